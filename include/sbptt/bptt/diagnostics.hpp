@@ -1,0 +1,75 @@
+#pragma once
+/// \file What a forward pass and a reverse sweep report besides the loss and the gradient.
+#include <cmath>
+#include <optional>
+#include <string_view>
+#include <vector>
+
+#include "sbptt/core/types.hpp"
+
+namespace sbptt {
+
+/// The kind of value that first turned NaN or Inf.
+enum class Quantity { Loss, State, Control, Adjoint, Gradient };
+
+[[nodiscard]] constexpr std::string_view to_string(Quantity quantity) {
+  switch (quantity) {
+    case Quantity::Loss: return "loss";
+    case Quantity::State: return "state";
+    case Quantity::Control: return "control";
+    case Quantity::Adjoint: return "adjoint";
+    case Quantity::Gradient: return "gradient";
+  }
+  return "?";
+}
+
+/// Where the first non-finite value appeared. `step` is the time index n of the state x_n,
+/// control c_n or adjoint λ_n; for a Gradient it is -1 and `sample` is the parameter index.
+struct NonFinite {
+  Quantity quantity = Quantity::Loss;
+  Index step = -1;
+  Index sample = -1;
+  double value = 0;
+};
+
+/// Diagnostics of one reverse sweep.
+struct SweepDiagnostics {
+  double grad_norm2 = 0;                    ///< ‖g‖²
+  std::vector<double> adjoint_norms;        ///< ‖λ_n‖_F of the batch adjoint, n = 0..m
+  std::optional<NonFinite> first_non_finite;  ///< first NaN/Inf of the sweep, if any
+};
+
+/// Diagnostics comparing the modified vector g_M with the regular gradient g_R.
+struct ComparisonDiagnostics {
+  double cos_modified_regular = 0;  ///< cos(g_M, g_R); 0 when either is zero
+  double agree_fraction = 0;        ///< fraction of components with sign(g_M) == sign(g_R)
+};
+
+namespace detail {
+
+/// TF's sign: -1, 0 or +1, and NaN for NaN (so it never compares equal).
+template <class Scalar>
+[[nodiscard]] Scalar tf_sign(Scalar v) {
+  if (std::isnan(v)) return v;
+  return static_cast<Scalar>((Scalar(0) < v) - (v < Scalar(0)));
+}
+
+}  // namespace detail
+
+/// cos(g_M, g_R) and the sign-agreement fraction (sign(0) = 0; NaN never agrees).
+template <class Scalar>
+[[nodiscard]] ComparisonDiagnostics compare(const Vector<Scalar>& modified,
+                                            const Vector<Scalar>& regular) {
+  ComparisonDiagnostics result;
+  const double dot = static_cast<double>(modified.dot(regular));
+  const double norms = static_cast<double>(modified.norm() * regular.norm());
+  result.cos_modified_regular = norms > 0 ? dot / norms : 0.0;
+  Index agree = 0;
+  for (Index i = 0; i < modified.size(); ++i)
+    agree += detail::tf_sign(modified(i)) == detail::tf_sign(regular(i)) ? 1 : 0;
+  result.agree_fraction =
+      modified.size() > 0 ? static_cast<double>(agree) / static_cast<double>(modified.size()) : 0.0;
+  return result;
+}
+
+}  // namespace sbptt

@@ -1,0 +1,163 @@
+#pragma once
+/// \file The two contracts everything else is built on: `Simulator` and `Controller`.
+///
+/// A concept failure inside a template is hard to read, so each requirement is also a concept
+/// of its own, and `static_assert_simulator<T>()` / `static_assert_controller<T>()` report the
+/// first missing member in plain words. The engine calls them on its template arguments.
+#include <concepts>
+
+#include "sbptt/core/types.hpp"
+
+namespace sbptt {
+namespace detail {
+
+template <class S>
+concept HasSimulatorTypes = requires {
+  typename S::Scalar;
+  typename S::State;
+  typename S::Control;
+  typename S::StateJacobian;
+  typename S::ControlJacobian;
+};
+
+template <class S>
+concept HasSimulatorSizes = HasSimulatorTypes<S> && requires(const S& sim) {
+  { sim.state_dim() } -> std::convertible_to<Index>;
+  { sim.control_dim() } -> std::convertible_to<Index>;
+  { sim.dt() } -> std::convertible_to<typename S::Scalar>;
+};
+
+template <class S>
+concept HasSimulatorStep = HasSimulatorTypes<S> &&
+    requires(const S& sim, const typename S::State& x, const typename S::Control& u,
+             typename S::State& x_next) {
+      sim.step(x, u, x_next);
+    };
+
+template <class S>
+concept HasSimulatorJacobians = HasSimulatorTypes<S> &&
+    requires(const S& sim, const typename S::State& x, const typename S::Control& u,
+             typename S::StateJacobian& a, typename S::ControlJacobian& b) {
+      sim.jacobians(x, u, a, b);
+    };
+
+template <class S>
+concept HasSimulatorVjp = HasSimulatorTypes<S> &&
+    requires(const S& sim, const typename S::State& x, const typename S::Control& u,
+             const typename S::State& lambda, typename S::State* lambda_x,
+             typename S::Control* lambda_u) {
+      sim.vjp(x, u, lambda, lambda_x, lambda_u);
+    };
+
+template <class C>
+concept HasControllerTypes = requires {
+  typename C::Scalar;
+  typename C::Workspace;
+  requires std::default_initializable<typename C::Workspace>;
+};
+
+template <class C>
+concept HasControllerSizes = HasControllerTypes<C> && requires(const C& c) {
+  { c.input_dim() } -> std::convertible_to<Index>;
+  { c.output_dim() } -> std::convertible_to<Index>;
+  { c.num_params() } -> std::convertible_to<Index>;
+};
+
+template <class C>
+concept HasControllerParams = HasControllerTypes<C> && requires(C& c, const C& cc) {
+  { cc.params() } -> std::convertible_to<const Vector<typename C::Scalar>&>;
+  { c.params() } -> std::same_as<Vector<typename C::Scalar>&>;
+};
+
+template <class C>
+concept HasControllerForward = HasControllerTypes<C> &&
+    requires(const C& c, const Matrix<typename C::Scalar>& inputs,
+             Matrix<typename C::Scalar>& outputs, typename C::Workspace& workspace) {
+      c.forward(inputs, outputs, workspace);
+    };
+
+template <class C>
+concept HasControllerBackward = HasControllerTypes<C> &&
+    requires(const C& c, const typename C::Workspace& workspace,
+             const Matrix<typename C::Scalar>& output_adjoint, Vector<typename C::Scalar>& grad,
+             Matrix<typename C::Scalar>* input_adjoint) {
+      c.backward(workspace, output_adjoint, grad, input_adjoint);
+    };
+
+}  // namespace detail
+
+/// A differentiable, immutable, thread-safe time stepper `x_next = P(x, u)`.
+///
+/// Members (all `const`):
+/// - `using Scalar, State, Control, StateJacobian, ControlJacobian` (Eigen types; State and
+///   Control are column vectors of sizes `state_dim()` and `control_dim()`);
+/// - `Index state_dim()`, `Index control_dim()`, `Scalar dt()`;
+/// - `void step(const State& x, const Control& u, State& x_next)`;
+/// - `void jacobians(const State& x, const Control& u, StateJacobian& A, ControlJacobian& B)`
+///   with `A = ∂x_next/∂x` (state_dim × state_dim), `B = ∂x_next/∂u` (state_dim × control_dim);
+/// - `void vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
+///   Control* lambda_u)` setting `*lambda_x = Aᵀ lambda`, `*lambda_u = Bᵀ lambda`; a null pointer
+///   skips that product. `lambda_x` never aliases `lambda`.
+template <class S>
+concept Simulator = detail::HasSimulatorSizes<S> && detail::HasSimulatorStep<S> &&
+                    detail::HasSimulatorJacobians<S> && detail::HasSimulatorVjp<S>;
+
+/// A parametric batch map `Y = N(X; θ)` with one flat parameter vector θ.
+///
+/// Members:
+/// - `using Scalar`, `using Workspace` (default-constructible; what backward needs);
+/// - `Index input_dim()`, `output_dim()`, `num_params()`;
+/// - `const Vector<Scalar>& params() const`, `Vector<Scalar>& params()` (size num_params());
+/// - `void forward(const Matrix<Scalar>& X, Matrix<Scalar>& Y, Workspace& ws) const` with X
+///   input_dim × B and Y resized to output_dim × B; `ws` records what backward needs;
+/// - `void backward(const Workspace& ws, const Matrix<Scalar>& dY, Vector<Scalar>& grad,
+///   Matrix<Scalar>* dX) const`: **adds** (∂N/∂θ)ᵀ dY, summed over the batch, to `grad`; if
+///   `dX` is not null, sets `*dX = (∂N/∂x)ᵀ dY` (input_dim × B). Passing null is how the
+///   gradient is stopped at the network input, and it skips that work.
+template <class C>
+concept Controller = detail::HasControllerSizes<C> && detail::HasControllerParams<C> &&
+                     detail::HasControllerForward<C> && detail::HasControllerBackward<C>;
+
+/// Compile-time check with a readable message per missing member; returns true.
+template <class S>
+consteval bool static_assert_simulator() {
+  static_assert(detail::HasSimulatorTypes<S>,
+                "sbptt::Simulator: the type needs member types Scalar, State, Control, "
+                "StateJacobian and ControlJacobian");
+  static_assert(detail::HasSimulatorSizes<S>,
+                "sbptt::Simulator: the type needs const members state_dim(), control_dim() "
+                "(convertible to Index) and dt() (convertible to Scalar)");
+  static_assert(detail::HasSimulatorStep<S>,
+                "sbptt::Simulator: the type needs `void step(const State& x, const Control& u, "
+                "State& x_next) const`");
+  static_assert(detail::HasSimulatorJacobians<S>,
+                "sbptt::Simulator: the type needs `void jacobians(const State& x, const Control& "
+                "u, StateJacobian& A, ControlJacobian& B) const`");
+  static_assert(detail::HasSimulatorVjp<S>,
+                "sbptt::Simulator: the type needs `void vjp(const State& x, const Control& u, "
+                "const State& lambda, State* lambda_x, Control* lambda_u) const`");
+  return true;
+}
+
+/// Compile-time check with a readable message per missing member; returns true.
+template <class C>
+consteval bool static_assert_controller() {
+  static_assert(detail::HasControllerTypes<C>,
+                "sbptt::Controller: the type needs member types Scalar and a "
+                "default-constructible Workspace");
+  static_assert(detail::HasControllerSizes<C>,
+                "sbptt::Controller: the type needs const members input_dim(), output_dim() and "
+                "num_params() convertible to Index");
+  static_assert(detail::HasControllerParams<C>,
+                "sbptt::Controller: the type needs `const Vector<Scalar>& params() const` and "
+                "`Vector<Scalar>& params()`");
+  static_assert(detail::HasControllerForward<C>,
+                "sbptt::Controller: the type needs `void forward(const Matrix<Scalar>& X, "
+                "Matrix<Scalar>& Y, Workspace& ws) const`");
+  static_assert(detail::HasControllerBackward<C>,
+                "sbptt::Controller: the type needs `void backward(const Workspace& ws, const "
+                "Matrix<Scalar>& dY, Vector<Scalar>& grad, Matrix<Scalar>* dX) const`");
+  return true;
+}
+
+}  // namespace sbptt

@@ -1,0 +1,59 @@
+#pragma once
+/// \file Exception types. The library never prints and never exits: every failure is one of
+/// these, with a message that names the offending value and what was expected.
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+namespace sbptt {
+
+/// Base of every sbptt exception.
+class Error : public std::runtime_error {
+public:
+  using std::runtime_error::runtime_error;
+};
+
+/// A size, count, setting or number outside what the callee accepts.
+class InvalidArgument : public Error {
+public:
+  using Error::Error;
+};
+
+/// Text that is not in the expected interchange format (DESIGN §4).
+class ParseError : public Error {
+public:
+  using Error::Error;
+};
+
+/// A file or directory that cannot be read or written.
+class IoError : public Error {
+public:
+  using Error::Error;
+};
+
+/// A NaN or Inf where a finite number is required.
+class NonFiniteError : public Error {
+public:
+  using Error::Error;
+};
+
+namespace detail {
+
+/// Streams every argument into one string: `concat("batch = ", b, ", expected > 0")`.
+template <class... Parts>
+[[nodiscard]] std::string concat(Parts&&... parts) {
+  std::ostringstream out;
+  out.precision(17);
+  (out << ... << std::forward<Parts>(parts));
+  return out.str();
+}
+
+/// Throws `Exception` with the concatenated message unless `condition` holds.
+template <class Exception = InvalidArgument, class... Parts>
+void require(bool condition, Parts&&... parts) {
+  if (!condition) throw Exception(concat(std::forward<Parts>(parts)...));
+}
+
+}  // namespace detail
+}  // namespace sbptt

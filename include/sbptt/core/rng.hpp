@@ -1,0 +1,40 @@
+#pragma once
+/// \file Seeded random numbers with results that do not depend on the standard library.
+///
+/// `std::uniform_real_distribution` and `std::normal_distribution` are implementation-defined,
+/// so a seed would give different data with libstdc++ and libc++. `Rng` draws from the fully
+/// specified `std::mt19937_64` engine and converts the bits itself.
+#include <cmath>
+#include <cstdint>
+#include <numbers>
+#include <random>
+
+namespace sbptt {
+
+/// Deterministic generator; every random draw in sbptt takes one explicitly.
+class Rng {
+public:
+  explicit Rng(std::uint64_t seed) : engine_(seed) {}
+
+  /// Uniform on [0, 1) with 53 random bits.
+  double uniform() { return static_cast<double>(engine_() >> 11) * 0x1.0p-53; }
+
+  /// Uniform on [low, high).
+  double uniform(double low, double high) { return low + (high - low) * uniform(); }
+
+  /// Standard normal by Box–Muller (one draw per call; the partner value is discarded so
+  /// that the stream position does not depend on call history).
+  double normal() {
+    const double u1 = 1.0 - uniform();  // in (0, 1], so log is finite
+    const double u2 = uniform();
+    return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * std::numbers::pi * u2);
+  }
+
+  /// The raw 64-bit engine output (for seeding child generators).
+  std::uint64_t bits() { return engine_(); }
+
+private:
+  std::mt19937_64 engine_;
+};
+
+}  // namespace sbptt

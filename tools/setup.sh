@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Installs the Debian packages sbptt needs, only those that are missing. Run as root, or as a
+# user with sudo.
+set -euo pipefail
+packages=(cmake make g++ libeigen3-dev catch2 python3 python3-matplotlib)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+[ ${#missing[@]} -eq 0 ] && exit 0
+as_root=()
+[ "$(id -u)" -eq 0 ] || as_root=(sudo)
+echo "sbptt: installing ${missing[*]}" >&2
+"${as_root[@]}" apt-get update -qq
+DEBIAN_FRONTEND=noninteractive "${as_root[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null

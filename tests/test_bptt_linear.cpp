@@ -242,3 +242,30 @@ TEST_CASE("engine rejects mismatched sizes and bad settings with a clear message
   REQUIRE_THROWS_WITH(engine.reverse(FlowSchedule({FlowMode::Full, FlowMode::Stopped}), g),
                       Catch::Contains("2 per-step modes for a horizon of 3"));
 }
+
+TEST_CASE("evaluate gives the forward loss without storing the trajectory", "[bptt]") {
+  for (auto timing : {LossTiming::Final, LossTiming::Continuous}) {
+    const auto sim = Sim<double>::scalar(0.9, 0.5);
+    PolynomialPolicy<double> policy({1});
+    policy.params()(0) = -0.7;
+    Sim<double>::State target = Sim<double>::State::Constant(0.4);
+    Engine engine(sim, policy, Objective<Loss<double>>{Loss<double>{target}, timing, 0.25, 0.3}, 6);
+    Matrix<double> x0(1, 3);
+    x0 << 0.3, -1.2, 2.0;
+    const double stored = engine.forward(x0);
+    // Closed form: Σ_{j∈S} w ½(ρʲx0 − y)² + ρ_reg/m Σ_n (θ ρⁿ x0)², batch mean.
+    const double rho = 0.9 + 0.5 * -0.7;
+    double expected = 0;
+    for (Index b = 0; b < 3; ++b) {
+      for (int n = 0; n <= 6; ++n) {
+        const double x = std::pow(rho, n) * x0(0, b);
+        const bool scored = timing == LossTiming::Final ? n == 6 : n >= 1;
+        if (scored) expected += 0.25 * 0.5 * (x - 0.4) * (x - 0.4);
+        if (n < 6) expected += 0.3 / 6 * (-0.7 * x) * (-0.7 * x);
+      }
+    }
+    expected /= 3;
+    CHECK(stored == Approx(expected).epsilon(1e-14));
+    CHECK(engine.evaluate(x0) == Approx(expected).epsilon(1e-14));
+  }
+}

@@ -90,11 +90,8 @@ public:
   /// Rolls out the batch `initial_states` (state_dim × B), stores the trajectory and returns
   /// the batch-mean loss.
   Scalar forward(const Matrix<Scalar>& initial_states) {
+    check_initial_states(initial_states, "forward");
     const Index batch = initial_states.cols();
-    detail::require(initial_states.rows() == sim_.state_dim(), "Engine::forward: ",
-                    initial_states.rows(), " rows in the initial states; expected state_dim = ",
-                    sim_.state_dim());
-    detail::require(batch > 0, "Engine::forward: an empty batch; expected at least one sample");
     trajectory_.resize(steps_, sim_.state_dim(), sim_.control_dim(), batch);
     forward_non_finite_.reset();
     trajectory_.states[0] = initial_states;
@@ -112,6 +109,39 @@ public:
       note_non_finite(Quantity::State, n + 1, trajectory_.states[i + 1]);
     }
     return batch_loss();
+  }
+
+  /// Batch-mean loss of a rollout of `initial_states` (state_dim × B) without storing the
+  /// trajectory: memory O(state_dim·B) whatever the horizon, for evaluating large sets.
+  /// Leaves the stored trajectory untouched; a non-finite value is reported through
+  /// `forward_non_finite()` like in `forward`.
+  Scalar evaluate(const Matrix<Scalar>& initial_states) {
+    check_initial_states(initial_states, "evaluate");
+    const Index batch = initial_states.cols();
+    forward_non_finite_.reset();
+    eval_state_ = initial_states;
+    eval_next_.resize(sim_.state_dim(), batch);
+    const Scalar w = static_cast<Scalar>(objective_.step_weight);
+    const Scalar control_scale = static_cast<Scalar>(
+        objective_.control_weight / static_cast<double>(steps_ * sim_.control_dim()));
+    eval_losses_.setZero(batch);
+    for (Index n = 0; n < steps_; ++n) {
+      controller_.forward(eval_state_, eval_control_, eval_workspace_);
+      note_non_finite(Quantity::Control, n, eval_control_);
+      for (Index b = 0; b < batch; ++b) {
+        x_ = eval_state_.col(b);
+        u_ = eval_control_.col(b);
+        sim_.step(x_, u_, x_next_);
+        eval_next_.col(b) = x_next_;
+        if (objective_.control_weight > 0)
+          eval_losses_(b) += control_scale * eval_control_.col(b).squaredNorm();
+        if (objective_.timing == LossTiming::Continuous || n + 1 == steps_)
+          eval_losses_(b) += w * objective_.state_loss(x_next_, static_cast<State*>(nullptr));
+      }
+      eval_state_.swap(eval_next_);
+      note_non_finite(Quantity::State, n + 1, eval_state_);
+    }
+    return mean_of_samples(eval_losses_);
   }
 
   /// Reverse sweep over the stored trajectory. Sets `gradient` (num_params) to the vector of
@@ -199,30 +229,46 @@ public:
   }
 
 private:
-  /// Batch-mean loss of the stored trajectory, summed in sample order.
+  void check_initial_states(const Matrix<Scalar>& initial_states, const char* caller) const {
+    detail::require(initial_states.rows() == sim_.state_dim(), "Engine::", caller, ": ",
+                    initial_states.rows(), " rows in the initial states; expected state_dim = ",
+                    sim_.state_dim());
+    detail::require(initial_states.cols() > 0, "Engine::", caller,
+                    ": an empty batch; expected at least one sample");
+  }
+
+  /// Batch-mean loss of the stored trajectory.
   Scalar batch_loss() {
     const Index batch = trajectory_.batch();
     const Scalar w = static_cast<Scalar>(objective_.step_weight);
     const Index first = objective_.timing == LossTiming::Final ? steps_ : 1;
-    Scalar total = 0;
+    eval_losses_.setZero(batch);
     for (Index b = 0; b < batch; ++b) {
-      Scalar sample = 0;
       for (Index n = first; n <= steps_; ++n) {
         x_ = trajectory_.states[static_cast<std::size_t>(n)].col(b);
-        sample += w * objective_.state_loss(x_, static_cast<State*>(nullptr));
+        eval_losses_(b) += w * objective_.state_loss(x_, static_cast<State*>(nullptr));
       }
       if (objective_.control_weight > 0) {
         Scalar squares = 0;
         for (const auto& c : trajectory_.controls) squares += c.col(b).squaredNorm();
-        sample += static_cast<Scalar>(objective_.control_weight /
-                                      static_cast<double>(steps_ * sim_.control_dim())) *
-                  squares;
+        eval_losses_(b) += static_cast<Scalar>(objective_.control_weight /
+                                               static_cast<double>(steps_ * sim_.control_dim())) *
+                           squares;
       }
-      if (!forward_non_finite_ && !std::isfinite(sample))
-        forward_non_finite_ = NonFinite{Quantity::Loss, steps_, b, static_cast<double>(sample)};
-      total += sample;
     }
-    return total / static_cast<Scalar>(batch);
+    return mean_of_samples(eval_losses_);
+  }
+
+  /// Mean of per-sample losses, summed in sample order (thread-count independent); notes the
+  /// first non-finite sample loss.
+  Scalar mean_of_samples(const Vector<Scalar>& losses) {
+    Scalar total = 0;
+    for (Index b = 0; b < losses.size(); ++b) {
+      if (!forward_non_finite_ && !std::isfinite(losses(b)))
+        forward_non_finite_ = NonFinite{Quantity::Loss, steps_, b, static_cast<double>(losses(b))};
+      total += losses(b);
+    }
+    return total / static_cast<Scalar>(losses.size());
   }
 
   /// lambda.col(b) += w/B · ∂ℓ/∂x_n for every sample b.
@@ -268,6 +314,9 @@ private:
   std::optional<NonFinite> forward_non_finite_;
   SweepDiagnostics sweep_;
   Matrix<Scalar> lambda_, propagated_, mu_, input_adjoint_;
+  Matrix<Scalar> eval_state_, eval_next_, eval_control_;
+  typename Ctrl::Workspace eval_workspace_;
+  Vector<Scalar> eval_losses_;
   State x_, x_next_, seed_, lambda_sample_, lambda_x_;
   Control u_, lambda_u_;
 };

@@ -1,0 +1,197 @@
+#pragma once
+/// \file The training loop: mini-batches in a fixed order (as the reference), one update per
+/// batch with the chosen method, then an evaluation of the whole train and test sets.
+///
+/// Update of one mini-batch:
+/// - R, M, S, N: one forward pass, one sweep of that mode, clip, optimizer step;
+/// - C: one forward pass, the Full and PhysicsOnly sweeps over it, combine, clip, step.
+///
+/// Non-finite values: the batch's forward pass, its sweep(s) and the stepped parameters are
+/// checked. In C mode a non-finite g_R is not an error: its NaN components fail the sign test
+/// and drop out, as in the reference. On a non-finite value the parameters are left as they
+/// were before the batch, and the event is recorded; `NonFinitePolicy` chooses whether the
+/// epoch ends there (Stop) or goes on with the next batch (SkipBatch).
+#include <chrono>
+#include <cmath>
+#include <numeric>
+#include <optional>
+#include <vector>
+
+#include "sbptt/bptt/engine.hpp"
+#include "sbptt/core/rng.hpp"
+#include "sbptt/optim/clip.hpp"
+#include "sbptt/optim/combined_update.hpp"
+#include "sbptt/train/method.hpp"
+#include "sbptt/train/training_log.hpp"
+
+namespace sbptt {
+
+/// What to do when a batch produces a NaN or Inf.
+enum class NonFinitePolicy { Stop, SkipBatch };
+
+/// Settings of a training run besides the optimizer.
+struct TrainerOptions {
+  Method method = Method::Combined;
+  ClipMode clip = ClipMode::None;
+  double clip_threshold = 1.0;
+  Index batch = 8;
+  bool shuffle = false;           ///< reshuffle the train set every epoch (the reference does not)
+  std::uint64_t shuffle_seed = 0;
+  Index truncation = 0;           ///< window K of the reverse sweep; 0 = none
+  NonFinitePolicy on_non_finite = NonFinitePolicy::Stop;
+};
+
+/// Where training met a non-finite value.
+struct NonFiniteEvent {
+  long epoch = 0;
+  Index batch = 0;  ///< index of the mini-batch within the epoch
+  NonFinite where;  ///< quantity, step and sample (for a gradient: the parameter index)
+};
+
+template <class Sim, class Ctrl, class Loss, class Optimizer>
+class Trainer {
+public:
+  using Scalar = typename Sim::Scalar;
+
+  Trainer(const Sim& sim, Ctrl& controller, Objective<Loss> objective, Index steps,
+          Optimizer optimizer, TrainerOptions options)
+      : controller_(controller),
+        engine_(sim, controller, std::move(objective), steps),
+        options_(options),
+        clipped_(optimizer, options.clip, static_cast<Scalar>(options.clip_threshold)),
+        combined_(std::move(optimizer), options.clip, static_cast<Scalar>(options.clip_threshold)),
+        shuffle_rng_(options.shuffle_seed) {
+    detail::require(options.batch > 0, "Trainer: batch = ", options.batch,
+                    "; expected at least 1 sample per batch");
+    detail::require(options.truncation >= 0, "Trainer: truncation = ", options.truncation,
+                    "; expected 0 (none) or a window >= 1");
+  }
+
+  /// One epoch over `train` (state_dim × N_train), then the evaluation of `train` and `test`.
+  EpochRecord train_epoch(const Matrix<Scalar>& train, const Matrix<Scalar>& test) {
+    EpochRecord record;
+    record.epoch = ++epoch_;
+    order_.resize(static_cast<std::size_t>(train.cols()));
+    std::iota(order_.begin(), order_.end(), Index{0});
+    if (options_.shuffle) shuffle(order_);
+
+    const auto start = std::chrono::steady_clock::now();
+    const Index batches = (train.cols() + options_.batch - 1) / options_.batch;
+    double loss_sum = 0, norm_sum = 0, cos_sum = 0, agree_sum = 0;
+    Index done = 0;
+    for (Index k = 0; k < batches; ++k) {
+      gather(train, k, batch_states_);
+      const std::optional<NonFinite> bad = update(batch_states_);
+      if (bad) {
+        last_non_finite_ = NonFiniteEvent{record.epoch, k, *bad};
+        if (options_.on_non_finite == NonFinitePolicy::Stop) break;
+        continue;
+      }
+      ++done;
+      loss_sum += static_cast<double>(last_loss_);
+      norm_sum += last_norm2_;
+      cos_sum += last_comparison_.cos_modified_regular;
+      agree_sum += last_comparison_.agree_fraction;
+    }
+    record.seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const double per = done > 0 ? 1.0 / static_cast<double>(done) : std::nan("");
+    record.batch_loss = loss_sum * per;
+    record.update_norm2 = norm_sum * per;
+    if (options_.method == Method::Combined) {
+      record.cos_m_r = cos_sum * per;
+      record.agree_fraction = agree_sum * per;
+    }
+    record.train_loss = static_cast<double>(engine_.evaluate(train));
+    record.test_loss = static_cast<double>(engine_.evaluate(test));
+    return record;
+  }
+
+  /// The last non-finite event, if any batch produced one.
+  [[nodiscard]] const std::optional<NonFiniteEvent>& last_non_finite() const {
+    return last_non_finite_;
+  }
+  /// True when the policy is Stop and a non-finite value ended the last epoch early.
+  [[nodiscard]] bool stopped() const {
+    return last_non_finite_ && options_.on_non_finite == NonFinitePolicy::Stop;
+  }
+  [[nodiscard]] Engine<Sim, Ctrl, Loss>& engine() { return engine_; }
+  /// The optimizer that takes the steps of the configured method (e.g. to change its rate).
+  [[nodiscard]] Optimizer& optimizer() {
+    return options_.method == Method::Combined ? combined_.inner() : clipped_.inner();
+  }
+  [[nodiscard]] const TrainerOptions& options() const { return options_; }
+
+private:
+  void gather(const Matrix<Scalar>& set, Index k, Matrix<Scalar>& out) const {
+    const Index first = k * options_.batch;
+    const Index count = std::min(options_.batch, set.cols() - first);
+    out.resize(set.rows(), count);
+    for (Index j = 0; j < count; ++j)
+      out.col(j) = set.col(order_[static_cast<std::size_t>(first + j)]);
+  }
+
+  void shuffle(std::vector<Index>& order) {
+    for (std::size_t i = order.size(); i > 1; --i) {
+      const auto j = static_cast<std::size_t>(shuffle_rng_.uniform() * static_cast<double>(i));
+      std::swap(order[i - 1], order[std::min(j, i - 1)]);
+    }
+  }
+
+  /// One optimizer step on one mini-batch; returns the first non-finite value, if any, in
+  /// which case the parameters are unchanged.
+  std::optional<NonFinite> update(const Matrix<Scalar>& states) {
+    backup_ = controller_.params();
+    std::optional<NonFinite> bad;
+    if (options_.method == Method::Combined) {
+      engine_.regular_and_modified(states, pair_, options_.truncation);
+      last_loss_ = pair_.loss;
+      bad = pair_.forward_non_finite ? pair_.forward_non_finite
+                                     : pair_.modified_diagnostics.first_non_finite;
+      if (!bad) {
+        combined_.step(controller_.params(), pair_.modified, pair_.regular);
+        last_norm2_ = static_cast<double>(combined_.last_norm2());
+        last_comparison_ = pair_.comparison;
+      }
+    } else {
+      last_loss_ = engine_.forward(states);
+      bad = engine_.forward_non_finite();
+      if (!bad) {
+        bad = engine_.reverse(*flow_mode(options_.method), gradient_, options_.truncation)
+                  .first_non_finite;
+      }
+      if (!bad) {
+        clipped_.step_in_place(controller_.params(), gradient_);
+        last_norm2_ = static_cast<double>(clipped_.last_norm2());
+      }
+    }
+    if (!bad && !controller_.params().allFinite()) {
+      for (Index p = 0; p < controller_.params().size(); ++p) {
+        if (!std::isfinite(controller_.params()(p))) {
+          bad = NonFinite{Quantity::Gradient, -1, p, static_cast<double>(controller_.params()(p))};
+          break;
+        }
+      }
+    }
+    if (bad) controller_.params() = backup_;
+    return bad;
+  }
+
+  Ctrl& controller_;
+  Engine<Sim, Ctrl, Loss> engine_;
+  TrainerOptions options_;
+  ClippedUpdate<Optimizer> clipped_;
+  CombinedUpdate<Optimizer> combined_;
+  Rng shuffle_rng_;
+  long epoch_ = 0;
+  std::vector<Index> order_;
+  Matrix<Scalar> batch_states_;
+  Vector<Scalar> gradient_, backup_;
+  GradientPair<Scalar> pair_;
+  Scalar last_loss_ = 0;
+  double last_norm2_ = 0;
+  ComparisonDiagnostics last_comparison_;
+  std::optional<NonFiniteEvent> last_non_finite_;
+};
+
+}  // namespace sbptt

@@ -1,0 +1,235 @@
+// The sign combination (TF semantics), its guarantees, and the combine → clip → step order.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "sbptt/core/error.hpp"
+#include "sbptt/core/rng.hpp"
+#include "sbptt/optim/adam.hpp"
+#include "sbptt/optim/clip.hpp"
+#include "sbptt/optim/combined_update.hpp"
+#include "sbptt/optim/sgd.hpp"
+
+namespace {
+
+using sbptt::ClipMode;
+using sbptt::Index;
+using sbptt::Vector;
+
+template <class Scalar>
+Vector<Scalar> vec(std::initializer_list<double> values) {
+  Vector<Scalar> v(static_cast<Index>(values.size()));
+  Index i = 0;
+  for (double x : values) v(i++) = static_cast<Scalar>(x);
+  return v;
+}
+
+template <class Scalar>
+Vector<Scalar> random_vector(sbptt::Rng& rng, Index n) {
+  Vector<Scalar> v(n);
+  for (Index i = 0; i < n; ++i) {
+    // Exact zeros are frequent in practice (stopped paths, masked components): include them.
+    v(i) = rng.uniform() < 0.15 ? Scalar(0) : static_cast<Scalar>(rng.normal());
+  }
+  return v;
+}
+
+static_assert(sbptt::FlatOptimizer<sbptt::Adam<float>>);
+static_assert(sbptt::FlatOptimizer<sbptt::Sgd<double>>);
+static_assert(!sbptt::FlatOptimizer<int>);
+
+}  // namespace
+
+TEMPLATE_TEST_CASE("combine keeps g_M where the TF signs agree and 0 elsewhere",
+                   "[optim][combine]", float, double) {
+  using Scalar = TestType;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  //                                 agree  agree  disagr disagr both0 M=0  R=0  R=NaN M=NaN both NaN
+  const Vector<Scalar> g_m = vec<Scalar>({1.0, -2.0, 3.0, -4.0, 0.0, 0.0, 5.0, 2.0, nan, nan, nan});
+  const Vector<Scalar> g_r = vec<Scalar>({2.0, -1.0, -3.0, 4.0, 0.0, 1.0, 0.0, nan, 0.0, 1.0, nan});
+  Vector<Scalar> out;
+  sbptt::combine(g_m, g_r, out);
+  const Vector<Scalar> expected =
+      vec<Scalar>({1.0, -2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0});
+  CHECK(out == expected);  // also false if any NaN slipped through
+  // Agreeing components: the two same-sign ones and the both-zero one.
+  CHECK(sbptt::sign_agreement(g_m, g_r) == Scalar(3) / Scalar(11));
+
+  // The output may alias an input.
+  Vector<Scalar> in_place = g_m;
+  sbptt::combine(in_place, g_r, in_place);
+  CHECK(in_place == expected);
+  Vector<Scalar> in_place_r = g_r;
+  sbptt::combine(g_m, in_place_r, in_place_r);
+  CHECK(in_place_r == expected);
+
+  CHECK_THROWS_WITH(sbptt::combine(vec<Scalar>({1.0, 2.0}), vec<Scalar>({1.0}), out),
+                    Catch::Contains("g_R size = 1") && Catch::Contains("g_M size 2"));
+  Vector<Scalar> empty;
+  sbptt::combine(empty, empty, out);
+  CHECK(out.size() == 0);
+  CHECK(sbptt::sign_agreement(empty, empty) == Scalar(1));
+}
+
+TEMPLATE_TEST_CASE("combine reproduces the paper's toy-problem table", "[optim][combine]", float,
+                   double) {
+  using Scalar = TestType;
+  Vector<Scalar> out;
+  // paper.md §3.1, θ = (2, −1): the vanishing regular gradient disagrees in the 2nd component.
+  const Vector<Scalar> g_r1 = vec<Scalar>({-2.11568e-3, -2.05214e-2});
+  const Vector<Scalar> g_m1 = vec<Scalar>({-0.253321, 0.0935972});
+  sbptt::combine(g_m1, g_r1, out);
+  CHECK(out == vec<Scalar>({-0.253321, 0.0}));
+  // θ = (−3, −3).
+  const Vector<Scalar> g_r2 = vec<Scalar>({-2.47227, -48.7552});
+  const Vector<Scalar> g_m2 = vec<Scalar>({-5.79088, 5.3268});
+  sbptt::combine(g_m2, g_r2, out);
+  CHECK(out == vec<Scalar>({-5.79088, 0.0}));
+  // θ = (1, 1): all signs agree, g_C = g_M.
+  const Vector<Scalar> g_r3 = vec<Scalar>({-2.91843, 3.21987});
+  const Vector<Scalar> g_m3 = vec<Scalar>({-5.44069, 7.52841});
+  sbptt::combine(g_m3, g_r3, out);
+  CHECK(out == g_m3);
+}
+
+TEMPLATE_TEST_CASE("combine: never an ascent direction, never larger than g_M",
+                   "[optim][combine]", float, double) {
+  using Scalar = TestType;
+  sbptt::Rng rng(20240507);
+  Vector<Scalar> out;
+  int kept_some = 0, zeroed_some = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    const Index n = 1 + static_cast<Index>(rng.uniform() * 60.0);
+    const Vector<Scalar> g_m = random_vector<Scalar>(rng, n);
+    const Vector<Scalar> g_r = random_vector<Scalar>(rng, n);
+    sbptt::combine(g_m, g_r, out);
+    REQUIRE(out.size() == n);
+    CHECK(out.dot(g_r) >= Scalar(0));
+    Index kept = 0;
+    for (Index i = 0; i < n; ++i) {
+      CHECK(std::abs(out(i)) <= std::abs(g_m(i)));
+      CHECK((out(i) == g_m(i) || out(i) == Scalar(0)));
+      CHECK(out(i) * g_r(i) >= Scalar(0));
+      const bool same = (g_m(i) > 0 && g_r(i) > 0) || (g_m(i) < 0 && g_r(i) < 0) ||
+                        (g_m(i) == 0 && g_r(i) == 0);
+      kept += same ? 1 : 0;
+    }
+    CHECK(sbptt::sign_agreement(g_m, g_r) == static_cast<Scalar>(kept) / static_cast<Scalar>(n));
+    kept_some += (out.array() != 0).any() ? 1 : 0;
+    zeroed_some += ((out.array() == 0) && (g_m.array() != 0)).any() ? 1 : 0;
+  }
+  // The property is not vacuous: both outcomes occur.
+  CHECK(kept_some > 100);
+  CHECK(zeroed_some > 100);
+}
+
+TEMPLATE_TEST_CASE("CombinedUpdate is combine, then clip, then the optimizer step",
+                   "[optim][combine]", float, double) {
+  using Scalar = TestType;
+  sbptt::AdamOptions<Scalar> options;
+  options.learning_rate = Scalar(0.01);
+  const Scalar threshold = Scalar(0.5);
+
+  const std::vector<Vector<Scalar>> g_m = {vec<Scalar>({3.0, -1.0, 0.5, 2.0}),
+                                           vec<Scalar>({-1.0, 4.0, 0.0, 1.0}),
+                                           vec<Scalar>({0.2, -0.2, 1.5, -3.0})};
+  const std::vector<Vector<Scalar>> g_r = {vec<Scalar>({1.0, 2.0, 0.5, -1.0}),
+                                           vec<Scalar>({-2.0, 1.0, 1.0, 1.0}),
+                                           vec<Scalar>({0.1, 0.3, 2.0, -0.5})};
+
+  sbptt::CombinedUpdate<sbptt::Adam<Scalar>> update(sbptt::Adam<Scalar>(options), ClipMode::Norm,
+                                                    threshold);
+  CHECK(update.clip_mode() == ClipMode::Norm);
+  CHECK(update.clip_threshold() == threshold);
+  Vector<Scalar> theta = vec<Scalar>({1.0, -1.0, 0.5, 0.0});
+
+  // The same three operations by hand.
+  sbptt::Adam<Scalar> manual_adam(options);
+  Vector<Scalar> manual = theta;
+  // The other order (clip g_M, then combine) as the counterfactual the test must tell apart.
+  sbptt::Adam<Scalar> wrong_adam(options);
+  Vector<Scalar> wrong = theta;
+
+  for (std::size_t t = 0; t < g_m.size(); ++t) {
+    update.step(theta, g_m[t], g_r[t]);
+
+    Vector<Scalar> g_c;
+    sbptt::combine(g_m[t], g_r[t], g_c);
+    const Scalar expected_norm2 = g_c.squaredNorm();
+    const Scalar expected_agreement = sbptt::sign_agreement(g_m[t], g_r[t]);
+    sbptt::clip(g_c, ClipMode::Norm, threshold);
+    manual_adam.step(manual, g_c);
+
+    Vector<Scalar> clipped_first = g_m[t];
+    sbptt::clip(clipped_first, ClipMode::Norm, threshold);
+    Vector<Scalar> g_w;
+    sbptt::combine(clipped_first, g_r[t], g_w);
+    wrong_adam.step(wrong, g_w);
+
+    CHECK(theta == manual);
+    CHECK(static_cast<double>(update.last_norm2()) ==
+          Approx(static_cast<double>(expected_norm2)).epsilon(1e-5));
+    CHECK(update.last_agreement() == expected_agreement);
+  }
+  CHECK(update.inner().iterations() == 3);
+  CHECK((theta - wrong).cwiseAbs().maxCoeff() > Scalar(1e-4));
+  // Step 3 by hand: g_C = (0.2, 0, 1.5, −3), so ‖g_C‖² = 11.29 and 3 of 4 signs agree.
+  CHECK(static_cast<double>(update.last_norm2()) == Approx(11.29).epsilon(1e-5));
+  CHECK(update.last_agreement() == Scalar(0.75));
+}
+
+TEMPLATE_TEST_CASE("ClippedUpdate clips a copy and steps; the caller's gradient is untouched",
+                   "[optim][combine]", float, double) {
+  using Scalar = TestType;
+  sbptt::SgdOptions<Scalar> options;
+  options.learning_rate = Scalar(0.5);
+  sbptt::ClippedUpdate<sbptt::Sgd<Scalar>> update(sbptt::Sgd<Scalar>(options), ClipMode::Value,
+                                                  Scalar(1));
+  Vector<Scalar> theta = vec<Scalar>({0.0, 0.0, 0.0});
+  const Vector<Scalar> grad = vec<Scalar>({3.0, -0.5, -2.0});
+  update.step(theta, grad);
+  CHECK(grad == vec<Scalar>({3.0, -0.5, -2.0}));
+  CHECK(theta == vec<Scalar>({-0.5, 0.25, 0.5}));
+  CHECK(static_cast<double>(update.last_norm2()) == Approx(13.25).epsilon(1e-6));
+
+  // Sgd inside CombinedUpdate: g_C = (3, 0, −2) clipped to (1, 0, −1).
+  sbptt::CombinedUpdate<sbptt::Sgd<Scalar>> combined(sbptt::Sgd<Scalar>(options), ClipMode::Value,
+                                                     Scalar(1));
+  Vector<Scalar> phi = vec<Scalar>({0.0, 0.0, 0.0});
+  combined.step(phi, grad, vec<Scalar>({1.0, 1.0, -1.0}));
+  CHECK(phi == vec<Scalar>({-0.5, 0.0, 0.5}));
+
+  using Wrapped = sbptt::ClippedUpdate<sbptt::Sgd<Scalar>>;
+  using Combined = sbptt::CombinedUpdate<sbptt::Adam<Scalar>>;
+  CHECK_THROWS_WITH(Wrapped(sbptt::Sgd<Scalar>(), ClipMode::Norm, Scalar(0)),
+                    Catch::Contains("clip threshold = 0"));
+  CHECK_THROWS_AS(Combined(sbptt::Adam<Scalar>(), ClipMode::Value, Scalar(-1)),
+                  sbptt::InvalidArgument);
+  CHECK_NOTHROW(Combined(sbptt::Adam<Scalar>(), ClipMode::None, Scalar(0)));
+  Combined sized;
+  Vector<Scalar> two = vec<Scalar>({1.0, 2.0});
+  CHECK_THROWS_AS(sized.step(two, vec<Scalar>({1.0, 2.0}), vec<Scalar>({1.0})),
+                  sbptt::InvalidArgument);
+}
+
+TEMPLATE_TEST_CASE("CombinedUpdate: a fixed gradient sequence gives bitwise-identical parameters",
+                   "[optim][combine]", float, double) {
+  using Scalar = TestType;
+  auto run = [] {
+    sbptt::Rng rng(7);
+    sbptt::CombinedUpdate<sbptt::Adam<Scalar>> update(sbptt::Adam<Scalar>(), ClipMode::Norm,
+                                                      Scalar(1));
+    Vector<Scalar> theta = Vector<Scalar>::Zero(101);
+    for (int t = 0; t < 40; ++t) {
+      const Vector<Scalar> g_m = random_vector<Scalar>(rng, theta.size());
+      const Vector<Scalar> g_r = random_vector<Scalar>(rng, theta.size());
+      update.step(theta, g_m, g_r);
+    }
+    return theta;
+  };
+  const Vector<Scalar> first = run();
+  CHECK(first == run());
+  CHECK(first.cwiseAbs().maxCoeff() > Scalar(0));
+}

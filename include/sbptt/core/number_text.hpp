@@ -31,7 +31,7 @@ inline constexpr int round_trip_digits = std::is_same_v<Scalar, float> ? 9 : 17;
 template <class Scalar>
 [[nodiscard]] Scalar parse_finite(std::string_view field, const std::string& where) {
   const std::string_view text = trim_blanks(field);
-  require<ParseError>(!text.empty(), where, ": empty field, expected one number");
+  require<ParseError>(!text.empty(), where, ": empty, expected one number");
   std::string_view digits = text;
   // from_chars rejects a leading '+', which other writers may emit; accept exactly one.
   if (digits.size() > 1 && digits.front() == '+' && digits[1] != '-' && digits[1] != '+')

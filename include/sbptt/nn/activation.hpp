@@ -1,0 +1,95 @@
+#pragma once
+/// \file Element-wise activations of the layers: identity and tanh.
+///
+/// Backward passes take the derivative from the stored layer *output* y rather than the
+/// pre-activation z: for tanh, f'(z) = 1 − y², so the workspace needs to keep only y and no
+/// second buffer per layer.
+#include <cmath>
+#include <string_view>
+
+#include <Eigen/Core>
+
+#include "sbptt/core/types.hpp"
+
+namespace sbptt {
+
+/// The activation applied after a layer's affine map.
+enum class Activation {
+  Identity,  ///< f(z) = z (the usual output layer of a controller)
+  Tanh,      ///< f(z) = tanh z
+};
+
+/// Lower-case name, as used in error messages and `describe()` strings.
+[[nodiscard]] constexpr std::string_view to_string(Activation activation) {
+  switch (activation) {
+    case Activation::Identity: return "identity";
+    case Activation::Tanh: return "tanh";
+  }
+  return "unknown";
+}
+
+/// f(z) for one scalar.
+template <class Scalar>
+[[nodiscard]] Scalar activate(Activation activation, Scalar z) {
+  return activation == Activation::Tanh ? std::tanh(z) : z;
+}
+
+/// f'(z) expressed through the output y = f(z): 1 for identity, 1 − y² for tanh.
+template <class Scalar>
+[[nodiscard]] Scalar activation_derivative_from_output(Activation activation, Scalar y) {
+  return activation == Activation::Tanh ? Scalar(1) - y * y : Scalar(1);
+}
+
+/// Applies f in place to every entry of `z` (any shape); identity is a no-op.
+template <class Derived>
+void activate_in_place(Activation activation, Eigen::DenseBase<Derived>& z) {
+  if (activation == Activation::Tanh) z.derived().array() = z.derived().array().tanh();
+}
+
+/// `delta = upstream ⊙ f'(z)`, with f' taken from the layer output `y` (f(z)).
+/// \param y         layer output, rows × B
+/// \param upstream  adjoint of the layer output ∂L/∂y, rows × B
+/// \param delta     adjoint of the pre-activation ∂L/∂z, rows × B (may alias `upstream`, as
+///                  the expression is element-wise)
+template <class DerivedY, class DerivedUp, class DerivedDelta>
+void activation_backward(Activation activation, const Eigen::DenseBase<DerivedY>& y,
+                         const Eigen::DenseBase<DerivedUp>& upstream,
+                         Eigen::DenseBase<DerivedDelta>& delta) {
+  using Scalar = typename DerivedDelta::Scalar;
+  if (activation == Activation::Tanh) {
+    delta.derived().array() =
+        upstream.derived().array() * (Scalar(1) - y.derived().array().square());
+  } else {
+    delta.derived() = upstream.derived();
+  }
+}
+
+namespace detail {
+
+/// Read-only view of a column-major block of memory; the layers see every batch and every
+/// slice of the flat parameter vector through these, so that nothing is copied.
+template <class Scalar>
+using ConstMatrixMap = Eigen::Map<const Matrix<Scalar>>;
+
+/// Writable column-major view (see `ConstMatrixMap`).
+template <class Scalar>
+using MatrixMap = Eigen::Map<Matrix<Scalar>>;
+
+/// Read-only row-major view: weights are row-major inside the flat parameter vector.
+template <class Scalar>
+using ConstRowMajorMap = Eigen::Map<const RowMajorMatrix<Scalar>>;
+
+/// Writable row-major view (the weight part of a gradient vector).
+template <class Scalar>
+using RowMajorMap = Eigen::Map<RowMajorMatrix<Scalar>>;
+
+/// A rows × cols view over `storage`, growing it only when it is too small, so that a
+/// scratch buffer reused across calls (and across networks) stops allocating after warm-up.
+template <class Scalar>
+[[nodiscard]] MatrixMap<Scalar> grow_map(Vector<Scalar>& storage, Index rows, Index cols) {
+  if (storage.size() < rows * cols) storage.resize(rows * cols);
+  return MatrixMap<Scalar>(storage.data(), rows, cols);
+}
+
+}  // namespace detail
+}  // namespace sbptt

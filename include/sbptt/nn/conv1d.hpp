@@ -1,0 +1,145 @@
+#pragma once
+/// \file 1-D convolution (cross-correlation, as in PyTorch and Keras), stride s, valid padding.
+///
+/// A sample has L positions × C_in channels and is stored POSITION-MAJOR in its column:
+/// entry (p, c) at row p·C_in + c. The output (P positions × C_out channels,
+/// P = (L − K)/s + 1, trailing positions that do not fill a window are dropped) uses the same
+/// layout, so flattening a conv output for a following dense layer costs nothing: the column
+/// already *is* the position-major flatten of DESIGN §4.
+///
+/// Parameter layout (PyTorch `Conv1d` order): weight (C_out × C_in × K) row-major, then the
+/// bias (C_out). Read as a C_out × (C_in·K) row-major matrix W, with column index c·K + j:
+///
+///     y(p, o) = f( b_o + Σ_c Σ_j W(o, c·K + j) · x(p·s + j, c) ).
+///
+/// The implementation gathers every window into a (C_in·K) × (P·B) matrix (im2col) so that the
+/// layer is ONE matrix product per batch; per-element loops would be an order of magnitude
+/// slower at the quantum-control sizes (60 channels).
+#include <string>
+
+#include "sbptt/core/error.hpp"
+#include "sbptt/core/types.hpp"
+#include "sbptt/nn/activation.hpp"
+
+namespace sbptt {
+
+/// Sizes, stride and activation of a 1-D convolution layer; the math is in its member templates.
+struct Conv1d {
+  Index length = 0;        ///< L, input positions
+  Index in_channels = 0;   ///< C_in
+  Index out_channels = 0;  ///< C_out (number of filters)
+  Index kernel = 0;        ///< K, window width in positions
+  Index stride = 1;        ///< s
+  Activation activation = Activation::Identity;  ///< f (linear by default, as in Keras/PyTorch)
+
+  /// P = (L − K)/s + 1 (valid padding).
+  [[nodiscard]] Index output_length() const { return (length - kernel) / stride + 1; }
+  [[nodiscard]] Index input_dim() const { return length * in_channels; }
+  [[nodiscard]] Index output_dim() const { return output_length() * out_channels; }
+  /// Rows of one im2col column: one window, C_in·K.
+  [[nodiscard]] Index window_size() const { return in_channels * kernel; }
+  [[nodiscard]] Index weight_count() const { return out_channels * window_size(); }
+  [[nodiscard]] Index num_params() const { return weight_count() + out_channels; }
+
+  /// Glorot fans, Keras `Conv1D` convention: (C_in·K, C_out·K).
+  [[nodiscard]] Index fan_in() const { return in_channels * kernel; }
+  [[nodiscard]] Index fan_out() const { return out_channels * kernel; }
+
+  /// e.g. "conv1d 32×2→15×60 k3 s2 tanh" (positions × channels).
+  [[nodiscard]] std::string describe() const {
+    return detail::concat("conv1d ", length, "×", in_channels, "→", output_length(), "×",
+                          out_channels, " k", kernel, " s", stride, " ", to_string(activation));
+  }
+
+  /// Throws `InvalidArgument` unless the sizes give at least one output position.
+  void validate() const {
+    detail::require(in_channels > 0, "Conv1d: in_channels = ", in_channels, ", expected > 0");
+    detail::require(out_channels > 0, "Conv1d: out_channels = ", out_channels, ", expected > 0");
+    detail::require(kernel > 0, "Conv1d: kernel = ", kernel, ", expected > 0");
+    detail::require(stride > 0, "Conv1d: stride = ", stride, ", expected > 0");
+    detail::require(length >= kernel, "Conv1d: length = ", length,
+                    ", expected >= kernel = ", kernel, " (valid padding needs one full window)");
+  }
+
+  /// Gathers the windows of a batch into `columns`, (C_in·K) × (P·B): column b·P + p holds
+  /// window p of sample b with row c·K + j = x(p·s + j, c), matching the weight's row layout.
+  /// \param x  inputs, (L·C_in) × B, position-major
+  template <class Scalar>
+  void im2col(const Matrix<Scalar>& x, Matrix<Scalar>& columns) const {
+    const Index positions = output_length();
+    const Index window = window_size();
+    columns.resize(window, positions * x.cols());
+    for (Index b = 0; b < x.cols(); ++b) {
+      const Scalar* sample = x.data() + b * x.rows();
+      for (Index p = 0; p < positions; ++p) {
+        // In memory the window is K positions of C_in channels, i.e. a C_in × K matrix; the
+        // weight wants channel-major (c·K + j), hence the small transpose.
+        const detail::ConstMatrixMap<Scalar> win(sample + p * stride * in_channels, in_channels,
+                                                 kernel);
+        detail::MatrixMap<Scalar>(columns.data() + (b * positions + p) * window, kernel,
+                                  in_channels) = win.transpose();
+      }
+    }
+  }
+
+  /// Y = f(conv(X) + b) for a batch.
+  /// \param params   this layer's slice of the flat vector, num_params() entries
+  /// \param x        inputs, (L·C_in) × B, position-major
+  /// \param y        outputs, resized to (P·C_out) × B, position-major
+  /// \param columns  im2col workspace, resized to (C_in·K) × (P·B); backward needs it
+  template <class Scalar>
+  void forward(const Scalar* params, const Matrix<Scalar>& x, Matrix<Scalar>& y,
+               Matrix<Scalar>& columns) const {
+    im2col(x, columns);
+    const Index batch = x.cols();
+    const detail::ConstRowMajorMap<Scalar> w(params, out_channels, window_size());
+    const Eigen::Map<const Vector<Scalar>> b(params + weight_count(), out_channels);
+    y.resize(output_dim(), batch);
+    // A C_out × (P·B) column-major matrix has exactly the memory of the position-major
+    // (P·C_out) × B output, so the GEMM writes the result in place.
+    detail::MatrixMap<Scalar> z(y.data(), out_channels, output_length() * batch);
+    z.noalias() = w * columns;
+    z.colwise() += b;
+    activate_in_place(activation, y);
+  }
+
+  /// Adds the parameter VJP to `grad` and, when `dx` is not null, writes the input VJP.
+  /// \param params   this layer's slice of the flat vector, num_params() entries
+  /// \param columns  the im2col matrix of the forward pass, (C_in·K) × (P·B)
+  /// \param delta    adjoint of the pre-activation, (P·C_out) × B position-major, equivalently
+  ///                 C_out × (P·B) column-major
+  /// \param grad     this layer's slice of the gradient, num_params() entries; accumulated
+  /// \param dx       null, or storage for ∂L/∂x, (L·C_in) × B position-major; overwritten
+  /// \param scratch  grown to hold the (C_in·K) × (P·B) window adjoints when `dx` is set
+  template <class Scalar>
+  void backward(const Scalar* params, const Matrix<Scalar>& columns, const Scalar* delta,
+                Scalar* grad, Scalar* dx, Vector<Scalar>& scratch) const {
+    const Index positions = output_length();
+    const Index window = window_size();
+    const Index batch = positions > 0 ? columns.cols() / positions : 0;
+    const detail::ConstMatrixMap<Scalar> d(delta, out_channels, positions * batch);
+    detail::RowMajorMap<Scalar> dw(grad, out_channels, window);
+    Eigen::Map<Vector<Scalar>> db(grad + weight_count(), out_channels);
+    dw.noalias() += d * columns.transpose();
+    db.noalias() += d.rowwise().sum();
+    if (dx == nullptr) return;
+
+    const detail::ConstRowMajorMap<Scalar> w(params, out_channels, window);
+    auto dcols = detail::grow_map(scratch, window, positions * batch);
+    dcols.noalias() = w.transpose() * d;
+    // col2im: overlapping windows (K > s) add up; positions past the last window stay zero.
+    detail::MatrixMap<Scalar> dxm(dx, input_dim(), batch);
+    dxm.setZero();
+    for (Index b = 0; b < batch; ++b) {
+      Scalar* sample = dx + b * input_dim();
+      for (Index p = 0; p < positions; ++p) {
+        detail::MatrixMap<Scalar> win(sample + p * stride * in_channels, in_channels, kernel);
+        win += detail::ConstMatrixMap<Scalar>(dcols.data() + (b * positions + p) * window, kernel,
+                                              in_channels)
+                   .transpose();
+      }
+    }
+  }
+};
+
+}  // namespace sbptt

@@ -1,0 +1,79 @@
+#pragma once
+/// \file Fully connected layer `y = f(W x + b)`.
+///
+/// Parameter layout inside the flat vector (DESIGN §4, PyTorch `Linear` order): the weight W
+/// (outputs × inputs) row-major, then the bias b (outputs). The layer reads and writes its slice
+/// through `Eigen::Map`s, so the network's single parameter vector is never copied.
+#include <string>
+
+#include "sbptt/core/error.hpp"
+#include "sbptt/core/types.hpp"
+#include "sbptt/nn/activation.hpp"
+
+namespace sbptt {
+
+/// Sizes and activation of a dense layer; the math is in its member templates.
+struct Dense {
+  Index inputs = 0;                           ///< n_in, length of x
+  Index outputs = 0;                          ///< n_out, length of y
+  Activation activation = Activation::Identity;  ///< f (linear by default, as in Keras/PyTorch)
+
+  [[nodiscard]] Index input_dim() const { return inputs; }
+  [[nodiscard]] Index output_dim() const { return outputs; }
+  [[nodiscard]] Index weight_count() const { return outputs * inputs; }
+  [[nodiscard]] Index num_params() const { return weight_count() + outputs; }
+
+  /// Glorot fans: (n_in, n_out).
+  [[nodiscard]] Index fan_in() const { return inputs; }
+  [[nodiscard]] Index fan_out() const { return outputs; }
+
+  /// e.g. "dense 24→100 tanh".
+  [[nodiscard]] std::string describe() const {
+    return detail::concat("dense ", inputs, "→", outputs, " ", to_string(activation));
+  }
+
+  /// Throws `InvalidArgument` unless both sizes are positive.
+  void validate() const {
+    detail::require(inputs > 0, "Dense: inputs = ", inputs, ", expected > 0");
+    detail::require(outputs > 0, "Dense: outputs = ", outputs, ", expected > 0");
+  }
+
+  /// Y = f(W X + b) for a batch.
+  /// \param params  this layer's slice of the flat vector, num_params() entries
+  /// \param x       inputs, n_in × B
+  /// \param y       outputs, resized to n_out × B (no allocation when already that shape)
+  template <class Scalar>
+  void forward(const Scalar* params, const Matrix<Scalar>& x, Matrix<Scalar>& y) const {
+    const detail::ConstRowMajorMap<Scalar> w(params, outputs, inputs);
+    const Eigen::Map<const Vector<Scalar>> b(params + weight_count(), outputs);
+    y.resize(outputs, x.cols());
+    y.noalias() = w * x;
+    y.colwise() += b;
+    activate_in_place(activation, y);
+  }
+
+  /// Adds the parameter VJP to `grad` and, when `dx` is not null, writes the input VJP.
+  /// \param params  this layer's slice of the flat vector, num_params() entries
+  /// \param x       the inputs the forward pass saw, n_in × B
+  /// \param delta   adjoint of the pre-activation ∂L/∂(W x + b), n_out × B (column-major)
+  /// \param grad    this layer's slice of the gradient, num_params() entries; accumulated
+  /// \param dx      null, or storage for ∂L/∂x, n_in × B (column-major); overwritten
+  template <class Scalar>
+  void backward(const Scalar* params, const Matrix<Scalar>& x, const Scalar* delta, Scalar* grad,
+                Scalar* dx) const {
+    const Index batch = x.cols();
+    const detail::ConstMatrixMap<Scalar> d(delta, outputs, batch);
+    detail::RowMajorMap<Scalar> dw(grad, outputs, inputs);
+    Eigen::Map<Vector<Scalar>> db(grad + weight_count(), outputs);
+    // The batch sum is the inner dimension of this product: one GEMM, no per-sample loop.
+    dw.noalias() += d * x.transpose();
+    db.noalias() += d.rowwise().sum();
+    if (dx != nullptr) {
+      const detail::ConstRowMajorMap<Scalar> w(params, outputs, inputs);
+      detail::MatrixMap<Scalar> dxm(dx, inputs, batch);
+      dxm.noalias() = w.transpose() * d;
+    }
+  }
+};
+
+}  // namespace sbptt

@@ -1,0 +1,289 @@
+#pragma once
+/// \file Sequential network of dense and 1-D convolution layers with one flat parameter
+/// vector: the library's `Controller`.
+///
+/// Parameter order (DESIGN §4): layers from input to output, each layer's weight then its bias
+/// (see dense.hpp and conv1d.hpp for the per-layer layouts). A conv output feeds a dense layer
+/// with no reshape, because samples are stored position-major throughout.
+///
+/// Memory: `forward` keeps what `backward` needs in the caller's `Workspace` (input copy,
+/// every layer's output, the im2col matrices) and resizes those buffers only when the batch
+/// size or the network changes. `backward` takes the workspace `const`, so its own temporaries
+/// (layer adjoints) live in thread-local buffers that only ever grow: after the first call on
+/// a thread, repeated calls at the same sizes allocate nothing, and several threads may run
+/// `backward` on the same workspace at once (e.g. the two sweeps of the combined update).
+#include <cstddef>
+#include <initializer_list>
+#include <string>
+#include <type_traits>
+#include <utility>
+#include <variant>
+#include <vector>
+
+#include "sbptt/core/concepts.hpp"
+#include "sbptt/core/error.hpp"
+#include "sbptt/core/types.hpp"
+#include "sbptt/nn/activation.hpp"
+#include "sbptt/nn/conv1d.hpp"
+#include "sbptt/nn/dense.hpp"
+
+namespace sbptt {
+
+/// One layer of a `Network`.
+using Layer = std::variant<Dense, Conv1d>;
+
+/// Size of the layer's input column (one sample).
+[[nodiscard]] inline Index layer_input_dim(const Layer& layer) {
+  return std::visit([](const auto& l) { return l.input_dim(); }, layer);
+}
+/// Size of the layer's output column (one sample).
+[[nodiscard]] inline Index layer_output_dim(const Layer& layer) {
+  return std::visit([](const auto& l) { return l.output_dim(); }, layer);
+}
+/// Number of entries of the layer's slice of the flat parameter vector.
+[[nodiscard]] inline Index layer_num_params(const Layer& layer) {
+  return std::visit([](const auto& l) { return l.num_params(); }, layer);
+}
+/// Number of weight (kernel) entries; the bias follows them in the layer's slice.
+[[nodiscard]] inline Index layer_weight_count(const Layer& layer) {
+  return std::visit([](const auto& l) { return l.weight_count(); }, layer);
+}
+[[nodiscard]] inline Activation layer_activation(const Layer& layer) {
+  return std::visit([](const auto& l) { return l.activation; }, layer);
+}
+[[nodiscard]] inline std::string layer_describe(const Layer& layer) {
+  return std::visit([](const auto& l) { return l.describe(); }, layer);
+}
+
+namespace detail {
+
+/// Per-thread temporaries of `Network::backward` (see the file comment for why).
+template <class Scalar>
+struct NetworkScratch {
+  Vector<Scalar> delta;       ///< pre-activation adjoint of the current layer
+  Vector<Scalar> adjoint[2];  ///< input adjoints, alternating so that input and output differ
+  Vector<Scalar> columns;     ///< conv window adjoints (im2col shape)
+};
+
+template <class Scalar>
+[[nodiscard]] NetworkScratch<Scalar>& network_scratch() {
+  thread_local NetworkScratch<Scalar> scratch;
+  return scratch;
+}
+
+}  // namespace detail
+
+/// A sequential stack of `Dense` / `Conv1d` layers; satisfies `sbptt::Controller`.
+///
+/// Parameters start at zero; use `glorot_uniform` (init.hpp) or `load_parameters`
+/// (parameters_io.hpp) to set them.
+template <class ScalarType = double>
+class Network {
+public:
+  using Scalar = ScalarType;
+
+  /// What `forward` records for `backward`. Default-constructible; one per concurrent forward.
+  class Workspace {
+  public:
+    /// B of the last forward pass (−1 before the first).
+    [[nodiscard]] Index batch_size() const { return batch_; }
+    /// Output of layer `l` (after its activation), output_dim(l) × B.
+    [[nodiscard]] const Matrix<Scalar>& layer_output(Index l) const {
+      return outputs_.at(static_cast<std::size_t>(l));
+    }
+
+  private:
+    friend class Network;
+    Matrix<Scalar> input_;                // X, input_dim × B
+    std::vector<Matrix<Scalar>> outputs_;  // per layer, output_dim × B
+    std::vector<Matrix<Scalar>> columns_;  // per conv layer the im2col matrix, else empty
+    Index batch_ = -1;
+  };
+
+  /// A network of the given layers (input to output), parameters zero.
+  /// Throws `InvalidArgument` if the list is empty, a layer is malformed, or consecutive sizes
+  /// do not chain (conv → conv must also agree in positions and channels).
+  explicit Network(std::vector<Layer> layers) : layers_(std::move(layers)) {
+    detail::require(!layers_.empty(), "Network: no layers, expected at least one");
+    Index offset = 0;
+    for (std::size_t l = 0; l < layers_.size(); ++l) {
+      std::visit([](const auto& layer) { layer.validate(); }, layers_[l]);
+      if (l > 0) check_chain(l);
+      offsets_.push_back(offset);
+      offset += layer_num_params(layers_[l]);
+    }
+    params_ = Vector<Scalar>::Zero(offset);
+  }
+
+  /// Same, from a braced list: `Network<>({Conv1d{...}, Dense{...}})`.
+  Network(std::initializer_list<Layer> layers) : Network(std::vector<Layer>(layers)) {}
+
+  /// Multi-layer perceptron inputs → hidden[0] → … → outputs; hidden layers use
+  /// `hidden_activation`, the output layer is linear (Identity).
+  [[nodiscard]] static Network mlp(Index inputs, const std::vector<Index>& hidden, Index outputs,
+                                   Activation hidden_activation = Activation::Tanh) {
+    std::vector<Layer> layers;
+    Index previous = inputs;
+    for (const Index width : hidden) {
+      layers.emplace_back(Dense{previous, width, hidden_activation});
+      previous = width;
+    }
+    layers.emplace_back(Dense{previous, outputs, Activation::Identity});
+    return Network(std::move(layers));
+  }
+
+  [[nodiscard]] Index input_dim() const { return layer_input_dim(layers_.front()); }
+  [[nodiscard]] Index output_dim() const { return layer_output_dim(layers_.back()); }
+  [[nodiscard]] Index num_params() const {
+    return offsets_.back() + layer_num_params(layers_.back());
+  }
+  [[nodiscard]] Index num_layers() const { return static_cast<Index>(layers_.size()); }
+  [[nodiscard]] const std::vector<Layer>& layers() const { return layers_; }
+  /// Index of layer `l`'s first parameter (its weight) in the flat vector.
+  [[nodiscard]] Index param_offset(Index l) const {
+    return offsets_.at(static_cast<std::size_t>(l));
+  }
+
+  /// The flat parameter vector θ, num_params() entries.
+  [[nodiscard]] const Vector<Scalar>& params() const { return params_; }
+  /// Writable θ; keep its size at num_params() (forward checks).
+  [[nodiscard]] Vector<Scalar>& params() { return params_; }
+
+  /// e.g. "dense 24→100 tanh | dense 100→4 identity (2904 parameters)".
+  [[nodiscard]] std::string describe() const {
+    std::string text;
+    for (const auto& layer : layers_) text += (text.empty() ? "" : " | ") + layer_describe(layer);
+    return text + detail::concat(" (", num_params(), " parameters)");
+  }
+
+  /// Y = N(X; θ).
+  /// \param x   inputs, input_dim() × B, one sample per column
+  /// \param y   outputs, resized to output_dim() × B
+  /// \param ws  records what `backward` needs; reused buffers, resized only when B changes
+  void forward(const Matrix<Scalar>& x, Matrix<Scalar>& y, Workspace& ws) const {
+    detail::require(x.rows() == input_dim(), "Network::forward: X has ", x.rows(),
+                    " rows, expected input_dim() = ", input_dim(), " (one sample per column)");
+    check_params_size();
+    const std::size_t count = layers_.size();
+    if (ws.outputs_.size() != count) {
+      ws.outputs_.resize(count);
+      ws.columns_.resize(count);
+    }
+    ws.input_ = x;
+    ws.batch_ = x.cols();
+    for (std::size_t l = 0; l < count; ++l) {
+      const Matrix<Scalar>& in = l == 0 ? ws.input_ : ws.outputs_[l - 1];
+      const Scalar* theta = params_.data() + offsets_[l];
+      std::visit(
+          [&](const auto& layer) {
+            if constexpr (std::is_same_v<std::decay_t<decltype(layer)>, Conv1d>) {
+              layer.forward(theta, in, ws.outputs_[l], ws.columns_[l]);
+            } else {
+              layer.forward(theta, in, ws.outputs_[l]);
+            }
+          },
+          layers_[l]);
+    }
+    y = ws.outputs_.back();
+  }
+
+  /// Vector–Jacobian products at the batch recorded in `ws`.
+  /// \param ws    filled by `forward` of this network (batch B)
+  /// \param dy    output adjoint, output_dim() × B
+  /// \param grad  num_params(); **adds** (∂N/∂θ)ᵀ dY summed over the batch
+  /// \param dx    null (gradient stopped at the input: that product is skipped), or set to
+  ///              (∂N/∂x)ᵀ dY, input_dim() × B; must not alias `dy`
+  void backward(const Workspace& ws, const Matrix<Scalar>& dy, Vector<Scalar>& grad,
+                Matrix<Scalar>* dx) const {
+    check_workspace(ws);
+    detail::require(dy.rows() == output_dim() && dy.cols() == ws.batch_,
+                    "Network::backward: dY is ", dy.rows(), " × ", dy.cols(), ", expected ",
+                    output_dim(), " × ", ws.batch_, " (output_dim() × batch of the forward pass)");
+    detail::require(grad.size() == num_params(), "Network::backward: grad has ", grad.size(),
+                    " entries, expected num_params() = ", num_params());
+    check_params_size();
+
+    auto& scratch = detail::network_scratch<Scalar>();
+    const Index batch = ws.batch_;
+    const Scalar* upstream = dy.data();  // ∂L/∂(output of layer l)
+    for (Index l = num_layers() - 1; l >= 0; --l) {
+      const auto ul = static_cast<std::size_t>(l);
+      const Layer& layer = layers_[ul];
+      const Matrix<Scalar>& out = ws.outputs_[ul];
+
+      const Scalar* delta = upstream;  // identity: ∂L/∂z = ∂L/∂y, no copy
+      if (layer_activation(layer) != Activation::Identity) {
+        auto d = detail::grow_map(scratch.delta, out.rows(), batch);
+        activation_backward(layer_activation(layer), out,
+                            detail::ConstMatrixMap<Scalar>(upstream, out.rows(), batch), d);
+        delta = d.data();
+      }
+
+      // The input adjoint of layer 0 is dX; skipping it is what stops the gradient.
+      Scalar* d_in = nullptr;
+      if (l > 0) {
+        d_in = detail::grow_map(scratch.adjoint[ul % 2], layer_input_dim(layer), batch).data();
+      } else if (dx != nullptr) {
+        dx->resize(input_dim(), batch);
+        d_in = dx->data();
+      }
+
+      const Scalar* theta = params_.data() + offsets_[ul];
+      Scalar* g = grad.data() + offsets_[ul];
+      std::visit(
+          [&](const auto& spec) {
+            if constexpr (std::is_same_v<std::decay_t<decltype(spec)>, Conv1d>) {
+              spec.backward(theta, ws.columns_[ul], delta, g, d_in, scratch.columns);
+            } else {
+              spec.backward(theta, l == 0 ? ws.input_ : ws.outputs_[ul - 1], delta, g, d_in);
+            }
+          },
+          layer);
+      upstream = d_in;
+    }
+  }
+
+private:
+  void check_chain(std::size_t l) const {
+    const Layer& previous = layers_[l - 1];
+    const Layer& current = layers_[l];
+    detail::require(layer_output_dim(previous) == layer_input_dim(current), "Network: layer ",
+                    l, " (", layer_describe(current), ") expects ", layer_input_dim(current),
+                    " inputs, but layer ", l - 1, " (", layer_describe(previous), ") produces ",
+                    layer_output_dim(previous));
+    // Equal totals with a different positions × channels split would silently reinterpret
+    // the memory; that is never what a conv stack means.
+    const auto* a = std::get_if<Conv1d>(&previous);
+    const auto* b = std::get_if<Conv1d>(&current);
+    if (a != nullptr && b != nullptr) {
+      detail::require(a->output_length() == b->length && a->out_channels == b->in_channels,
+                      "Network: layer ", l, " (", b->describe(), ") expects ", b->length,
+                      " positions × ", b->in_channels, " channels, but layer ", l - 1, " (",
+                      a->describe(), ") produces ", a->output_length(), " × ", a->out_channels);
+    }
+  }
+
+  void check_params_size() const {
+    detail::require(params_.size() == num_params(), "Network: params() has ", params_.size(),
+                    " entries, expected num_params() = ", num_params());
+  }
+
+  void check_workspace(const Workspace& ws) const {
+    detail::require(ws.batch_ >= 0, "Network::backward: the workspace holds no forward pass");
+    bool matches = ws.outputs_.size() == layers_.size() && ws.input_.rows() == input_dim();
+    for (std::size_t l = 0; matches && l < layers_.size(); ++l)
+      matches = ws.outputs_[l].rows() == layer_output_dim(layers_[l]);
+    detail::require(matches, "Network::backward: the workspace was filled by a different "
+                             "network (layer sizes differ from ", describe(), ")");
+  }
+
+  std::vector<Layer> layers_;
+  std::vector<Index> offsets_;  // first parameter of each layer
+  Vector<Scalar> params_;
+};
+
+static_assert(static_assert_controller<Network<double>>());
+static_assert(static_assert_controller<Network<float>>());
+static_assert(Controller<Network<double>> && Controller<Network<float>>);
+
+}  // namespace sbptt

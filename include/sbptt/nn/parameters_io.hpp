@@ -1,0 +1,87 @@
+#pragma once
+/// \file The parameters file (DESIGN §4): plain text, one number per line, in flat-vector order.
+///
+/// Numbers are written as printf `%.17g` for double and `%.9g` for float, the shortest fixed
+/// precision that round-trips every value bit for bit (core/number_text.hpp).
+///
+/// Loading is strict, because a silently misread controller is worse than a refused one:
+/// each line is one finite number with optional surrounding blanks (spaces, tabs, a CR from a
+/// Windows editor); anything else is a `ParseError` naming the file, the 1-based line and the
+/// text. Writing goes to a temporary file beside the target, renamed over it at the end, so a
+/// crash never leaves a half-written parameters file.
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "sbptt/core/atomic_file.hpp"
+#include "sbptt/core/concepts.hpp"
+#include "sbptt/core/number_text.hpp"
+#include "sbptt/core/error.hpp"
+#include "sbptt/core/types.hpp"
+
+namespace sbptt {
+
+/// Writes θ to `path`, one number per line (%.17g for double, %.9g for float).
+/// \param theta  the flat parameter vector, any length
+/// Throws `NonFiniteError` (naming the index) before writing anything if θ has a NaN or Inf,
+/// and `IoError` if the temporary file cannot be written or renamed.
+template <class Scalar>
+void save_parameters(const std::filesystem::path& path, const Vector<Scalar>& theta) {
+  for (Index i = 0; i < theta.size(); ++i)
+    detail::require<NonFiniteError>(std::isfinite(theta(i)), "save_parameters: parameter ", i,
+                                    " is ", theta(i), ", expected a finite number");
+  std::string text;
+  for (Index i = 0; i < theta.size(); ++i) {
+    detail::append_number(text, theta(i));
+    text += '\n';
+  }
+  write_file_atomically(path.string(), text);
+}
+
+/// Reads a parameters file that must hold exactly `expected` numbers.
+/// \return the flat parameter vector, `expected` entries
+/// Throws `IoError` if `path` cannot be read, `ParseError` for a malformed line or a wrong count
+/// ("expected N numbers, got M").
+template <class Scalar>
+[[nodiscard]] Vector<Scalar> load_parameters(const std::filesystem::path& path, Index expected) {
+  std::error_code error;
+  detail::require<IoError>(!std::filesystem::is_directory(path, error),
+                           "load_parameters: '", path.string(), "' is a directory, expected a "
+                           "parameters file");
+  std::ifstream in(path, std::ios::binary);
+  detail::require<IoError>(static_cast<bool>(in), "load_parameters: cannot open '",
+                           path.string(), "' for reading");
+  std::vector<Scalar> values;
+  values.reserve(static_cast<std::size_t>(expected > 0 ? expected : 0));
+  std::string line;
+  Index line_number = 0;
+  while (std::getline(in, line)) {
+    ++line_number;
+    values.push_back(detail::parse_finite<Scalar>(
+        line, detail::concat("parameters file '", path.string(), "', line ", line_number)));
+  }
+  detail::require<IoError>(in.eof(), "load_parameters: reading '", path.string(),
+                           "' failed after line ", line_number);
+  const auto count = static_cast<Index>(values.size());
+  detail::require<ParseError>(count == expected, "parameters file '", path.string(),
+                              "': expected ", expected, " numbers, got ", count);
+  return Eigen::Map<const Vector<Scalar>>(values.data(), count);
+}
+
+/// Saves a controller's parameters (see `save_parameters(path, theta)`).
+template <Controller Ctrl>
+void save_parameters(const std::filesystem::path& path, const Ctrl& controller) {
+  save_parameters<typename Ctrl::Scalar>(path, controller.params());
+}
+
+/// Loads `path` into a controller; the file must hold exactly num_params() numbers. On any
+/// error the controller is left unchanged.
+template <Controller Ctrl>
+void load_parameters(const std::filesystem::path& path, Ctrl& controller) {
+  controller.params() = load_parameters<typename Ctrl::Scalar>(path, controller.num_params());
+}
+
+}  // namespace sbptt

@@ -16,18 +16,17 @@
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
-#include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <utility>
-#include <variant>
 #include <vector>
 
 #include "sbptt/optim/adam.hpp"
 #include "sbptt/optim/combined_update.hpp"
+#include "sbptt/core/atomic_file.hpp"
+#include "sbptt/train/arguments.hpp"
 
 namespace {
 
@@ -89,26 +88,6 @@ std::vector<Point> run_combined(const Settings& s) {
   return path;
 }
 
-std::optional<double> parse_number(std::string_view text) {
-  const std::string owned(text);
-  char* end = nullptr;
-  const double value = std::strtod(owned.c_str(), &end);
-  if (owned.empty() || end != owned.c_str() + owned.size() || !std::isfinite(value)) {
-    return std::nullopt;
-  }
-  return value;
-}
-
-std::optional<long> parse_count(std::string_view text) {
-  const std::string owned(text);
-  char* end = nullptr;
-  const long value = std::strtol(owned.c_str(), &end, 10);
-  if (owned.empty() || end != owned.c_str() + owned.size() || value < 1 || value > 1000000) {
-    return std::nullopt;
-  }
-  return value;
-}
-
 void usage(std::ostream& out) {
   out << "usage: rotation [--k K] [--lr LR] [--iterations N] [--csv FILE]\n"
          "  --k K           rotation strength, finite (default 2)\n"
@@ -117,102 +96,48 @@ void usage(std::ostream& out) {
          "  --csv FILE      write iteration,method,theta1,theta2,loss rows to FILE\n";
 }
 
-// Returns the settings, or an exit code: 0 after --help, 2 after a bad argument.
-std::variant<Settings, int> parse_arguments(int argc, char** argv) {
+// Throws sbptt::InvalidArgument naming the flag and what was expected.
+Settings parse_arguments(int argc, const char* const* argv) {
   Settings s;
-  for (int i = 1; i < argc; ++i) {
-    std::string_view arg = argv[i];
-    if (arg == "--help" || arg == "-h") {
-      usage(std::cout);
-      return 0;
-    }
-    std::string_view value;
-    std::string_view flag = arg;
-    if (const auto eq = arg.find('='); arg.starts_with("--") && eq != std::string_view::npos) {
-      flag = arg.substr(0, eq);
-      value = arg.substr(eq + 1);
-    } else if (flag == "--k" || flag == "--lr" || flag == "--iterations" || flag == "--csv") {
-      if (i + 1 >= argc) {
-        std::cerr << "rotation: " << flag << " needs a value\n";
-        usage(std::cerr);
-        return 2;
-      }
-      value = argv[++i];
-    }
-    auto bad = [&](const char* expected) {
-      std::cerr << "rotation: " << flag << " = \"" << value << "\" is not valid; expected "
-                << expected << "\n";
-      return 2;
-    };
-    if (flag == "--k") {
-      const auto k = parse_number(value);
-      if (!k) return bad("a finite number");
-      s.k = *k;
-    } else if (flag == "--lr") {
-      const auto lr = parse_number(value);
-      if (!lr || *lr <= 0) return bad("a finite number > 0");
-      s.lr = *lr;
-    } else if (flag == "--iterations") {
-      const auto n = parse_count(value);
-      if (!n) return bad("an integer in [1, 1000000]");
-      s.iterations = *n;
-    } else if (flag == "--csv") {
-      if (value.empty()) return bad("a file name");
-      s.csv = std::string(value);
-    } else {
-      std::cerr << "rotation: unknown argument \"" << arg << "\"\n";
-      usage(std::cerr);
-      return 2;
-    }
+  sbptt::ArgumentCursor args(argc, argv);
+  while (args.next()) {
+    const std::string& flag = args.flag();
+    if (flag == "--k") s.k = sbptt::parse_number(flag, args.value(), -1e6, 1e6);
+    else if (flag == "--lr") s.lr = sbptt::parse_number(flag, args.value(), 1e-300, 1e6);
+    else if (flag == "--iterations") s.iterations = sbptt::parse_integer(flag, args.value(), 1, 1000000);
+    else if (flag == "--csv") s.csv = args.value();
+    else args.unknown("--k, --lr, --iterations, --csv");
   }
   return s;
 }
 
 using Runs = std::vector<std::pair<const char*, const std::vector<Point>*>>;
 
-// Written to FILE.tmp and renamed, so a failed run leaves no half-written FILE behind.
-bool write_csv(const std::string& file, const Runs& runs) {
-  const std::string tmp = file + ".tmp";
-  {
-    std::ofstream out(tmp);
-    if (!out) {
-      std::cerr << "rotation: cannot open \"" << tmp << "\" for writing\n";
-      return false;
-    }
-    out << "iteration,method,theta1,theta2,loss\n";
-    char line[160];
-    for (const auto& [name, path] : runs) {
-      for (const Point& p : *path) {
-        std::snprintf(line, sizeof line, "%ld,%s,%.17g,%.17g,%.17g\n", p.iteration, name,
-                      p.theta1, p.theta2, p.loss);
-        out << line;
-      }
-    }
-    out.flush();
-    if (!out) {
-      std::cerr << "rotation: writing \"" << tmp << "\" failed\n";
-      std::filesystem::remove(tmp);
-      return false;
+std::string csv_text(const Runs& runs) {
+  std::string text = "iteration,method,theta1,theta2,loss\n";
+  char line[160];
+  for (const auto& [name, path] : runs) {
+    for (const Point& p : *path) {
+      std::snprintf(line, sizeof line, "%ld,%s,%.17g,%.17g,%.17g\n", p.iteration, name,
+                    p.theta1, p.theta2, p.loss);
+      text += line;
     }
   }
-  std::error_code ec;
-  std::filesystem::rename(tmp, file, ec);
-  if (ec) {
-    std::cerr << "rotation: cannot rename \"" << tmp << "\" to \"" << file << "\": "
-              << ec.message() << "\n";
-    std::filesystem::remove(tmp, ec);
-    return false;
-  }
-  return true;
+  return text;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
+  Settings s;
   try {
-    const auto parsed = parse_arguments(argc, argv);
-    if (const int* code = std::get_if<int>(&parsed)) return *code;
-    const Settings s = std::get<Settings>(parsed);
+    s = parse_arguments(argc, argv);
+  } catch (const sbptt::InvalidArgument& e) {
+    std::cerr << "rotation: " << e.what() << "\n";
+    usage(std::cerr);
+    return 2;
+  }
+  try {
 
     const auto plain = run_plain(s, false);
     const auto rotated = run_plain(s, true);
@@ -254,7 +179,7 @@ int main(int argc, char** argv) {
                   path->back().loss, reached.c_str(), low, high);
     }
     if (!s.csv.empty()) {
-      if (!write_csv(s.csv, runs)) return 1;
+      sbptt::write_file_atomically(s.csv, csv_text(runs));
       std::printf("trajectories written to %s\n", s.csv.c_str());
     }
     return 0;

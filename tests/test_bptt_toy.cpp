@@ -8,7 +8,7 @@
 #include "sbptt/bptt/losses.hpp"
 #include "sbptt/optim/combined_update.hpp"
 #include "sbptt/sim/linear.hpp"
-#include "support/polynomial_policy.hpp"
+#include "polynomial_policy.hpp"
 
 using namespace sbptt;
 using sbptt::testing::PolynomialPolicy;

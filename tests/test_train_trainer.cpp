@@ -11,7 +11,7 @@
 #include "sbptt/optim/sgd.hpp"
 #include "sbptt/sim/linear.hpp"
 #include "sbptt/train/trainer.hpp"
-#include "support/polynomial_policy.hpp"
+#include "polynomial_policy.hpp"
 
 using namespace sbptt;
 using sbptt::testing::PolynomialPolicy;

@@ -72,7 +72,12 @@ struct TaskOptions {
 [[nodiscard]] inline TaskOptions parse_task_options(Task task, int argc, const char* const* argv) {
   TaskOptions o;
   o.task = task;
-  if (task == Task::Guidance) o.rc = 0.1;
+  if (task == Task::Toy) {  // the paper's toy has one start and two parameters
+    o.samples = 1;
+    o.batch = 1;
+    o.epochs = 200;
+    o.lr = 0.01;
+  }
   ArgumentCursor args(argc, argv);
   constexpr long many = 1'000'000'000;
   while (args.next()) {

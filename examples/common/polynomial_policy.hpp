@@ -1,5 +1,6 @@
 #pragma once
-// A user-defined controller, written against the Controller concept only (no sbptt::nn):
+// A user-defined controller, written against the Controller concept only (no sbptt::nn),
+// used by the toy program and the engine tests:
 // the scalar policy c = Σ_k θ_k · x^{p_k}. Powers {1} give the linear policy c = θ x of the
 // LQR test; powers {2, 1} give the paper's toy network c = θ1 x² + θ2 x.
 #include <utility>

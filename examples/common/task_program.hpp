@@ -1,0 +1,171 @@
+#pragma once
+// What the four task programs (toy, cartpole, guidance, quantum) share: flag parsing with clear
+// errors, the horizon rules, the data split, --dump-gradients, and the training loop with its
+// log, progress line and non-finite handling. Each program only builds its simulator,
+// objective, controller and initial states.
+//
+// Exit codes: 0 success, 1 error (unreadable file, ...), 2 bad flags, 3 a non-finite value
+// stopped training (the last finite parameters are saved when --save-params is given).
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <string>
+
+#include <sbptt/sbptt.hpp>
+
+namespace sbptt::examples {
+
+/// Time stepping of a task after --steps / --dt / --T. Given only --steps, dt is kept (the
+/// horizon changes); given only --dt or only --T, the other one of steps and dt is adapted.
+struct Horizon {
+  Index steps;
+  double dt;
+  [[nodiscard]] double horizon() const { return static_cast<double>(steps) * dt; }
+};
+
+inline Horizon resolve_horizon(const TaskOptions& o, Index default_steps, double default_dt) {
+  Horizon h{default_steps, default_dt};
+  if (o.steps) h.steps = *o.steps;
+  if (o.dt) h.dt = *o.dt;
+  if (o.horizon && o.steps) h.dt = *o.horizon / static_cast<double>(*o.steps);
+  if (o.horizon && !o.steps) {
+    const double steps = std::round(*o.horizon / h.dt);
+    detail::require(steps >= 1 && std::abs(steps * h.dt - *o.horizon) < 1e-9 * *o.horizon,
+                    "--T ", *o.horizon, " is not a whole number of steps of dt = ", h.dt,
+                    "; give --steps too, or a --dt that divides T");
+    h.steps = static_cast<Index>(steps);
+  }
+  return h;
+}
+
+/// Splits 2N generated samples into the first N (train) and last N (test), as the reference.
+template <class Scalar>
+struct DataSplit {
+  Matrix<Scalar> train, test;
+};
+template <class Scalar>
+DataSplit<Scalar> split_half(const Matrix<Scalar>& states) {
+  const Index n = states.cols() / 2;
+  return {states.leftCols(n), states.rightCols(n)};
+}
+
+/// --dump-gradients: one batch (all of `states`), no update; prints loss=… and writes
+/// `param,R,M,C,S,N`, one row per parameter.
+template <class Sim, class Ctrl, class Loss>
+int dump_gradients(const TaskOptions& o, const Sim& sim, Ctrl& controller,
+                   const Objective<Loss>& objective, Index steps,
+                   const Matrix<typename Sim::Scalar>& states) {
+  using Scalar = typename Sim::Scalar;
+  Engine engine(sim, controller, objective, steps);
+  const Scalar loss = engine.forward(states);
+  Vector<Scalar> regular, modified, stopped, network, combined;
+  engine.reverse(FlowMode::Full, regular, o.truncation);
+  engine.reverse(FlowMode::PhysicsOnly, modified, o.truncation);
+  engine.reverse(FlowMode::Stopped, stopped, o.truncation);
+  engine.reverse(FlowMode::NetworkOnly, network, o.truncation);
+  combine(modified, regular, combined);
+  std::string text = "param,R,M,C,S,N\n";
+  for (Index p = 0; p < regular.size(); ++p) {
+    text += std::to_string(p);
+    for (const auto* column : {&regular, &modified, &combined, &stopped, &network}) {
+      text += ',';
+      detail::append_number(text, (*column)(p));
+    }
+    text += '\n';
+  }
+  write_file_atomically(o.dump_gradients, text);
+  std::printf("loss=%.17g\n", static_cast<double>(loss));
+  return 0;
+}
+
+/// Trains `controller` for o.epochs epochs (or dumps gradients), writing the log and params.
+template <class Sim, class Ctrl, class Loss>
+int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objective<Loss>& objective,
+          Index steps, DataSplit<typename Sim::Scalar> data) {
+  using Scalar = typename Sim::Scalar;
+  const char* name = to_string(o.task);
+  if (!o.init_params.empty()) load_parameters(o.init_params, controller);
+  if (!o.init_states.empty()) data.train = load_states<Scalar>(o.init_states, sim.state_dim());
+  if (!o.dump_gradients.empty())
+    return dump_gradients(o, sim, controller, objective, steps, data.train);
+
+  TrainerOptions options;
+  options.method = o.method;
+  options.clip = o.clip;
+  options.clip_threshold = o.clip_threshold;
+  options.batch = o.batch;
+  options.shuffle = o.shuffle;
+  options.shuffle_seed = o.seed;
+  options.truncation = o.truncation;
+  options.on_non_finite = o.on_non_finite;
+  AdamOptions<Scalar> adam;
+  adam.learning_rate = static_cast<Scalar>(o.lr);
+  Trainer trainer(sim, controller, objective, steps, Adam<Scalar>(adam), options);
+
+  std::fprintf(stderr,
+               "%s: method %s, clip %s, %ld epochs, %ld train / %ld test samples, batch %ld, "
+               "%ld steps, %ld parameters, %s\n",
+               name, std::string(label(o.method)).c_str(), to_string(o.clip).c_str(), o.epochs,
+               static_cast<long>(data.train.cols()), static_cast<long>(data.test.cols()), o.batch,
+               static_cast<long>(steps), static_cast<long>(controller.num_params()),
+               o.use_float ? "float" : "double");
+  TrainingLog log;
+  const double initial = static_cast<double>(trainer.engine().evaluate(data.test));
+  std::fprintf(stderr, "%s: initial test loss %.6g\n", name, initial);
+  int status = 0;
+  for (long epoch = 1; epoch <= o.epochs; ++epoch) {
+    const EpochRecord record = trainer.train_epoch(data.train, data.test);
+    if (trainer.stopped()) {
+      const auto& event = *trainer.last_non_finite();
+      std::fprintf(stderr,
+                   "%s: non-finite %s (%g) in epoch %ld, batch %ld, step %ld, sample %ld; "
+                   "training stopped, keeping the last finite parameters\n",
+                   name, std::string(to_string(event.where.quantity)).c_str(), event.where.value,
+                   event.epoch, static_cast<long>(event.batch),
+                   static_cast<long>(event.where.step), static_cast<long>(event.where.sample));
+      status = 3;
+      break;
+    }
+    log.add(record);
+    if (!o.csv.empty()) log.save(o.csv);
+    if (epoch == 1 || epoch == o.epochs || epoch % 10 == 0)
+      std::fprintf(stderr, "%s: epoch %ld  batch %.6g  train %.6g  test %.6g  %.3fs\n", name,
+                   epoch, record.batch_loss, record.train_loss, record.test_loss, record.seconds);
+  }
+  if (!o.save_params.empty()) save_parameters(o.save_params, controller);
+  if (status == 0 && !log.rows().empty())
+    std::printf("final test loss %.9g\n", log.rows().back().test_loss);
+  return status;
+}
+
+/// Parses the flags for `task` and calls `body.template operator()<Scalar>(options)` with
+/// float or double; turns exceptions into messages and exit codes.
+template <class Body>
+int task_main(Task task, int argc, char** argv, Body&& body) {
+  const char* name = to_string(task);
+  for (int i = 1; i < argc; ++i) {
+    if (std::string(argv[i]) == "--help") {
+      std::printf("usage: %s [flags]\nflags: %s\n", name, task_flags(task).c_str());
+      return 0;
+    }
+  }
+  TaskOptions options;
+  try {
+    options = parse_task_options(task, argc, argv);
+  } catch (const InvalidArgument& e) {
+    std::cerr << name << ": " << e.what() << "\n";
+    return 2;
+  }
+  try {
+    return options.use_float ? body.template operator()<float>(options)
+                             : body.template operator()<double>(options);
+  } catch (const InvalidArgument& e) {
+    std::cerr << name << ": " << e.what() << "\n";
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << name << ": " << e.what() << "\n";
+    return 1;
+  }
+}
+
+}  // namespace sbptt::examples

@@ -131,3 +131,46 @@ TEST_CASE("trainer: parse_method accepts short and long names and rejects others
   CHECK(parse_method("network") == Method::NetworkOnly);
   REQUIRE_THROWS_WITH(parse_method("Q"), Catch::Contains("'Q'") && Catch::Contains("R, M, C, S, N"));
 }
+
+namespace {
+
+/// Fault injection: c = θ1 x + θ2, but the input product reports an infinite feedback, so the
+/// regular sweep (which uses it) overflows while the modified one (which does not) stays finite.
+struct InfiniteFeedbackPolicy : Policy {
+  InfiniteFeedbackPolicy() : Policy({1, 0}) {}
+  void backward(const Workspace& ws, const Matrix<double>& dy, Vector<double>& grad,
+                Matrix<double>* dx) const {
+    Policy::backward(ws, dy, grad, dx);
+    if (dx) *dx = dy * std::numeric_limits<double>::infinity();
+  }
+};
+
+}  // namespace
+
+TEST_CASE("trainer: C stays finite when g_R overflows; R stops and keeps its parameters",
+          "[train]") {
+  const Sim sim = Sim::scalar(0.9, 0.5);
+  const Matrix<double> train = samples({0.5, -1.0, 1.5, 2.0});
+  for (Method method : {Method::Combined, Method::Regular}) {
+    InfiniteFeedbackPolicy policy;
+    policy.params() << 0.2, 0.1;
+    const Vector<double> start = policy.params();
+    TrainerOptions options;
+    options.method = method;
+    options.batch = 2;
+    Trainer trainer(sim, policy, to_origin(LossTiming::Continuous), 5,
+                    Adam<double>(AdamOptions<double>{0.01}), options);
+    const EpochRecord record = trainer.train_epoch(train, train);
+    INFO("method " << label(method));
+    CHECK(policy.params().allFinite());
+    if (method == Method::Combined) {
+      CHECK_FALSE(trainer.last_non_finite());
+      CHECK(policy.params() != start);  // it did step, with g_R's NaN components dropped
+      CHECK(std::isfinite(record.update_norm2));
+    } else {
+      REQUIRE(trainer.last_non_finite());
+      CHECK(trainer.last_non_finite()->where.quantity == Quantity::Adjoint);
+      CHECK(policy.params() == start);
+    }
+  }
+}

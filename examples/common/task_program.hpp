@@ -8,6 +8,8 @@
 // stopped training (the last finite parameters are saved when --save-params is given).
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <unistd.h>
 #include <iostream>
 #include <string>
 
@@ -36,6 +38,20 @@ inline Horizon resolve_horizon(const TaskOptions& o, Index default_steps, double
     h.steps = static_cast<Index>(steps);
   }
   return h;
+}
+
+/// Fails before any work when an output file could not be written: its directory must exist
+/// and be writable (an hours-long run must not die at its first save).
+inline void require_writable(const std::string& path, const char* flag) {
+  if (path.empty()) return;
+  const std::filesystem::path parent = std::filesystem::absolute(path).parent_path();
+  std::error_code error;
+  detail::require<IoError>(std::filesystem::exists(parent, error), flag, " '", path,
+                           "': directory '", parent.string(), "' does not exist");
+  detail::require<IoError>(std::filesystem::is_directory(parent, error), flag, " '", path,
+                           "': '", parent.string(), "' is not a directory");
+  detail::require<IoError>(::access(parent.c_str(), W_OK) == 0, flag, " '", path,
+                           "': directory '", parent.string(), "' is not writable");
 }
 
 /// Splits 2N generated samples into the first N (train) and last N (test), as the reference.
@@ -84,6 +100,9 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
           Index steps, DataSplit<typename Sim::Scalar> data) {
   using Scalar = typename Sim::Scalar;
   const char* name = to_string(o.task);
+  require_writable(o.csv, "--csv");
+  require_writable(o.save_params, "--save-params");
+  require_writable(o.dump_gradients, "--dump-gradients");
   if (!o.init_params.empty()) load_parameters(o.init_params, controller);
   if (!o.init_states.empty()) data.train = load_states<Scalar>(o.init_states, sim.state_dim());
   if (!o.dump_gradients.empty())

@@ -160,6 +160,40 @@ TEST_CASE("bad flags get exit code 2 and a message naming the value", "[programs
   }
 }
 
+TEST_CASE("unreadable inputs and unwritable outputs fail at once with exit 1", "[programs]") {
+  struct Case {
+    std::string arguments, expected;
+  };
+  std::ofstream(scratch("narrow.csv")) << "1,2\n";
+  for (const Case& c :
+       {Case{"--init-params /nonexistent/p.txt", "cannot open '/nonexistent/p.txt'"},
+        Case{"--init-states /nonexistent/s.csv", "cannot open states file '/nonexistent/s.csv'"},
+        Case{"--init-states " + scratch("narrow.csv").string(), "2 columns; expected exactly state_dim = 4"},
+        Case{"--csv /nonexistent/dir/log.csv", "directory '/nonexistent/dir' does not exist"},
+        Case{"--save-params " + (scratch("narrow.csv") / "p.txt").string(), "is not a directory"}}) {
+    const Result r = run("cartpole", "--epochs 1 --samples 8 --steps 3 " + c.arguments);
+    INFO(c.arguments << "\n" << r.output);
+    CHECK(r.status == 1);
+    CHECK(r.output.find(c.expected) != std::string::npos);
+    CHECK(r.output.find("epoch 1") == std::string::npos);  // failed before training
+  }
+}
+
+TEST_CASE("an overflow stops training with a message and finite saved parameters",
+          "[programs]") {
+  for (const std::string method : {"R", "C"}) {
+    const fs::path params = scratch("overflow.params");
+    const Result r = run("cartpole", "--poles 2 --method " + method +
+                                         " --lr 1e200 --epochs 3 --samples 16 --save-params " +
+                                         params.string());
+    INFO(r.output);
+    CHECK(r.status == 3);
+    CHECK(r.output.find("non-finite state") != std::string::npos);
+    CHECK(r.output.find("epoch 1, batch 1") != std::string::npos);
+    CHECK(sbptt::load_parameters<double>(params, 10901).allFinite());  // load rejects NaN/Inf
+  }
+}
+
 TEST_CASE("combined update, paper settings: 2-pole cart pole from ~1.9 to below 1.0 in 20 epochs",
           "[programs]") {
   const fs::path log = scratch("cartpole20.csv");

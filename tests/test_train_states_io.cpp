@@ -1,0 +1,59 @@
+// The states file (DESIGN §4): exact round trips and a clear error for every malformed input.
+#include <catch2/catch.hpp>
+
+#include <filesystem>
+#include <fstream>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include "sbptt/core/rng.hpp"
+#include "sbptt/train/states_io.hpp"
+
+using namespace sbptt;
+using Catch::Contains;
+
+TEST_CASE("states file: save then load reproduces every bit", "[io]") {
+  Rng rng(3);
+  Matrix<double> states(5, 7);
+  for (Index i = 0; i < states.size(); ++i) states(i) = rng.normal() * std::pow(10.0, rng.uniform(-300, 300));
+  states(0, 0) = -0.0;
+  states(1, 0) = std::numeric_limits<double>::denorm_min();
+  const auto path = std::filesystem::temp_directory_path() / "sbptt_states_roundtrip.csv";
+  save_states(path, states);
+  const Matrix<double> loaded = load_states<double>(path, 5);
+  REQUIRE(loaded.rows() == 5);
+  REQUIRE(loaded.cols() == 7);
+  for (Index i = 0; i < states.size(); ++i)
+    CHECK(std::memcmp(&loaded(i), &states(i), sizeof(double)) == 0);
+}
+
+TEST_CASE("states file: one row per sample in the state layout", "[io]") {
+  const Matrix<double> m = parse_states<double>("1,2,3\n4, 5 ,6\r\n\n", 3, "inline");
+  CHECK(m.cols() == 2);
+  CHECK(m(0, 1) == 4.0);
+  CHECK(m(1, 1) == 5.0);
+  CHECK(m(2, 0) == 3.0);
+}
+
+TEST_CASE("states file: every malformed input names its line and what was expected", "[io]") {
+  auto parse = [](const char* text) { return parse_states<double>(text, 3, "s.csv"); };
+  REQUIRE_THROWS_AS(parse(""), ParseError);
+  REQUIRE_THROWS_WITH(parse(""), Contains("holds no samples") && Contains("3 numbers"));
+  REQUIRE_THROWS_WITH(parse("\n  \n"), Contains("holds no samples"));
+  REQUIRE_THROWS_WITH(parse("1,2,3\n1,2\n"), Contains("line 2") && Contains("2 columns; expected exactly state_dim = 3"));
+  REQUIRE_THROWS_WITH(parse("1,2,3,4\n"), Contains("line 1") && Contains("more than 3 columns"));
+  REQUIRE_THROWS_WITH(parse("1,x,3\n"), Contains("line 1, column 2") && Contains("'x' is not a number"));
+  REQUIRE_THROWS_WITH(parse("1,nan,3\n"), Contains("column 2") && Contains("not finite"));
+  REQUIRE_THROWS_WITH(parse("1,2,inf\n"), Contains("column 3") && Contains("not finite"));
+  REQUIRE_THROWS_WITH(parse("1,2,3abc\n"), Contains("trailing characters 'abc'"));
+  REQUIRE_THROWS_WITH(parse("1,,3\n"), Contains("column 2") && Contains("empty"));
+  REQUIRE_THROWS_WITH(parse("1,2,1e999\n"), Contains("out of range"));
+}
+
+TEST_CASE("states file: unreadable paths are IoErrors naming the path", "[io]") {
+  REQUIRE_THROWS_AS(load_states<double>("/nonexistent/states.csv", 2), IoError);
+  REQUIRE_THROWS_WITH(load_states<double>("/nonexistent/states.csv", 2), Contains("/nonexistent/states.csv"));
+  REQUIRE_THROWS_WITH(load_states<double>(std::filesystem::temp_directory_path(), 2), Contains("is a directory"));
+  REQUIRE_THROWS_AS(save_states<double>("/nonexistent/dir/s.csv", Matrix<double>::Zero(2, 2)), IoError);
+}

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <vector>
 
+#include "support/test_data.hpp"
 #include "sbptt/core/finite_difference.hpp"
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"
@@ -17,19 +18,10 @@ using sbptt::Network;
 
 namespace {
 
+using sbptt::testing::randomize;
 template <class Scalar>
 sbptt::Matrix<Scalar> random_batch(Index rows, Index cols, std::uint64_t seed) {
-  sbptt::Rng rng(seed);
-  sbptt::Matrix<Scalar> x(rows, cols);
-  for (Index i = 0; i < x.size(); ++i) x(i) = static_cast<Scalar>(rng.uniform(-1.5, 1.5));
-  return x;
-}
-
-template <class Scalar>
-void randomize(Network<Scalar>& net, std::uint64_t seed, double scale = 0.8) {
-  sbptt::Rng rng(seed);
-  for (Index i = 0; i < net.num_params(); ++i)
-    net.params()(i) = static_cast<Scalar>(rng.uniform(-scale, scale));
+  return sbptt::testing::random_matrix<Scalar>(rows, cols, seed, 1.5);
 }
 
 // The quantum-control CNN of the paper: (32 positions × 2 channels) → conv 60 k3 s2 tanh

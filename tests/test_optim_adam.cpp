@@ -9,21 +9,16 @@
 #include <string>
 #include <vector>
 
+#include "support/test_data.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/optim/adam.hpp"
 
 namespace {
 
+using sbptt::testing::vec;
+
 using sbptt::Index;
 using sbptt::Vector;
-
-template <class Scalar>
-Vector<Scalar> vec(std::initializer_list<double> values) {
-  Vector<Scalar> v(static_cast<Index>(values.size()));
-  Index i = 0;
-  for (double x : values) v(i++) = static_cast<Scalar>(x);
-  return v;
-}
 
 // The paper's formula, written independently of the library's evaluation order, in long
 // double, from the Scalar-rounded inputs and hyper-parameters.

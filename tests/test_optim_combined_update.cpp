@@ -5,6 +5,7 @@
 #include <limits>
 #include <vector>
 
+#include "support/test_data.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/optim/adam.hpp"
@@ -14,17 +15,11 @@
 
 namespace {
 
+using sbptt::testing::vec;
+
 using sbptt::ClipMode;
 using sbptt::Index;
 using sbptt::Vector;
-
-template <class Scalar>
-Vector<Scalar> vec(std::initializer_list<double> values) {
-  Vector<Scalar> v(static_cast<Index>(values.size()));
-  Index i = 0;
-  for (double x : values) v(i++) = static_cast<Scalar>(x);
-  return v;
-}
 
 template <class Scalar>
 Vector<Scalar> random_vector(sbptt::Rng& rng, Index n) {

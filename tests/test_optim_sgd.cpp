@@ -4,21 +4,16 @@
 #include <limits>
 #include <vector>
 
+#include "support/test_data.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/optim/sgd.hpp"
 
 namespace {
 
+using sbptt::testing::vec;
+
 using sbptt::Index;
 using sbptt::Vector;
-
-template <class Scalar>
-Vector<Scalar> vec(std::initializer_list<double> values) {
-  Vector<Scalar> v(static_cast<Index>(values.size()));
-  Index i = 0;
-  for (double x : values) v(i++) = static_cast<Scalar>(x);
-  return v;
-}
 
 template <class Scalar>
 std::vector<Vector<Scalar>> gradients() {

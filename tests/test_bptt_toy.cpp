@@ -126,6 +126,29 @@ TEST_CASE("toy: with P_x = 1, g_M = (x_4 − y) Σ_n ∂c_n/∂θ and g_S is the
   CHECK(stopped(1) == Approx(residual * x3).epsilon(1e-13));
 }
 
+TEST_CASE("toy: NetworkOnly keeps only the network path, g_N = r Σ_n ∂c_n/∂θ Π_{k>n} K_k",
+          "[bptt][toy]") {
+  // Without the physics term A = 1, the adjoint of x_n is carried back by the controller's
+  // input Jacobian alone: λ_n = K_n μ_n, μ_n = λ_{n+1}, K_n = 2θ1 x_n + θ2.
+  Toy toy;
+  for (const Row& row : table) {
+    const double t1 = row.theta[0], t2 = row.theta[1];
+    const auto network = toy.vector_at(t1, t2, FlowMode::NetworkOnly);
+    const auto& states = toy.engine.trajectory().states;
+    double carried = states[4](0, 0) - 2.0;  // r, then r Π_{k>n} K_k
+    double g1 = 0, g2 = 0;
+    for (int n = 3; n >= 0; --n) {
+      const double x = states[static_cast<std::size_t>(n)](0, 0);
+      g1 += carried * x * x;
+      g2 += carried * x;
+      carried *= 2 * t1 * x + t2;
+    }
+    INFO("theta = (" << t1 << ", " << t2 << ")");
+    CHECK(network(0) == Approx(g1).epsilon(1e-13));
+    CHECK(network(1) == Approx(g2).epsilon(1e-13));
+  }
+}
+
 TEST_CASE("toy: the modified field has curl, the gradient field has none", "[bptt][toy]") {
   Toy toy;
   CHECK(toy.curl(0, 0, FlowMode::PhysicsOnly) == Approx(1.242).epsilon(1e-3));
@@ -137,7 +160,27 @@ TEST_CASE("toy: the modified field has curl, the gradient field has none", "[bpt
           1e-6 * (1 + toy.vector_at(row.theta[0], row.theta[1], FlowMode::Full).norm()));
 }
 
+namespace {
+/// The toy's controller, counting its forward calls (one per step and batch).
+class CountingPolicy : public PolynomialPolicy<double> {
+public:
+  using PolynomialPolicy<double>::PolynomialPolicy;
+  void forward(const Matrix<double>& x, Matrix<double>& y, Workspace& ws) const {
+    ++forward_calls;
+    PolynomialPolicy<double>::forward(x, y, ws);
+  }
+  mutable int forward_calls = 0;
+};
+}  // namespace
+
 TEST_CASE("toy: one forward pass serves both sweeps", "[bptt][toy]") {
+  CountingPolicy counting{{2, 1}};
+  counting.params() << 1, 1;
+  const Sim sim = Sim::scalar(1.0, 1.0);
+  Engine<Sim, CountingPolicy, Loss> counted{sim, counting, Toy::objective(), 4};
+  counted.regular_and_modified(Matrix<double>::Constant(1, 1, -0.3));
+  CHECK(counting.forward_calls == 4);  // 4 steps, one rollout
+
   Toy toy;
   const auto pair = toy.at(1, 1);
   CHECK(pair.regular.isApprox(toy.vector_at(1, 1, FlowMode::Full), 1e-15));

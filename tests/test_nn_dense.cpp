@@ -2,7 +2,9 @@
 // finite-difference checks of both vector–Jacobian products, and input validation.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <thread>
 #include <vector>
 
@@ -205,4 +207,31 @@ TEST_CASE("dense networks reject malformed layers and inputs", "[nn][dense]") {
   net.params().resize(5);
   REQUIRE_THROWS_WITH(net.forward(sbptt::Matrix<double>::Zero(4, 2), y, ws),
                       Contains("params() has 5 entries"));
+}
+
+TEST_CASE("the vectorised double tanh equals std::tanh to round-off", "[nn][activation]") {
+  // Dense sweep across both branches (|x| ≤ 0.625 rational, beyond 1 − 2/(e^{2x}+1)), the
+  // branch point itself, tiny and huge arguments, and the non-finite ones.
+  std::vector<double> xs;
+  for (int i = -40000; i <= 40000; ++i) xs.push_back(i * 5e-4);
+  for (double x : {0.625, std::nextafter(0.625, 1.0), 1e-300, 5e-324, 0.0, -0.0, 19.0, 20.0,
+                   710.0, 1e300, std::numeric_limits<double>::infinity()}) {
+    xs.push_back(x);
+    xs.push_back(-x);
+  }
+  Eigen::ArrayXd z = Eigen::Map<const Eigen::ArrayXd>(xs.data(), static_cast<Index>(xs.size()));
+  sbptt::activate_in_place(Activation::Tanh, z);
+  double worst = 0;
+  for (std::size_t i = 0; i < xs.size(); ++i) {
+    const double expected = std::tanh(xs[i]);
+    const double got = z(static_cast<Index>(i));
+    REQUIRE(std::signbit(got) == std::signbit(expected));
+    if (expected != 0) worst = std::max(worst, std::abs(got - expected) / std::abs(expected));
+    else REQUIRE(got == 0);
+  }
+  CHECK(worst < 1e-15);
+  Eigen::ArrayXd nan(1);
+  nan(0) = std::numeric_limits<double>::quiet_NaN();
+  sbptt::activate_in_place(Activation::Tanh, nan);
+  CHECK(std::isnan(nan(0)));
 }

@@ -170,6 +170,10 @@ TEST_CASE("trainer: C stays finite when g_R overflows; R stops and keeps its par
     } else {
       REQUIRE(trainer.last_non_finite());
       CHECK(trainer.last_non_finite()->where.quantity == Quantity::Adjoint);
+      // λ_5 is the finite loss seed; λ_4 is the first adjoint the infinite K_4 feeds, and the
+      // first sample of the first batch (x_0 = 0.5) already has a non-zero μ.
+      CHECK(trainer.last_non_finite()->where.step == 4);
+      CHECK(trainer.last_non_finite()->where.sample == 0);
       CHECK(policy.params() == start);
     }
   }

@@ -117,6 +117,7 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
   options.shuffle_seed = o.seed;
   options.truncation = o.truncation;
   options.on_non_finite = o.on_non_finite;
+  options.threads = o.threads;
   AdamOptions<Scalar> adam;
   adam.learning_rate = static_cast<Scalar>(o.lr);
   Trainer trainer(sim, controller, objective, steps, Adam<Scalar>(adam), options);

@@ -11,8 +11,24 @@
 ///
 /// With a truncation window K > 0 the two propagated terms are dropped at every step n that
 /// is a positive multiple of K, so no gradient crosses those states.
+///
+/// Cost and memory: the controller runs once per step on the whole batch (one product per
+/// layer, never per sample); the simulator, the loss and their VJPs run per sample. After the
+/// first call at a batch shape, `forward`, `reverse` and `regular_and_modified` allocate
+/// nothing (every buffer is kept and resized only when the shape changes).
+///
+/// Threads (`set_threads`): the per-sample work of a step (simulator step and VJP, loss seeds)
+/// is split over the samples; `regular_and_modified` runs its two sweeps at once; `evaluate`
+/// rolls out fixed chunks of `kEvaluateChunk` samples independently. Every sample is computed
+/// by the same operations whatever the thread count, and every batch sum is taken in a fixed
+/// order, so all results are bitwise identical for any number of threads. With more than one
+/// thread the controller's `backward` must be safe to call concurrently on one workspace
+/// (`Network`'s is) and the loss functor must be thread-safe (a `const` pure function).
+#include <chrono>
 #include <cmath>
+#include <memory>
 #include <optional>
+#include <vector>
 
 #include "sbptt/bptt/diagnostics.hpp"
 #include "sbptt/bptt/flow_mode.hpp"
@@ -20,6 +36,8 @@
 #include "sbptt/bptt/trajectory.hpp"
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/error.hpp"
+#include "sbptt/detail/engine_buffers.hpp"
+#include "sbptt/detail/parallel.hpp"
 
 namespace sbptt {
 
@@ -53,6 +71,10 @@ public:
   using State = typename Sim::State;
   using Control = typename Sim::Control;
 
+  /// Samples per independently rolled-out chunk of `evaluate` (a constant, so that the result
+  /// does not depend on the number of threads).
+  static constexpr Index kEvaluateChunk = 32;
+
   /// \param steps the horizon m (> 0).
   Engine(const Sim& sim, const Ctrl& controller, Objective<Loss> objective, Index steps)
       : sim_(sim), controller_(controller), objective_(std::move(objective)), steps_(steps) {
@@ -68,13 +90,7 @@ public:
     detail::require(std::isfinite(objective_.control_weight) && objective_.control_weight >= 0,
                     "Engine: control_weight = ", objective_.control_weight,
                     "; expected a finite number >= 0");
-    x_.resize(sim.state_dim());
-    x_next_.resize(sim.state_dim());
-    seed_.resize(sim.state_dim());
-    lambda_sample_.resize(sim.state_dim());
-    lambda_x_.resize(sim.state_dim());
-    u_.resize(sim.control_dim());
-    lambda_u_.resize(sim.control_dim());
+    set_threads(1);
   }
 
   [[nodiscard]] Index steps() const { return steps_; }
@@ -86,6 +102,26 @@ public:
   [[nodiscard]] const std::optional<NonFinite>& forward_non_finite() const {
     return forward_non_finite_;
   }
+
+  /// Threads for the per-sample work (≥ 1; 1 = none started). Results do not depend on it
+  /// (see the file comment). Starts or stops the engine's worker threads.
+  /// \param split_above_ns a per-sample loop of a step (simulator steps, VJPs, losses) is
+  ///        split over the threads only when it takes at least this long on one thread
+  ///        (timed on its first calls): a fork costs about a microsecond, more than a cheap
+  ///        simulator's whole batch. 0 splits every loop.
+  void set_threads(Index threads, double split_above_ns = 4000) {
+    detail::require(threads >= 1, "Engine::set_threads: threads = ", threads,
+                    "; expected at least 1");
+    detail::require(split_above_ns >= 0, "Engine::set_threads: split_above_ns = ",
+                    split_above_ns, "; expected a number of nanoseconds >= 0");
+    pool_ = threads > 1 ? std::make_unique<detail::ThreadPool>(threads) : nullptr;
+    threads_ = threads;
+    for (auto& decision : fork_) decision = detail::ForkDecision(split_above_ns);
+    const auto slots = static_cast<std::size_t>(threads);
+    for (auto* scratch : {&forward_scratch_, &sweeps_[0].scratch, &sweeps_[1].scratch})
+      scratch->assign(slots, make_scratch());
+  }
+  [[nodiscard]] Index threads() const { return threads_; }
 
   /// Rolls out the batch `initial_states` (state_dim × B), stores the trajectory and returns
   /// the batch-mean loss.
@@ -100,46 +136,48 @@ public:
       const auto i = static_cast<std::size_t>(n);
       controller_.forward(trajectory_.states[i], trajectory_.controls[i], trajectory_.workspaces[i]);
       note_non_finite(Quantity::Control, n, trajectory_.controls[i]);
-      for (Index b = 0; b < batch; ++b) {
-        x_ = trajectory_.states[i].col(b);
-        u_ = trajectory_.controls[i].col(b);
-        sim_.step(x_, u_, x_next_);
-        trajectory_.states[i + 1].col(b) = x_next_;
-      }
+      for_samples(batch, forward_scratch_, true, fork_[0], [&](Index b, Scratch& t) {
+        t.x = trajectory_.states[i].col(b);
+        t.u = trajectory_.controls[i].col(b);
+        sim_.step(t.x, t.u, t.x_next);
+        trajectory_.states[i + 1].col(b) = t.x_next;
+      });
       note_non_finite(Quantity::State, n + 1, trajectory_.states[i + 1]);
     }
     return batch_loss();
   }
 
   /// Batch-mean loss of a rollout of `initial_states` (state_dim × B) without storing the
-  /// trajectory: memory O(state_dim·B) whatever the horizon, for evaluating large sets.
+  /// trajectory: memory O(B·(state_dim + network widths)) whatever the horizon, for large sets.
   /// Leaves the stored trajectory untouched; a non-finite value is reported through
-  /// `forward_non_finite()` like in `forward`.
+  /// `forward_non_finite()` like in `forward`. Chunks of `kEvaluateChunk` samples are rolled
+  /// out independently (in parallel with threads).
   Scalar evaluate(const Matrix<Scalar>& initial_states) {
     check_initial_states(initial_states, "evaluate");
     const Index batch = initial_states.cols();
+    const Index chunks = (batch + kEvaluateChunk - 1) / kEvaluateChunk;
+    if (static_cast<Index>(chunks_.size()) < chunks)
+      chunks_.resize(static_cast<std::size_t>(chunks));
+    eval_losses_.resize(batch);
+    auto task = [&](Index k, Index) {
+      const Index first = k * kEvaluateChunk;
+      evaluate_chunk(initial_states.middleCols(first, std::min(kEvaluateChunk, batch - first)),
+                     chunks_[static_cast<std::size_t>(k)], first);
+    };
+    if (pool_) {
+      pool_->run(chunks, task);
+    } else {
+      for (Index k = 0; k < chunks; ++k) task(k, 0);
+    }
+    // The first non-finite value in rollout order: by step, control before state, then sample.
     forward_non_finite_.reset();
-    eval_state_ = initial_states;
-    eval_next_.resize(sim_.state_dim(), batch);
-    const Scalar w = static_cast<Scalar>(objective_.step_weight);
-    const Scalar control_scale = static_cast<Scalar>(
-        objective_.control_weight / static_cast<double>(steps_ * sim_.control_dim()));
-    eval_losses_.setZero(batch);
-    for (Index n = 0; n < steps_; ++n) {
-      controller_.forward(eval_state_, eval_control_, eval_workspace_);
-      note_non_finite(Quantity::Control, n, eval_control_);
-      for (Index b = 0; b < batch; ++b) {
-        x_ = eval_state_.col(b);
-        u_ = eval_control_.col(b);
-        sim_.step(x_, u_, x_next_);
-        eval_next_.col(b) = x_next_;
-        if (objective_.control_weight > 0)
-          eval_losses_(b) += control_scale * eval_control_.col(b).squaredNorm();
-        if (objective_.timing == LossTiming::Continuous || n + 1 == steps_)
-          eval_losses_(b) += w * objective_.state_loss(x_next_, static_cast<State*>(nullptr));
+    Index best = -1;
+    for (Index k = 0; k < chunks; ++k) {
+      const EvalChunk& chunk = chunks_[static_cast<std::size_t>(k)];
+      if (chunk.non_finite && (best < 0 || chunk.order < best)) {
+        best = chunk.order;
+        forward_non_finite_ = chunk.non_finite;
       }
-      eval_state_.swap(eval_next_);
-      note_non_finite(Quantity::State, n + 1, eval_state_);
     }
     return mean_of_samples(eval_losses_);
   }
@@ -150,64 +188,9 @@ public:
   ///        multiple of K.
   const SweepDiagnostics& reverse(const FlowSchedule& schedule, Vector<Scalar>& gradient,
                                   Index truncation = 0) {
-    const Index batch = trajectory_.batch();
-    detail::require(batch > 0 && trajectory_.steps() == steps_,
-                    "Engine::reverse: no stored trajectory; call forward first");
-    detail::require(truncation >= 0, "Engine::reverse: truncation = ", truncation,
-                    "; expected 0 (none) or a window of at least 1 step");
-    schedule.validate(steps_);
-    const Index state_dim = sim_.state_dim();
-    gradient.setZero(controller_.num_params());
-    lambda_.setZero(state_dim, batch);
-    mu_.resize(sim_.control_dim(), batch);
-    propagated_.resize(state_dim, batch);
-    sweep_.adjoint_norms.assign(static_cast<std::size_t>(steps_ + 1), 0.0);
-    sweep_.first_non_finite.reset();
-
-    add_loss_seed(steps_, lambda_);
-    record_adjoint(steps_);
-    const Scalar control_seed =
-        static_cast<Scalar>(2.0 * objective_.control_weight /
-                            static_cast<double>(steps_ * sim_.control_dim() * batch));
-    for (Index n = steps_ - 1; n >= 0; --n) {
-      const auto i = static_cast<std::size_t>(n);
-      const FlowMode mode = schedule.at(n);
-      const bool cut = truncation > 0 && n > 0 && n % truncation == 0;
-      const bool physics = physics_flows(mode) && !cut;
-      const bool network = network_flows(mode) && !cut;
-      for (Index b = 0; b < batch; ++b) {
-        x_ = trajectory_.states[i].col(b);
-        u_ = trajectory_.controls[i].col(b);
-        lambda_sample_ = lambda_.col(b);
-        sim_.vjp(x_, u_, lambda_sample_, physics ? &lambda_x_ : nullptr, &lambda_u_);
-        mu_.col(b) = lambda_u_;
-        if (physics) propagated_.col(b) = lambda_x_;
-      }
-      if (objective_.control_weight > 0) mu_.noalias() += control_seed * trajectory_.controls[i];
-      controller_.backward(trajectory_.workspaces[i], mu_, gradient,
-                           network ? &input_adjoint_ : nullptr);
-      if (physics) {
-        lambda_.swap(propagated_);
-        if (network) lambda_ += input_adjoint_;
-      } else if (network) {
-        lambda_ = input_adjoint_;
-      } else {
-        lambda_.setZero();
-      }
-      if (objective_.timing == LossTiming::Continuous && n > 0) add_loss_seed(n, lambda_);
-      record_adjoint(n);
-    }
-    sweep_.grad_norm2 = static_cast<double>(gradient.squaredNorm());
-    if (!sweep_.first_non_finite) {
-      for (Index p = 0; p < gradient.size(); ++p) {
-        if (!std::isfinite(gradient(p))) {
-          sweep_.first_non_finite =
-              NonFinite{Quantity::Gradient, -1, p, static_cast<double>(gradient(p))};
-          break;
-        }
-      }
-    }
-    return sweep_;
+    check_sweep(schedule, truncation);
+    sweep(sweeps_[0], schedule, gradient, truncation, true);
+    return sweeps_[0].diagnostics;
   }
 
   /// One forward pass, then the Full (g_R) and PhysicsOnly (g_M) sweeps over it.
@@ -218,17 +201,62 @@ public:
     return result;
   }
 
-  /// As above, reusing the buffers of `result` (no allocation once sized).
+  /// As above, reusing the buffers of `result` (no allocation once sized). With threads the
+  /// two sweeps run at the same time, each exactly as it would alone.
   void regular_and_modified(const Matrix<Scalar>& initial_states, GradientPair<Scalar>& result,
                             Index truncation = 0) {
     result.loss = forward(initial_states);
     result.forward_non_finite = forward_non_finite_;
-    result.regular_diagnostics = reverse(FlowMode::Full, result.regular, truncation);
-    result.modified_diagnostics = reverse(FlowMode::PhysicsOnly, result.modified, truncation);
+    check_sweep(FlowMode::Full, truncation);
+    auto task = [&](Index item, Index) {
+      if (item == 0) {
+        sweep(sweeps_[0], FlowMode::Full, result.regular, truncation, !pool_);
+      } else {
+        sweep(sweeps_[1], FlowMode::PhysicsOnly, result.modified, truncation, !pool_);
+      }
+    };
+    if (pool_) {
+      pool_->run(2, task);
+    } else {
+      task(0, 0);
+      task(1, 0);
+    }
+    result.regular_diagnostics = sweeps_[0].diagnostics;
+    result.modified_diagnostics = sweeps_[1].diagnostics;
     result.comparison = compare(result.modified, result.regular);
   }
 
 private:
+  using Scratch = detail::SampleScratch<State, Control>;
+  using Sweep = detail::SweepBuffers<Scalar, Scratch>;
+  using EvalChunk = detail::EvaluationChunk<Scalar, typename Ctrl::Workspace, Scratch>;
+
+  [[nodiscard]] Scratch make_scratch() const { return Scratch(sim_.state_dim(), sim_.control_dim()); }
+
+  /// Calls f(b, scratch) for every sample b of the batch, as items of a parallel run when
+  /// `parallel`, a pool exists and `decision` finds the loop worth it, else in order on this
+  /// thread (timed while the decision is still probing).
+  template <class F>
+  void for_samples(Index batch, std::vector<Scratch>& scratch, bool parallel,
+                   detail::ForkDecision& decision, F&& f) {
+    if (pool_ && parallel && batch > 1) {
+      if (decision.fork()) {
+        auto task = [&](Index b, Index worker) { f(b, scratch[static_cast<std::size_t>(worker)]); };
+        pool_->run(batch, task);
+        return;
+      }
+      if (decision.probing()) {
+        const auto start = std::chrono::steady_clock::now();
+        for (Index b = 0; b < batch; ++b) f(b, scratch[0]);
+        decision.record(std::chrono::duration<double, std::nano>(
+                            std::chrono::steady_clock::now() - start)
+                            .count());
+        return;
+      }
+    }
+    for (Index b = 0; b < batch; ++b) f(b, scratch[0]);
+  }
+
   void check_initial_states(const Matrix<Scalar>& initial_states, const char* caller) const {
     detail::require(initial_states.rows() == sim_.state_dim(), "Engine::", caller, ": ",
                     initial_states.rows(), " rows in the initial states; expected state_dim = ",
@@ -237,16 +265,110 @@ private:
                     ": an empty batch; expected at least one sample");
   }
 
+  void check_sweep(const FlowSchedule& schedule, Index truncation) const {
+    detail::require(trajectory_.batch() > 0 && trajectory_.steps() == steps_,
+                    "Engine::reverse: no stored trajectory; call forward first");
+    detail::require(truncation >= 0, "Engine::reverse: truncation = ", truncation,
+                    "; expected 0 (none) or a window of at least 1 step");
+    schedule.validate(steps_);
+  }
+
+  /// The reverse sweep of the file comment into `s` and `gradient`. The loss seed of x_{n+1}
+  /// is added in the same per-sample pass as the VJPs of step n.
+  void sweep(Sweep& s, const FlowSchedule& schedule, Vector<Scalar>& gradient, Index truncation,
+             bool parallel) {
+    const Index batch = trajectory_.batch();
+    gradient.setZero(controller_.num_params());
+    s.lambda.setZero(sim_.state_dim(), batch);
+    s.mu.resize(sim_.control_dim(), batch);
+    s.propagated.resize(sim_.state_dim(), batch);
+    s.diagnostics.adjoint_norms.assign(static_cast<std::size_t>(steps_ + 1), 0.0);
+    s.diagnostics.first_non_finite.reset();
+    const Scalar seed_scale =
+        static_cast<Scalar>(objective_.step_weight / static_cast<double>(batch));
+    const Scalar control_seed =
+        static_cast<Scalar>(2.0 * objective_.control_weight /
+                            static_cast<double>(steps_ * sim_.control_dim() * batch));
+    for (Index n = steps_ - 1; n >= 0; --n) {
+      const auto i = static_cast<std::size_t>(n);
+      const FlowMode mode = schedule.at(n);
+      const bool cut = truncation > 0 && n > 0 && n % truncation == 0;
+      const bool physics = physics_flows(mode) && !cut;
+      const bool network = network_flows(mode) && !cut;
+      const bool scored = objective_.timing == LossTiming::Continuous || n + 1 == steps_;
+      for_samples(batch, s.scratch, parallel, fork_[1], [&](Index b, Scratch& t) {
+        if (scored) {  // λ_{n+1} += w/B · ∂ℓ/∂x_{n+1}
+          t.x = trajectory_.states[i + 1].col(b);
+          objective_.state_loss(t.x, &t.seed);
+          s.lambda.col(b) += seed_scale * t.seed;
+        }
+        t.x = trajectory_.states[i].col(b);
+        t.u = trajectory_.controls[i].col(b);
+        t.lambda_sample = s.lambda.col(b);
+        sim_.vjp(t.x, t.u, t.lambda_sample, physics ? &t.lambda_x : nullptr, &t.lambda_u);
+        s.mu.col(b) = t.lambda_u;
+        if (physics) s.propagated.col(b) = t.lambda_x;
+      });
+      record_adjoint(s, n + 1);
+      if (objective_.control_weight > 0) s.mu.noalias() += control_seed * trajectory_.controls[i];
+      controller_.backward(trajectory_.workspaces[i], s.mu, gradient,
+                           network ? &s.input_adjoint : nullptr);
+      if (physics) {
+        s.lambda.swap(s.propagated);
+        if (network) s.lambda += s.input_adjoint;
+      } else if (network) {
+        s.lambda = s.input_adjoint;
+      } else {
+        s.lambda.setZero();
+      }
+    }
+    record_adjoint(s, 0);
+    s.diagnostics.grad_norm2 = static_cast<double>(gradient.squaredNorm());
+    if (!s.diagnostics.first_non_finite)
+      s.diagnostics.first_non_finite = detail::first_non_finite_component(gradient);
+  }
+
+  /// Rolls out `x0` (state_dim × b, samples first..first+b−1 of the set) into `eval_losses_`.
+  void evaluate_chunk(const auto& x0, EvalChunk& c, Index first) {
+    const Index batch = x0.cols();
+    const Scalar w = static_cast<Scalar>(objective_.step_weight);
+    const Scalar control_scale = static_cast<Scalar>(
+        objective_.control_weight / static_cast<double>(steps_ * sim_.control_dim()));
+    if (!c.scratch) c.scratch = make_scratch();
+    Scratch& t = *c.scratch;
+    c.non_finite.reset();
+    c.state = x0;
+    c.next.resize(sim_.state_dim(), batch);
+    auto losses = eval_losses_.segment(first, batch);
+    losses.setZero();
+    for (Index n = 0; n < steps_; ++n) {
+      controller_.forward(c.state, c.control, c.workspace);
+      c.note(Quantity::Control, n, 2 * n, c.control, first);
+      for (Index b = 0; b < batch; ++b) {
+        t.x = c.state.col(b);
+        t.u = c.control.col(b);
+        sim_.step(t.x, t.u, t.x_next);
+        c.next.col(b) = t.x_next;
+        if (objective_.control_weight > 0)
+          losses(b) += control_scale * c.control.col(b).squaredNorm();
+        if (objective_.timing == LossTiming::Continuous || n + 1 == steps_)
+          losses(b) += w * objective_.state_loss(t.x_next, static_cast<State*>(nullptr));
+      }
+      c.state.swap(c.next);
+      c.note(Quantity::State, n + 1, 2 * n + 1, c.state, first);
+    }
+  }
+
   /// Batch-mean loss of the stored trajectory.
   Scalar batch_loss() {
     const Index batch = trajectory_.batch();
     const Scalar w = static_cast<Scalar>(objective_.step_weight);
     const Index first = objective_.timing == LossTiming::Final ? steps_ : 1;
     eval_losses_.setZero(batch);
-    for (Index b = 0; b < batch; ++b) {
+    for_samples(batch, forward_scratch_, true, fork_[2], [&](Index b, Scratch& t) {
       for (Index n = first; n <= steps_; ++n) {
-        x_ = trajectory_.states[static_cast<std::size_t>(n)].col(b);
-        eval_losses_(b) += w * objective_.state_loss(x_, static_cast<State*>(nullptr));
+        t.x = trajectory_.states[static_cast<std::size_t>(n)].col(b);
+        eval_losses_(b) += w * objective_.state_loss(t.x, static_cast<State*>(nullptr));
       }
       if (objective_.control_weight > 0) {
         Scalar squares = 0;
@@ -255,7 +377,7 @@ private:
                                                static_cast<double>(steps_ * sim_.control_dim())) *
                            squares;
       }
-    }
+    });
     return mean_of_samples(eval_losses_);
   }
 
@@ -271,54 +393,33 @@ private:
     return total / static_cast<Scalar>(losses.size());
   }
 
-  /// lambda.col(b) += w/B · ∂ℓ/∂x_n for every sample b.
-  void add_loss_seed(Index n, Matrix<Scalar>& lambda) {
-    const Index batch = trajectory_.batch();
-    const Scalar scale =
-        static_cast<Scalar>(objective_.step_weight / static_cast<double>(batch));
-    for (Index b = 0; b < batch; ++b) {
-      x_ = trajectory_.states[static_cast<std::size_t>(n)].col(b);
-      objective_.state_loss(x_, &seed_);
-      lambda.col(b) += scale * seed_;
-    }
-  }
-
-  void record_adjoint(Index n) {
-    sweep_.adjoint_norms[static_cast<std::size_t>(n)] = static_cast<double>(lambda_.norm());
-    if (!sweep_.first_non_finite) note_first(Quantity::Adjoint, n, lambda_, sweep_.first_non_finite);
+  void record_adjoint(Sweep& s, Index n) {
+    s.diagnostics.adjoint_norms[static_cast<std::size_t>(n)] =
+        static_cast<double>(s.lambda.norm());
+    if (!s.diagnostics.first_non_finite)
+      detail::note_first_non_finite(Quantity::Adjoint, n, s.lambda,
+                                    s.diagnostics.first_non_finite);
   }
 
   void note_non_finite(Quantity quantity, Index n, const Matrix<Scalar>& values) {
-    if (!forward_non_finite_) note_first(quantity, n, values, forward_non_finite_);
-  }
-
-  static void note_first(Quantity quantity, Index n, const Matrix<Scalar>& values,
-                         std::optional<NonFinite>& slot) {
-    if (values.allFinite()) return;
-    for (Index b = 0; b < values.cols(); ++b) {
-      for (Index r = 0; r < values.rows(); ++r) {
-        if (!std::isfinite(values(r, b))) {
-          slot = NonFinite{quantity, n, b, static_cast<double>(values(r, b))};
-          return;
-        }
-      }
-    }
+    if (!forward_non_finite_)
+      detail::note_first_non_finite(quantity, n, values, forward_non_finite_);
   }
 
   const Sim& sim_;
   const Ctrl& controller_;
   Objective<Loss> objective_;
   Index steps_;
+  Index threads_ = 1;
+  std::unique_ptr<detail::ThreadPool> pool_;
 
   Trajectory<Scalar, typename Ctrl::Workspace> trajectory_;
   std::optional<NonFinite> forward_non_finite_;
-  SweepDiagnostics sweep_;
-  Matrix<Scalar> lambda_, propagated_, mu_, input_adjoint_;
-  Matrix<Scalar> eval_state_, eval_next_, eval_control_;
-  typename Ctrl::Workspace eval_workspace_;
+  std::vector<Scratch> forward_scratch_;
+  detail::ForkDecision fork_[3];  ///< per-sample loops: simulator step, VJPs, batch loss
+  Sweep sweeps_[2];
+  std::vector<EvalChunk> chunks_;
   Vector<Scalar> eval_losses_;
-  State x_, x_next_, seed_, lambda_sample_, lambda_x_;
-  Control u_, lambda_u_;
 };
 
 }  // namespace sbptt

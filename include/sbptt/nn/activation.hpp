@@ -6,6 +6,7 @@
 /// second buffer per layer.
 #include <cmath>
 #include <string_view>
+#include <type_traits>
 
 #include <Eigen/Core>
 
@@ -40,10 +41,41 @@ template <class Scalar>
   return activation == Activation::Tanh ? Scalar(1) - y * y : Scalar(1);
 }
 
-/// Applies f in place to every entry of `z` (any shape); identity is a no-op.
+namespace detail {
+
+/// tanh of every entry of a double array, vectorised. Eigen 3.4 vectorises tanh for float
+/// only; for double it calls std::tanh per entry (≈ 20 ns each, which made tanh the largest
+/// cost of a double MLP epoch). This is Cephes' `tanh` (S. L. Moshier) written with Eigen's
+/// vectorised exp and division: x·(1 + s·P(s)/Q(s)), s = x², for |x| ≤ 0.625 (a product, so
+/// that tanh(−0) = −0), and
+/// 1 − 2/(e^{2x} + 1) beyond (exact for ±∞: e^{2x} → ∞ or 0). Both branches are evaluated and
+/// one is selected per entry; NaN stays NaN. Within 1e-15 relative of std::tanh (test_nn_dense).
+template <class Derived>
+void tanh_in_place_double(Eigen::ArrayBase<Derived>& z) {
+  constexpr double p0 = -9.64399179425052238628e-1, p1 = -9.92877231001918586564e1,
+                   p2 = -1.61468768441708447952e3;
+  constexpr double q0 = 1.12811678491632931402e2, q1 = 2.23548839060100448583e3,
+                   q2 = 4.84406305325125486048e3;
+  const auto& x = z.derived();
+  const auto s = x.square();
+  z.derived() = (x.abs() > 0.625)
+                    .select(1.0 - 2.0 / ((2.0 * x).exp() + 1.0),
+                            x * (1.0 + s * (((p0 * s + p1) * s + p2) / (((s + q0) * s + q1) * s + q2))));
+}
+
+}  // namespace detail
+
+/// Applies f in place to every entry of `z` (any shape); identity is a no-op. For double the
+/// tanh is `detail::tanh_in_place_double` (vectorised); for float Eigen's own.
 template <class Derived>
 void activate_in_place(Activation activation, Eigen::DenseBase<Derived>& z) {
-  if (activation == Activation::Tanh) z.derived().array() = z.derived().array().tanh();
+  if (activation != Activation::Tanh) return;
+  if constexpr (std::is_same_v<typename Derived::Scalar, double>) {
+    auto&& a = z.derived().array();
+    detail::tanh_in_place_double(a);
+  } else {
+    z.derived().array() = z.derived().array().tanh();
+  }
 }
 
 /// `delta = upstream ⊙ f'(z)`, with f' taken from the layer output `y` (f(z)).

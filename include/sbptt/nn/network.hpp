@@ -91,6 +91,13 @@ public:
     [[nodiscard]] const Matrix<Scalar>& layer_output(Index l) const {
       return outputs_.at(static_cast<std::size_t>(l));
     }
+    /// Bytes of the recorded matrices: the input, every layer output and the im2col matrices.
+    [[nodiscard]] std::size_t bytes() const {
+      std::size_t entries = static_cast<std::size_t>(input_.size());
+      for (const auto& m : outputs_) entries += static_cast<std::size_t>(m.size());
+      for (const auto& m : columns_) entries += static_cast<std::size_t>(m.size());
+      return entries * sizeof(Scalar);
+    }
 
   private:
     friend class Network;
@@ -273,8 +280,10 @@ private:
     bool matches = ws.outputs_.size() == layers_.size() && ws.input_.rows() == input_dim();
     for (std::size_t l = 0; matches && l < layers_.size(); ++l)
       matches = ws.outputs_[l].rows() == layer_output_dim(layers_[l]);
-    detail::require(matches, "Network::backward: the workspace was filled by a different "
-                             "network (layer sizes differ from ", describe(), ")");
+    if (!matches)  // describe() only on failure: backward must not build strings per call
+      throw InvalidArgument(detail::concat("Network::backward: the workspace was filled by a "
+                                           "different network (layer sizes differ from ",
+                                           describe(), ")"));
   }
 
   std::vector<Layer> layers_;

@@ -39,6 +39,10 @@ struct TrainerOptions {
   std::uint64_t shuffle_seed = 0;
   Index truncation = 0;           ///< window K of the reverse sweep; 0 = none
   NonFinitePolicy on_non_finite = NonFinitePolicy::Stop;
+  /// Threads of the engine (≥ 1, see `Engine::set_threads`): per-sample simulator work, the
+  /// two sweeps of C at once, and the evaluation in chunks. Results are bitwise identical for
+  /// every thread count.
+  Index threads = 1;
 };
 
 /// Where training met a non-finite value.
@@ -65,6 +69,9 @@ public:
                     "; expected at least 1 sample per batch");
     detail::require(options.truncation >= 0, "Trainer: truncation = ", options.truncation,
                     "; expected 0 (none) or a window >= 1");
+    detail::require(options.threads >= 1, "Trainer: threads = ", options.threads,
+                    "; expected at least 1");
+    engine_.set_threads(options.threads);
   }
 
   /// One epoch over `train` (state_dim × N_train), then the evaluation of `train` and `test`.

@@ -1,0 +1,111 @@
+#pragma once
+/// \file The engine's reusable buffers (per thread, per sweep, per evaluation chunk) and its
+/// scan for the first non-finite value. Implementation details of `sbptt::Engine`.
+#include <algorithm>
+#include <cmath>
+#include <optional>
+#include <vector>
+
+#include "sbptt/bptt/diagnostics.hpp"
+#include "sbptt/core/types.hpp"
+
+namespace sbptt::detail {
+
+/// Temporaries of the per-sample work of one thread (sized once; never shared by two threads).
+template <class State, class Control>
+struct SampleScratch {
+  State x, x_next, seed, lambda_sample, lambda_x;
+  Control u, lambda_u;
+
+  SampleScratch(Index state_dim, Index control_dim) {
+    for (State* v : {&x, &x_next, &seed, &lambda_sample, &lambda_x}) v->resize(state_dim);
+    u.resize(control_dim);
+    lambda_u.resize(control_dim);
+  }
+};
+
+/// Buffers and report of one reverse sweep: λ, A_nᵀλ, μ and K_nᵀμ (state_dim or control_dim
+/// × B), plus one scratch per thread. Two of them let both sweeps of the combined update run at
+/// the same time.
+template <class Scalar, class Scratch>
+struct SweepBuffers {
+  Matrix<Scalar> lambda, propagated, mu, input_adjoint;
+  SweepDiagnostics diagnostics;
+  std::vector<Scratch> scratch;
+};
+
+/// One independently rolled-out chunk of `Engine::evaluate`: its states, controls, controller
+/// workspace and the first non-finite value it met, with that value's place in rollout order.
+template <class Scalar, class Workspace, class Scratch>
+struct EvaluationChunk {
+  Matrix<Scalar> state, next, control;
+  Workspace workspace;
+  std::optional<Scratch> scratch;
+  std::optional<NonFinite> non_finite;
+  Index order = 0;  ///< 2n for the control c_n, 2n − 1 for the state x_n
+
+  /// Notes the first non-finite entry of `values` unless one is already noted.
+  void note(Quantity quantity, Index step, Index rank, const Matrix<Scalar>& values, Index first);
+};
+
+/// Whether a per-sample loop is worth splitting over threads. A fork costs about a microsecond
+/// when the workers are awake, so a cheap simulator (cart pole: tens of ns per sample) runs its
+/// loop on one thread; an expensive one (a quantum step: about a microsecond per sample) is
+/// split. The first `probes` runs are serial and timed; the best time decides from then on.
+/// Default threshold: 4 µs of serial work.
+/// Only speed depends on the decision: every sample is computed the same way either way.
+class ForkDecision {
+public:
+  static constexpr int probes = 4;
+
+  /// \param threshold_ns split loops whose serial time is at least this (0: always split)
+  explicit ForkDecision(double threshold_ns = 4000) : threshold_ns_(threshold_ns) {}
+
+  [[nodiscard]] bool probing() const { return runs_ < probes; }
+  [[nodiscard]] bool fork() const { return !probing() && best_ns_ >= threshold_ns_; }
+  void record(double ns) {
+    best_ns_ = runs_ == 0 ? ns : std::min(best_ns_, ns);
+    ++runs_;
+  }
+
+private:
+  double threshold_ns_;
+  int runs_ = 0;
+  double best_ns_ = 0;
+};
+
+/// Sets `slot` to the first non-finite entry of `values` (scanning sample by sample), with
+/// samples numbered from `first`; leaves it alone when every entry is finite.
+template <class Scalar>
+void note_first_non_finite(Quantity quantity, Index step, const Matrix<Scalar>& values,
+                           std::optional<NonFinite>& slot, Index first = 0) {
+  if (values.allFinite()) return;
+  for (Index b = 0; b < values.cols(); ++b) {
+    for (Index r = 0; r < values.rows(); ++r) {
+      if (!std::isfinite(values(r, b))) {
+        slot = NonFinite{quantity, step, first + b, static_cast<double>(values(r, b))};
+        return;
+      }
+    }
+  }
+}
+
+template <class Scalar, class Workspace, class Scratch>
+void EvaluationChunk<Scalar, Workspace, Scratch>::note(Quantity quantity, Index step, Index rank,
+                                                      const Matrix<Scalar>& values,
+                                                      Index first) {
+  if (non_finite) return;
+  note_first_non_finite(quantity, step, values, non_finite, first);
+  if (non_finite) order = rank;
+}
+
+/// The first non-finite component of a gradient (step −1, `sample` = parameter index).
+template <class Scalar>
+[[nodiscard]] std::optional<NonFinite> first_non_finite_component(const Vector<Scalar>& g) {
+  if (g.allFinite()) return std::nullopt;
+  for (Index p = 0; p < g.size(); ++p)
+    if (!std::isfinite(g(p))) return NonFinite{Quantity::Gradient, -1, p, static_cast<double>(g(p))};
+  return std::nullopt;
+}
+
+}  // namespace sbptt::detail

@@ -1,0 +1,126 @@
+// After a warm-up call at a batch shape, the engine's forward pass, its reverse sweeps and the
+// combined pair allocate nothing: Eigen's runtime malloc check, with every failed Eigen
+// assertion counted so that Release builds see it. (Counted, not thrown as in
+// test_nn_no_malloc.cpp: an exception in the middle of an Eigen resize would leave the matrix
+// half-built, and the engine's buffers must stay usable for the check that the guard fires.)
+// Covers the paper's cart pole (MLP) and quantum (CNN) settings at batch 8, in float and
+// double, with 1 and 2 threads.
+#include <atomic>
+
+namespace {
+std::atomic<int> eigen_failures{0};
+}  // namespace
+
+#define EIGEN_RUNTIME_NO_MALLOC
+#define eigen_assert(x)               \
+  do {                                \
+    if (!(x)) eigen_failures.fetch_add(1); \
+  } while (false)
+
+#include <catch2/catch.hpp>
+
+#include "sbptt/bptt/engine.hpp"
+#include "sbptt/nn/init.hpp"
+#include "sbptt/nn/network.hpp"
+#include "sbptt/sim/cartpole.hpp"
+#include "sbptt/sim/schrodinger.hpp"
+
+using namespace sbptt;
+
+namespace {
+
+struct MallocGuard {
+  MallocGuard() { Eigen::internal::set_is_malloc_allowed(false); }
+  ~MallocGuard() { Eigen::internal::set_is_malloc_allowed(true); }
+  MallocGuard(const MallocGuard&) = delete;
+  MallocGuard& operator=(const MallocGuard&) = delete;
+};
+
+template <class Scalar>
+Network<Scalar> quantum_cnn() {
+  return Network<Scalar>({Conv1d{32, 2, 60, 3, 2, Activation::Tanh},
+                          Conv1d{15, 60, 60, 3, 2, Activation::Tanh},
+                          Dense{420, 1, Activation::Identity}});
+}
+
+/// Warm-up, then the same calls again with Eigen's allocator switched off. The results of the
+/// guarded calls must equal the warm-up's (the guard changes nothing but the check).
+template <class Engine, class Scalar>
+void check_no_allocation(Engine& engine, const Matrix<Scalar>& x0, Index threads) {
+  engine.set_threads(threads);
+  Vector<Scalar> g_full, g_physics;
+  GradientPair<Scalar> pair;
+  const Scalar loss = engine.forward(x0);
+  engine.reverse(FlowMode::Full, g_full);
+  engine.reverse(FlowMode::PhysicsOnly, g_physics);
+  engine.regular_and_modified(x0, pair);
+  const Vector<Scalar> first_full = g_full;
+  // With threads, the combined pair runs its sweeps on whichever thread is free, and the
+  // network's thread-local scratch of a worker grows on that worker's first backward: the
+  // guarantee is per thread after its own warm-up, so the pair is checked single-threaded.
+  const bool pair_guarded = threads == 1;
+
+  const Matrix<Scalar> narrower = x0.leftCols(x0.cols() - 1);
+  eigen_failures = 0;
+  {
+    MallocGuard guard;
+    for (int repeat = 0; repeat < 2; ++repeat) {
+      CHECK(engine.forward(x0) == loss);
+      engine.reverse(FlowMode::Full, g_full);
+      engine.reverse(FlowMode::PhysicsOnly, g_physics);
+      if (pair_guarded) engine.regular_and_modified(x0, pair);
+    }
+  }
+  CHECK(eigen_failures == 0);
+  CHECK(g_full == first_full);
+  CHECK(pair.regular == g_full);
+  CHECK(pair.modified == g_physics);
+  // The guard does see the engine: a new batch shape must resize the stored trajectory.
+  {
+    MallocGuard guard;
+    engine.forward(narrower);
+  }
+  CHECK(eigen_failures > 0);
+}
+
+}  // namespace
+
+TEMPLATE_TEST_CASE("engine: cart pole with the paper's MLP allocates nothing after warm-up",
+                   "[bptt][malloc]", float, double) {
+  using S = TestType;
+  const CartPole<S, 4> sim;
+  auto net = Network<S>::mlp(sim.state_dim(), {100, 100}, 1);
+  Rng rng(3);
+  glorot_uniform(net, rng);  // last kernel not zeroed, so that g is non-trivial everywhere
+  Engine engine(sim, net, cartpole_objective<S, 4>(), 100);
+  const Matrix<S> x0 = cartpole_initial_states(sim, rng, 8);
+  for (const Index threads : {1, 2}) {
+    INFO("threads " << threads);
+    check_no_allocation(engine, x0, threads);
+  }
+}
+
+TEMPLATE_TEST_CASE("engine: quantum control with the paper's CNN allocates nothing after "
+                   "warm-up", "[bptt][malloc]", float, double) {
+  using S = TestType;
+  const Schrodinger1D<S, 32> sim;
+  auto net = quantum_cnn<S>();
+  Rng rng(4);
+  glorot_uniform(net, rng);
+  Engine engine(sim, net, quantum_objective(sim, 4), 24);
+  const Matrix<S> x0 = sim.initial_states(rng, 8);
+  for (const Index threads : {1, 2}) {
+    INFO("threads " << threads);
+    check_no_allocation(engine, x0, threads);
+  }
+}
+
+TEST_CASE("engine no-malloc check: the guard itself fires", "[bptt][malloc]") {
+  eigen_failures = 0;
+  {
+    MallocGuard guard;
+    const Matrix<double> m(10, 10);
+    CHECK(m.size() == 100);
+  }
+  CHECK(eigen_failures == 1);
+}

@@ -1,0 +1,195 @@
+// Threads change the speed, never the numbers: the loss, g_R, g_M, every diagnostic, the
+// evaluation of a set, its non-finite report, and the parameters after a few Trainer epochs
+// are bitwise identical for 1, 2 and 3 threads (cart pole with an MLP, guidance, and quantum
+// control with a CNN; batches and sets whose sizes do not divide evenly).
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <limits>
+#include <utility>
+#include <vector>
+
+#include "sbptt/bptt/engine.hpp"
+#include "sbptt/nn/init.hpp"
+#include "sbptt/nn/network.hpp"
+#include "sbptt/optim/adam.hpp"
+#include "sbptt/sim/cartpole.hpp"
+#include "sbptt/sim/guidance_by_repulsion.hpp"
+#include "sbptt/sim/schrodinger.hpp"
+#include "sbptt/train/trainer.hpp"
+
+using namespace sbptt;
+
+namespace {
+
+template <class Scalar>
+struct PairRecord {
+  Scalar loss;
+  Vector<Scalar> regular, modified;
+  std::vector<double> regular_norms, modified_norms;
+  double cos, agree;
+};
+
+void check_same(const SweepDiagnostics& a, const SweepDiagnostics& b) {
+  CHECK(a.grad_norm2 == b.grad_norm2);
+  CHECK(a.adjoint_norms == b.adjoint_norms);
+  CHECK(a.first_non_finite.has_value() == b.first_non_finite.has_value());
+}
+
+/// Everything an engine reports for one batch, and training results, at `threads`.
+template <class Sim, class Net, class Objective>
+void check_thread_independence(const Sim& sim, const Net& initial, const Objective& objective,
+                               Index steps, const Matrix<typename Sim::Scalar>& train,
+                               const Matrix<typename Sim::Scalar>& test, Index batch) {
+  using S = typename Sim::Scalar;
+  const Matrix<S> x0 = train.leftCols(batch);
+  std::vector<GradientPair<S>> pairs;
+  std::vector<Vector<S>> full, physics, stopped, trained_r, trained_c;
+  std::vector<S> evaluations;
+  // 1 thread, then 2 and 3 threads with every per-sample loop split (threshold 0) and with
+  // the default threshold (cheap loops stay on one thread).
+  const std::vector<std::pair<Index, double>> settings = {{1, 4000}, {2, 0}, {3, 0}, {2, 4000}};
+  for (const auto& [threads, split] : settings) {
+    Net net = initial;
+    Engine engine(sim, net, objective, steps);
+    engine.set_threads(threads, split);
+    REQUIRE(engine.threads() == threads);
+    GradientPair<S> pair;
+    engine.regular_and_modified(x0, pair);
+    pairs.push_back(pair);
+    Vector<S> g;
+    engine.forward(x0);
+    engine.reverse(FlowMode::Full, g);
+    full.push_back(g);
+    engine.reverse(FlowMode::PhysicsOnly, g, steps / 3);  // truncated, for variety
+    physics.push_back(g);
+    engine.reverse(FlowMode::Stopped, g);
+    stopped.push_back(g);
+    evaluations.push_back(engine.evaluate(test));
+
+    for (const Method method : {Method::Regular, Method::Combined}) {
+      Net trained = initial;
+      TrainerOptions options;
+      options.method = method;
+      options.batch = batch;
+      options.clip = ClipMode::Norm;
+      options.threads = threads;
+      Trainer trainer(sim, trained, objective, steps, Adam<S>(AdamOptions<S>{S(1e-3)}), options);
+      trainer.engine().set_threads(threads, split);
+      for (int epoch = 0; epoch < 2; ++epoch) {
+        const EpochRecord record = trainer.train_epoch(train, test);
+        REQUIRE(std::isfinite(record.test_loss));
+      }
+      (method == Method::Regular ? trained_r : trained_c).push_back(trained.params());
+    }
+  }
+  for (std::size_t t = 1; t < pairs.size(); ++t) {
+    INFO("threads " << settings[t].first << ", split above " << settings[t].second
+                    << " ns, against 1 thread");
+    CHECK(pairs[t].loss == pairs[0].loss);
+    CHECK(pairs[t].regular == pairs[0].regular);
+    CHECK(pairs[t].modified == pairs[0].modified);
+    check_same(pairs[t].regular_diagnostics, pairs[0].regular_diagnostics);
+    check_same(pairs[t].modified_diagnostics, pairs[0].modified_diagnostics);
+    CHECK(pairs[t].comparison.cos_modified_regular == pairs[0].comparison.cos_modified_regular);
+    CHECK(pairs[t].comparison.agree_fraction == pairs[0].comparison.agree_fraction);
+    CHECK(full[t] == full[0]);
+    CHECK(physics[t] == physics[0]);
+    CHECK(stopped[t] == stopped[0]);
+    CHECK(evaluations[t] == evaluations[0]);
+    CHECK(trained_r[t] == trained_r[0]);
+    CHECK(trained_c[t] == trained_c[0]);
+  }
+  // The sweeps of the pair equal the single sweeps, and training moved the parameters.
+  CHECK(pairs[0].regular == full[0]);
+  CHECK(trained_r[0] != initial.params());
+  CHECK(trained_c[0] != trained_r[0]);
+}
+
+template <class Scalar>
+Network<Scalar> seeded_mlp(Index inputs, Index outputs, std::uint64_t seed) {
+  auto net = Network<Scalar>::mlp(inputs, {24, 24}, outputs);
+  Rng rng(seed);
+  glorot_uniform(net, rng);
+  return net;
+}
+
+}  // namespace
+
+TEMPLATE_TEST_CASE("threads: cart pole results are bitwise identical for 1, 2 and 3 threads",
+                   "[bptt][threads]", float, double) {
+  using S = TestType;
+  const CartPole<S, 2> sim;
+  Rng rng(42);
+  const Matrix<S> train = cartpole_initial_states(sim, rng, 21);  // batches of 5: 5,5,5,5,1
+  const Matrix<S> test = cartpole_initial_states(sim, rng, 70);   // chunks of 32: 32,32,6
+  check_thread_independence(sim, seeded_mlp<S>(sim.state_dim(), 1, 7),
+                            cartpole_objective<S, 2>(), 30, train, test, 5);
+}
+
+TEST_CASE("threads: guidance (continuous loss, regulariser) is bitwise identical",
+          "[bptt][threads]") {
+  GuidanceOptions options;
+  options.steps = 20;
+  const GuidanceByRepulsion<double, 2, 4> sim(options);
+  Rng rng(43);
+  const Matrix<double> train = guidance_initial_states(sim, rng, 16);
+  const Matrix<double> test = guidance_initial_states(sim, rng, 40);
+  check_thread_independence(sim, seeded_mlp<double>(sim.state_dim(), sim.control_dim(), 8),
+                            guidance_objective(sim, 0.1), 20, train, test, 8);
+}
+
+TEST_CASE("threads: quantum control with a CNN is bitwise identical", "[bptt][threads]") {
+  const Schrodinger1D<float, 16> sim;
+  Network<float> net({Conv1d{16, 2, 12, 3, 2, Activation::Tanh},
+                      Conv1d{7, 12, 12, 3, 2, Activation::Tanh},
+                      Dense{36, 1, Activation::Identity}});
+  Rng rng(44);
+  glorot_uniform(net, rng);
+  const Matrix<float> train = sim.initial_states(rng, 16);
+  const Matrix<float> test = sim.initial_states(rng, 40);
+  check_thread_independence(sim, net, quantum_objective(sim, 4), 16, train, test, 8);
+}
+
+TEST_CASE("threads: evaluate reports the same first non-finite value for any thread count",
+          "[bptt][threads]") {
+  const CartPole<double, 1> sim;
+  const auto net = seeded_mlp<double>(sim.state_dim(), 1, 9);
+  Rng rng(45);
+  Matrix<double> set = cartpole_initial_states(sim, rng, 80);
+  // Sample 40 (second chunk) overflows to +inf in its state x_1; sample 70 (third chunk) has a
+  // NaN angle, so its control c_0 is NaN. c_0 comes before x_1 in rollout order, so the report
+  // is sample 70's control at step 0, whichever chunk finishes first.
+  set(0, 40) = 1.79e308;
+  set(1, 40) = 1e308;
+  set(2, 70) = std::numeric_limits<double>::quiet_NaN();
+  std::vector<NonFinite> reports;
+  std::vector<double> losses;
+  for (const Index threads : {1, 2, 3}) {
+    Engine engine(sim, net, cartpole_objective<double, 1>(), 10);
+    engine.set_threads(threads, 0);
+    losses.push_back(engine.evaluate(set));
+    REQUIRE(engine.forward_non_finite());
+    reports.push_back(*engine.forward_non_finite());
+  }
+  CHECK(std::isnan(losses[0]));
+  for (const auto& report : reports) {
+    CHECK(report.quantity == Quantity::Control);
+    CHECK(report.step == 0);
+    CHECK(report.sample == 70);
+  }
+}
+
+TEST_CASE("threads: bad settings are rejected with a clear message", "[bptt][threads]") {
+  const CartPole<double, 1> sim;
+  const auto net = seeded_mlp<double>(sim.state_dim(), 1, 9);
+  Engine engine(sim, net, cartpole_objective<double, 1>(), 10);
+  CHECK_THROWS_WITH(engine.set_threads(0), Catch::Contains("threads = 0"));
+  CHECK_THROWS_WITH(engine.set_threads(2, -1.0), Catch::Contains("split_above_ns = -1"));
+  TrainerOptions options;
+  options.threads = -2;
+  auto copy = net;
+  CHECK_THROWS_WITH((Trainer(sim, copy, cartpole_objective<double, 1>(), 10,
+                             Adam<double>(AdamOptions<double>{1e-3}), options)),
+                    Catch::Contains("threads = -2"));
+}

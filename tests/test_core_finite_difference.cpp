@@ -1,0 +1,96 @@
+// The public checkers must catch what they exist to catch: a correct derivative passes at
+// round-off, and each kind of planted error (one Jacobian entry, the VJP, the controller's
+// parameter or input product) is reported in its own field at about its relative size.
+#include <catch2/catch.hpp>
+
+#include "sbptt/core/finite_difference.hpp"
+#include "sbptt/sim/linear.hpp"
+#include "polynomial_policy.hpp"
+
+using namespace sbptt;
+using sbptt::testing::PolynomialPolicy;
+
+namespace {
+
+using Linear = LinearSystem<double, 3, 1>;
+
+Linear linear_system() {
+  Linear::StateJacobian a;
+  a << 0.9, 0.2, 0.0, -0.1, 1.1, 0.3, 0.0, 0.4, 0.8;
+  Linear::ControlJacobian b;
+  b << 0.5, 2.0, -1.0;
+  return Linear(a, b);
+}
+
+/// The linear system with one planted error in A, B or the VJP.
+struct PlantedError : Linear {
+  enum class Where { Nowhere, StateJacobian, ControlJacobian, Vjp } where;
+  double size;
+  PlantedError(Where w, double s) : Linear(linear_system()), where(w), size(s) {}
+  void jacobians(const State& x, const Control& u, StateJacobian& a, ControlJacobian& b) const {
+    Linear::jacobians(x, u, a, b);
+    if (where == Where::StateJacobian) a(1, 0) += size;
+    if (where == Where::ControlJacobian) b(0, 0) += size;
+  }
+  void vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
+           Control* lambda_u) const {
+    Linear::vjp(x, u, lambda, lambda_x, lambda_u);
+    if (where == Where::Vjp && lambda_x) (*lambda_x)(0) += size * lambda(1);
+  }
+};
+
+/// The toy policy with its parameter or input product scaled by (1 + size).
+struct WrongBackward : PolynomialPolicy<double> {
+  bool wrong_params, wrong_input;
+  double size;
+  WrongBackward(bool params, bool input, double s)
+      : PolynomialPolicy<double>({2, 1}), wrong_params(params), wrong_input(input), size(s) {}
+  void backward(const Workspace& ws, const Matrix<double>& dy, Vector<double>& grad,
+                Matrix<double>* dx) const {
+    Vector<double> own = Vector<double>::Zero(grad.size());
+    PolynomialPolicy<double>::backward(ws, dy, own, dx);
+    grad += wrong_params ? Vector<double>((1 + size) * own) : own;
+    if (wrong_input && dx) *dx *= 1 + size;
+  }
+};
+
+}  // namespace
+
+TEST_CASE("check_jacobians passes a correct simulator and names each planted error",
+          "[core][finite_difference]") {
+  using Where = PlantedError::Where;
+  const Linear::State x(0.3, -0.7, 0.1);
+  const Linear::Control u = Linear::Control::Constant(0.4);
+  const auto clean = check_jacobians(PlantedError(Where::Nowhere, 0), x, u);
+  CHECK(clean.worst() < 1e-9);
+  for (double size : {1e-3, 1e-5}) {
+    INFO("planted error " << size);
+    const auto a = check_jacobians(PlantedError(Where::StateJacobian, size), x, u);
+    CHECK(a.state_jacobian_error == Approx(size / 1.1).epsilon(1e-3));  // / max |A| = 1.1
+    CHECK(a.control_jacobian_error < 1e-9);
+    const auto b = check_jacobians(PlantedError(Where::ControlJacobian, size), x, u);
+    CHECK(b.control_jacobian_error == Approx(size / 2.0).epsilon(1e-3));  // / max |B| = 2
+    CHECK(b.state_jacobian_error < 1e-9);
+    const auto v = check_jacobians(PlantedError(Where::Vjp, size), x, u);
+    CHECK(v.vjp_error > 0.5 * size);
+    CHECK(std::max(v.state_jacobian_error, v.control_jacobian_error) < 1e-9);
+  }
+}
+
+TEST_CASE("check_controller passes a correct controller and names each planted error",
+          "[core][finite_difference]") {
+  Matrix<double> inputs(1, 3);
+  inputs << -0.3, 0.8, 1.5;
+  for (bool params : {false, true}) {
+    for (bool input : {false, true}) {
+      WrongBackward policy(params, input, 1e-4);
+      policy.params() << 0.7, -1.2;
+      const auto check = check_controller(policy, inputs);
+      INFO("wrong params " << params << ", wrong input " << input);
+      if (params) CHECK(check.param_vjp_error == Approx(1e-4).epsilon(1e-2));
+      else CHECK(check.param_vjp_error < 1e-9);
+      if (input) CHECK(check.input_vjp_error == Approx(1e-4).epsilon(1e-2));
+      else CHECK(check.input_vjp_error < 1e-9);
+    }
+  }
+}

@@ -1,6 +1,7 @@
 // The paper's multi-pole cart-pole swing-up (paper.md §5): one force swings 1–4 poles up within
 // T = 1 s. MLP 2×100 tanh with a zeroed last kernel, final-state loss 1 − mean cos θ_i.
 //   cartpole --poles 4 --method C --clip norm --epochs 50 --csv out.csv
+//   cartpole --poles 4 --physical     poles coupled through the cart (CartPoleModel::Physical)
 #include "task_program.hpp"
 
 using namespace sbptt;
@@ -11,6 +12,7 @@ int run(const TaskOptions& o) {
   CartPoleOptions options;
   options.horizon = horizon.horizon();
   options.steps = horizon.steps;
+  if (o.physical) options.model = CartPoleModel::Physical;
   const CartPole<Scalar, Poles> sim(options);
   Rng data_rng(o.seed);
   auto data = examples::split_half<Scalar>(cartpole_initial_states(sim, data_rng, 2 * o.samples));

@@ -2,6 +2,7 @@
 // tangential gains, herd evaders to the origin. MLP 2×100 tanh with a zeroed last kernel;
 // loss: mean squared evader distance over time plus rc · mean(control²).
 //   guidance --rc 0.01 --method C --epochs 50 --csv out.csv
+//   guidance --physical    centroid instead of the sum of evader positions, flocking as intended
 #include "task_program.hpp"
 
 using namespace sbptt;
@@ -12,6 +13,7 @@ int run(const TaskOptions& o) {
   GuidanceOptions options;
   options.horizon = horizon.horizon();
   options.steps = horizon.steps;
+  if (o.physical) options.physical = {GuidanceCenter::Centroid, FlockingSign::AsIntended};
   const GuidanceByRepulsion<Scalar, Drivers, Evaders> sim(o.drivers, o.evaders, options);
   Rng data_rng(o.seed);
   auto data = examples::split_half<Scalar>(guidance_initial_states(sim, data_rng, 2 * o.samples));

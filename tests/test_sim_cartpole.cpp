@@ -107,6 +107,24 @@ Eigen::Matrix<Scalar, Eigen::Dynamic, 1> final_state_sine_force(
   return x;
 }
 
+/// At 20 seeded states, the Taylor remainder at h over that at h/2 is 4 ± 0.5 (O(h²)).
+void check_taylor_ratios(const CartPole<double, 4>& sim, std::uint64_t seed) {
+  sbptt::Rng rng(seed);
+  for (int sample = 0; sample < 20; ++sample) {
+    const auto x = random_state(sim, rng);
+    const CartPole<double, 4>::Control u(rng.uniform(-5, 5));
+    const CartPole<double, 4>::State dx = random_state(sim, rng).normalized();
+    const CartPole<double, 4>::Control du(rng.uniform(-1, 1));
+    for (const double h : {1e-2, 1e-3}) {
+      const double ratio =
+          taylor_remainder(sim, x, u, dx, du, h) / taylor_remainder(sim, x, u, dx, du, h / 2);
+      INFO("sample " << sample << ", h = " << h << ", ratio = " << ratio);
+      CHECK(ratio >= 3.5);
+      CHECK(ratio <= 4.5);
+    }
+  }
+}
+
 }  // namespace
 
 TEST_CASE("CartPole: constructor rejects bad options with a message naming the value",
@@ -169,22 +187,7 @@ TEST_CASE("CartPole: VJP with a null pointer skips that product only", "[sim][ca
 }
 
 TEST_CASE("CartPole: Taylor remainder shrinks as O(h^2)", "[sim][cartpole][jacobian]") {
-  const CartPole<double, 4> sim;
-  sbptt::Rng rng(21);
-  for (int sample = 0; sample < 5; ++sample) {
-    const auto x = random_state(sim, rng);
-    CartPole<double, 4>::Control u(rng.uniform(-5, 5));
-    CartPole<double, 4>::State dx = random_state(sim, rng);
-    dx.normalize();
-    const CartPole<double, 4>::Control du(rng.uniform(-1, 1));
-    for (const double h : {1e-2, 1e-3}) {
-      const double ratio =
-          taylor_remainder(sim, x, u, dx, du, h) / taylor_remainder(sim, x, u, dx, du, h / 2);
-      INFO("sample " << sample << ", h = " << h << ", ratio = " << ratio);
-      CHECK(ratio >= 3.5);
-      CHECK(ratio <= 4.5);
-    }
-  }
+  check_taylor_ratios(CartPole<double, 4>(), 21);
 }
 
 TEST_CASE("CartPole: upright loss gradient matches finite differences", "[sim][cartpole]") {
@@ -385,4 +388,105 @@ TEST_CASE("CartPole: initial states follow the paper's distribution", "[sim][car
     CHECK(states.row(row).maxCoeff() - states.row(row).minCoeff() > 0.9 * kPi / 3);
   }
   CHECK_THROWS_AS(sbptt::cartpole_initial_states(sim, rng, -1), sbptt::InvalidArgument);
+}
+
+namespace {
+
+sbptt::CartPoleOptions physical_options() {
+  sbptt::CartPoleOptions o;
+  o.model = sbptt::CartPoleModel::Physical;
+  return o;
+}
+
+/// ½ M_P ẋ² + Σ_i (m l cos θ_i ẋ θ̇_i + ⅔ m l² θ̇_i² + m g l cos θ_i): the physical model's
+/// energy, written from the poles' geometry (independent of the simulator's equations).
+template <class Sim>
+double physical_energy(const Sim& sim, const typename Sim::State& x) {
+  const auto& o = sim.options();
+  const double m = o.pole_mass, l = o.half_length, g = o.gravity;
+  const double total = o.total_mass + static_cast<double>(sim.poles() - 1) * m;
+  double e = 0.5 * total * x(1) * x(1);
+  for (Index i = 0; i < sim.poles(); ++i) {
+    const double theta = x(2 + 2 * i), omega = x(3 + 2 * i);
+    e += m * l * std::cos(theta) * x(1) * omega + 2.0 / 3.0 * m * l * l * omega * omega +
+         m * g * l * std::cos(theta);
+  }
+  return e;
+}
+
+}  // namespace
+
+TEST_CASE("CartPole physical model: Jacobians, VJP and Taylor remainder",
+          "[sim][cartpole][jacobian][physical]") {
+  check_random_jacobians(CartPole<double, 1>(physical_options()), 61);
+  check_random_jacobians(CartPole<double, 3>(physical_options()), 62);
+  check_random_jacobians(CartPole<double, Eigen::Dynamic>(4, physical_options()), 63);
+  check_taylor_ratios(CartPole<double, 4>(physical_options()), 64);
+}
+
+TEST_CASE("CartPole physical model: one pole is the reference; more poles feel each other",
+          "[sim][cartpole][physical]") {
+  sbptt::Rng rng(65);
+  const CartPole<double, 1> reference, physical(physical_options());
+  for (int sample = 0; sample < 20; ++sample) {
+    auto a = random_state(reference, rng);
+    auto b = a;
+    const CartPole<double, 1>::Control u(rng.uniform(-5, 5));
+    for (int n = 0; n < 100; ++n) {
+      reference.step(a, u, a);
+      physical.step(b, u, b);
+    }
+    CHECK((a - b).norm() <= 1e-12 * (1 + a.norm()));
+  }
+  // Two poles: moving pole 2 changes pole 1's acceleration in the physical model only.
+  const CartPole<double, 2> ref2, phys2(physical_options());
+  CartPole<double, 2>::State x(0, 0, kPi + 0.3, 0.5, kPi - 0.2, -1.0), y = x;
+  y(4) += 0.4;
+  const CartPole<double, 2>::Control u(1.0);
+  CartPole<double, 2>::State xr, yr, xp, yp;
+  ref2.step(x, u, xr);
+  ref2.step(y, u, yr);
+  phys2.step(x, u, xp);
+  phys2.step(y, u, yp);
+  CHECK(xr(3) == yr(3));
+  CHECK(std::abs(xp(3) - yp(3)) > 1e-6);
+}
+
+TEST_CASE("CartPole physical model conserves energy as dt -> 0 (first-order drift)",
+          "[sim][cartpole][physical][invariant]") {
+  sbptt::Rng rng(66);
+  for (int sample = 0; sample < 5; ++sample) {
+    double drift[2] = {0, 0};
+    CartPole<double, 3>::State x0;
+    for (int level = 0; level < 2; ++level) {
+      auto options = physical_options();
+      options.steps = level == 0 ? 1000 : 10000;  // T = 1
+      const CartPole<double, 3> sim(options);
+      if (level == 0) x0 = random_state(sim, rng);
+      auto x = x0;
+      const double e0 = physical_energy(sim, x0);
+      const CartPole<double, 3>::Control zero(0.0);
+      for (Index n = 0; n < options.steps; ++n) {
+        sim.step(x, zero, x);
+        drift[level] = std::max(drift[level], std::abs(physical_energy(sim, x) - e0));
+      }
+    }
+    INFO("sample " << sample << ": max energy drift " << drift[0] << " (dt = 1e-3), "
+                   << drift[1] << " (dt = 1e-4)");
+    CHECK(drift[1] < 1e-2);  // energies here are O(1): |ẋ| ≤ 3, |θ̇| ≤ 6
+    CHECK(drift[0] / drift[1] > 5);
+    CHECK(drift[0] / drift[1] < 20);
+  }
+}
+
+TEST_CASE("CartPole physical model rejects a cart without mass", "[sim][cartpole][physical]") {
+  auto options = physical_options();
+  options.pole_mass = 1.25;  // fine for the reference model (< 4/3 M), not for a cart
+  CHECK_NOTHROW(CartPole<>([] {
+    sbptt::CartPoleOptions reference;
+    reference.pole_mass = 1.25;
+    return reference;
+  }()));
+  CHECK_THROWS_WITH(CartPole<>(options),
+                    Catch::Matchers::Contains("pole_mass = 1.25 with the physical model"));
 }

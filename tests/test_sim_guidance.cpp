@@ -7,13 +7,16 @@
 #include <cmath>
 #include <functional>
 #include <numbers>
+#include <utility>
 #include <thread>
 #include <vector>
 
+#include "sbptt/bptt/engine.hpp"
 #include "sbptt/bptt/objective.hpp"
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/finite_difference.hpp"
 #include "sbptt/core/rng.hpp"
+#include "sbptt/nn/network.hpp"
 #include "sbptt/sim/guidance_by_repulsion.hpp"
 
 using sbptt::GuidanceByRepulsion;
@@ -121,6 +124,23 @@ typename Sim::State rollout(const Sim& sim, typename Sim::State x,
   return x;
 }
 
+/// ‖P(x + h δx, u + h δu) − P(x, u) − h (A δx + B δu)‖ at h over the same at h/2: about 4
+/// when A and B are the derivatives (the remainder is O(h²)).
+double taylor_ratio(const Gbr& sim, const Gbr::State& x, const Gbr::Control& u,
+                    const Gbr::State& dx, const Gbr::Control& du, double h) {
+  Gbr::StateJacobian a;
+  Gbr::ControlJacobian b;
+  sim.jacobians(x, u, a, b);
+  Gbr::State base;
+  sim.step(x, u, base);
+  auto remainder = [&](double step) {
+    Gbr::State moved;
+    sim.step(x + step * dx, u + step * du, moved);
+    return (moved - base - step * (a * dx + b * du)).norm();
+  };
+  return remainder(h) / remainder(h / 2);
+}
+
 }  // namespace
 
 TEST_CASE("Guidance: constructor rejects bad options with a message naming the value",
@@ -223,29 +243,69 @@ TEST_CASE("Guidance: Taylor remainder shrinks as O(h^2)", "[sim][guidance][jacob
   intended.physical.flocking = sbptt::FlockingSign::AsIntended;
   for (const Gbr& sim : {Gbr(), Gbr(intended)}) {
     sbptt::Rng rng(51);
-    for (int sample = 0; sample < 5; ++sample) {
+    for (int sample = 0; sample < 20; ++sample) {
       Gbr::State x = random_state(sim, rng);
       place_near(x, 3, 2, 0.3, rng);  // evader pair in the flocking range
       const Gbr::Control u = random_control(sim, rng);
       const Gbr::State dx = random_state(sim, rng).normalized();
       const Gbr::Control du = random_control(sim, rng).normalized();
       for (const double h : {1e-2, 1e-3}) {
-        auto remainder = [&](double step) {
-          Gbr::StateJacobian a;
-          Gbr::ControlJacobian b;
-          sim.jacobians(x, u, a, b);
-          Gbr::State base, moved;
-          sim.step(x, u, base);
-          sim.step(x + step * dx, u + step * du, moved);
-          return (moved - base - step * (a * dx + b * du)).norm();
-        };
-        const double ratio = remainder(h) / remainder(h / 2);
+        const double ratio = taylor_ratio(sim, x, u, dx, du, h);
         INFO("sample " << sample << ", h = " << h << ", ratio = " << ratio);
         CHECK(ratio >= 3.5);
         CHECK(ratio <= 4.5);
       }
     }
   }
+}
+
+TEST_CASE("Guidance: Taylor remainder is O(h^2) with agents closer than epsilon",
+          "[sim][guidance][jacobian][singular]") {
+  // Every kind of pair 0.01–0.09 apart (ε = 0.1): the kernels bend on the scale ε + ‖r‖, so
+  // the steps stay well below it.
+  const Gbr sim;
+  sbptt::Rng rng(52);
+  const Index pairs[4][2] = {{1, 0}, {2, 0}, {3, 4}, {5, 4}};
+  for (int sample = 0; sample < 20; ++sample) {
+    Gbr::State x = random_state(sim, rng);
+    for (const auto& pair : pairs) place_near(x, pair[0], pair[1], rng.uniform(0.01, 0.09), rng);
+    const Gbr::Control u = random_control(sim, rng);
+    const Gbr::State dx = random_state(sim, rng).normalized();
+    const Gbr::Control du = random_control(sim, rng).normalized();
+    for (const double h : {1e-3, 1e-4}) {
+      const double ratio = taylor_ratio(sim, x, u, dx, du, h);
+      INFO("sample " << sample << ", h = " << h << ", ratio = " << ratio);
+      CHECK(ratio >= 3.5);
+      CHECK(ratio <= 4.5);
+    }
+  }
+}
+
+TEST_CASE("Guidance: no flocking with one evader, no spreading with one driver",
+          "[sim][guidance][invariant]") {
+  // A term that cannot act must not change anything, whatever its gain.
+  sbptt::GuidanceOptions strong;
+  strong.flocking_gain = 50;
+  strong.spreading_gain = 50;
+  sbptt::Rng rng(53);
+  const std::vector<Eigen::Vector4d> two_drivers(60, Eigen::Vector4d(-0.5, 0.3, 0.2, 0.1));
+  const GuidanceByRepulsion<double, 2, 1> one_evader, one_evader_strong(strong);
+  const auto x21 = random_state(one_evader, rng);
+  CHECK(rollout(one_evader, x21, two_drivers) != rollout(one_evader, x21, {}));  // it moves
+  const std::vector<Eigen::Vector2d> one_driver(60, Eigen::Vector2d(-0.5, 0.3));
+  const GuidanceByRepulsion<double, 1, 3> one_driver_sim, one_driver_strong(strong);
+  const auto x13 = random_state(one_driver_sim, rng);
+  // With one driver the spreading gain is idle but flocking acts: only compare the spreading.
+  sbptt::GuidanceOptions strong_spreading;
+  strong_spreading.spreading_gain = 50;
+  const GuidanceByRepulsion<double, 1, 3> one_driver_spreading(strong_spreading);
+  CHECK(rollout(one_driver_sim, x13, one_driver) == rollout(one_driver_spreading, x13, one_driver));
+  CHECK(rollout(one_driver_sim, x13, one_driver) != rollout(one_driver_strong, x13, one_driver));
+  sbptt::GuidanceOptions strong_flocking;
+  strong_flocking.flocking_gain = 50;
+  const GuidanceByRepulsion<double, 2, 1> one_evader_flocking(strong_flocking);
+  CHECK(rollout(one_evader, x21, two_drivers) == rollout(one_evader_flocking, x21, two_drivers));
+  CHECK(rollout(one_evader, x21, two_drivers) != rollout(one_evader_strong, x21, two_drivers));
 }
 
 TEST_CASE("Guidance: evader loss and its gradient", "[sim][guidance]") {
@@ -311,6 +371,23 @@ TEST_CASE("Guidance: paper §4 sanity values (60 steps, continuous loss)",
   GuidanceByRepulsion<double, 2, 1>::State x1 = x0.head<12>();
   const std::vector<Eigen::Vector4d> controls(60, Eigen::Vector4d(-0.5, 0.3, 0.2, 0.1));
   CHECK(rollout(one_sum, x1, controls) == rollout(one_centroid, x1, controls));
+}
+
+TEST_CASE("Guidance: the engine's batch loss gives the paper's §4 totals",
+          "[sim][guidance][paper]") {
+  // A controller whose output is its bias (zero weights) gives the constant control of the
+  // sanity case; the engine's regulariser normalisation (rc · mean over steps and the
+  // 4 control components) must reproduce 3.9309805839 + rc · 0.17.
+  const Gbr sim;
+  sbptt::Network<double> constant({sbptt::Dense{24, 4, sbptt::Activation::Identity}});
+  constant.params().setZero();
+  constant.params().tail<4>() << -0.5, 0.3, -0.5, 0.3;
+  const Eigen::MatrixXd x0 = sanity_state();
+  for (const auto& [rc, total] : {std::pair{1.0, 4.1009805839}, std::pair{0.1, 3.9479805839}}) {
+    sbptt::Engine engine(sim, constant, sbptt::guidance_objective(sim, rc), sim.steps());
+    CHECK(std::abs(engine.forward(x0) - total) <= 1e-9);
+    CHECK(std::abs(engine.evaluate(x0) - total) <= 1e-9);
+  }
 }
 
 TEST_CASE("Guidance: flocking sign as coded vs as intended", "[sim][guidance][invariant]") {

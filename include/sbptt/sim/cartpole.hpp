@@ -15,8 +15,19 @@
 ///
 /// Reference quirks kept on purpose (paper §8.8): M = 1.1 does not grow with the pole count, and
 /// each θ̈_i depends only on F and its own pole, so the poles do not feel each other or the cart
-/// state. This is the benchmark the paper's numbers come from; a physical multi-pendulum would
-/// be a different simulator, not an option of this one.
+/// state. This is the benchmark the paper's numbers come from, and the default.
+///
+/// `CartPoleModel::Physical` switches both off: P rigid poles hinged side by side on one cart
+/// of mass m_c = M − m (M stays the mass with one pole, so one pole is the gym system exactly),
+/// total mass M_P = m_c + P m. From the Lagrangian (pole i: centre at x + l sin θ_i, inertia
+/// m l²/3 about it):
+///
+///     D = M_P − ¾ m Σ_i cos²θ_i,   ẍ = (F + Σ_i (m l θ̇_i² sin θ_i − ¾ m g sin θ_i cos θ_i)) / D
+///     θ̈_i = ¾ (g sin θ_i − ẍ cos θ_i) / l
+///
+/// so every pole feels the others through the cart. Its energy ½ M_P ẋ² + Σ_i (m l cos θ_i ẋ θ̇_i
+/// + ⅔ m l² θ̇_i² + m g l cos θ_i) is conserved with F = 0 (the tests check the integrator's
+/// drift against it).
 ///
 /// Derivative structure used below: x_next = E x + G a(θ, θ̇, F) with a = (ẍ, θ̈_1, …, θ̈_P),
 /// E the kinematic part of the integrator, and G = (dt², dt) per position/velocity pair.
@@ -34,6 +45,12 @@
 
 namespace sbptt {
 
+/// Which equations of motion `CartPole` integrates (see its file comment).
+enum class CartPoleModel {
+  Reference,  ///< the paper's: decoupled poles, total mass M whatever the pole count
+  Physical,   ///< poles hinged on one cart, coupled through it; total mass M + (P − 1) m
+};
+
 /// Horizon and physical constants of `CartPole`. Defaults are the paper's (§5).
 struct CartPoleOptions {
   double horizon = 1.0;      ///< T, simulated time of one rollout (> 0)
@@ -42,6 +59,7 @@ struct CartPoleOptions {
   double pole_mass = 0.1;    ///< m, mass of every pole (≥ 0, < 4/3 · total_mass)
   double total_mass = 1.1;   ///< M, fixed regardless of the pole count (> 0)
   double half_length = 0.5;  ///< l, half the pole length (> 0)
+  CartPoleModel model = CartPoleModel::Reference;
 };
 
 namespace detail {
@@ -103,6 +121,10 @@ public:
                         3 * options.pole_mass < 4 * options.total_mass,
                     "CartPole: pole_mass = ", options.pole_mass,
                     ", expected 0 <= m < 4/3 * total_mass = ", 4 * options.total_mass / 3);
+    detail::require(options.model == CartPoleModel::Reference ||
+                        options.pole_mass < options.total_mass,
+                    "CartPole: pole_mass = ", options.pole_mass, " with the physical model, "
+                    "expected m < total_mass = ", options.total_mass, " (a cart of positive mass)");
     options_ = options;
     dt_ = static_cast<Scalar>(options.horizon / static_cast<double>(options.steps));
     gravity_ = static_cast<Scalar>(options.gravity);
@@ -110,6 +132,9 @@ public:
     inv_total_mass_ = static_cast<Scalar>(1.0 / options.total_mass);
     half_length_ = static_cast<Scalar>(options.half_length);
     ml_over_m_ = static_cast<Scalar>(options.pole_mass * options.half_length / options.total_mass);
+    pole_mass_ = static_cast<Scalar>(options.pole_mass);
+    physical_total_mass_ = static_cast<Scalar>(
+        options.total_mass + static_cast<double>(poles - 1) * options.pole_mass);
   }
 
   [[nodiscard]] Index poles() const { return poles_; }
@@ -123,6 +148,7 @@ public:
   void step(const State& x, const Control& u, State& x_next) const {
     check_size(x, "x");
     x_next.resize(state_dim());
+    if (options_.model == CartPoleModel::Physical) return physical_step(x, u, x_next);
     const Scalar force = u(0);
     Scalar q_sum(0);
     for (Index i = 0; i < poles_; ++i) {
@@ -147,6 +173,7 @@ public:
     a(0, 0) = Scalar(1);
     a(0, 1) = dt_;
     a(1, 1) = Scalar(1);
+    if (options_.model == CartPoleModel::Physical) return physical_jacobians(x, u, a, b);
     Scalar cart_force = inv_total_mass_;  // ∂ẍ/∂F, completed by the pole sums below
     for (Index i = 0; i < poles_; ++i) {
       const Index k = 2 + 2 * i;
@@ -178,6 +205,7 @@ public:
     check_size(x, "x");
     check_size(lambda, "lambda");
     if (lambda_x == nullptr && lambda_u == nullptr) return;
+    if (options_.model == CartPoleModel::Physical) return physical_vjp(x, u, lambda, lambda_x, lambda_u);
     const Scalar dt2 = dt_ * dt_;
     // Gᵀλ: the adjoint of each acceleration (ẍ first, then θ̈_i per pole).
     const Scalar cart_adj = dt2 * lambda(0) + dt_ * lambda(1);
@@ -202,11 +230,122 @@ public:
   }
 
 private:
+  /// ẍ of the physical model and its partials in θ_i, θ̇_i (into `d_theta`, `d_omega` when
+  /// not null) and F. The pole accelerations follow as ¾ (g sin θ_i − ẍ cos θ_i) / l.
+  using PoleVector = Eigen::Matrix<Scalar, Poles, 1>;  ///< one entry per pole
+
+  Scalar physical_cart_accel(const State& x, Scalar force, PoleVector* d_theta = nullptr,
+                             PoleVector* d_omega = nullptr, Scalar* d_force = nullptr) const {
+    using std::cos, std::sin;
+    const Scalar m = pole_mass_, l = half_length_, g = gravity_, quarter3 = Scalar(0.75);
+    Scalar numer = force, denom = physical_total_mass_;
+    for (Index i = 0; i < poles_; ++i) {
+      const Scalar s = sin(x(2 + 2 * i)), c = cos(x(2 + 2 * i)), w = x(3 + 2 * i);
+      numer += m * l * w * w * s - quarter3 * m * g * s * c;
+      denom -= quarter3 * m * c * c;
+    }
+    const Scalar accel = numer / denom;
+    if (d_force != nullptr) *d_force = Scalar(1) / denom;
+    if (d_theta == nullptr) return accel;
+    for (Index i = 0; i < poles_; ++i) {
+      const Scalar s = sin(x(2 + 2 * i)), c = cos(x(2 + 2 * i)), w = x(3 + 2 * i);
+      const Scalar numer_theta = m * l * w * w * c - quarter3 * m * g * (c * c - s * s);
+      const Scalar denom_theta = Scalar(2) * quarter3 * m * c * s;
+      (*d_theta)(i) = (numer_theta - accel * denom_theta) / denom;
+      (*d_omega)(i) = Scalar(2) * m * l * w * s / denom;
+    }
+    return accel;
+  }
+
+  /// ẍ of the physical model with all its partials.
+  struct PhysicalPartials {
+    Scalar cart_accel, d_force;
+    PoleVector d_theta, d_omega;
+  };
+  [[nodiscard]] PhysicalPartials physical_partials(const State& x, Scalar force) const {
+    PhysicalPartials p;
+    p.d_theta.resize(poles_);
+    p.d_omega.resize(poles_);
+    p.cart_accel = physical_cart_accel(x, force, &p.d_theta, &p.d_omega, &p.d_force);
+    return p;
+  }
+
+  void physical_step(const State& x, const Control& u, State& x_next) const {
+    using std::cos, std::sin;
+    const Scalar cart_accel = physical_cart_accel(x, u(0));
+    const Scalar k = Scalar(0.75) / half_length_;
+    for (Index i = 0; i < poles_; ++i) {
+      const Index j = 2 + 2 * i;
+      const Scalar accel = k * (gravity_ * sin(x(j)) - cart_accel * cos(x(j)));
+      x_next(j + 1) = x(j + 1) + dt_ * accel;
+      x_next(j) = x(j) + dt_ * x_next(j + 1);
+    }
+    x_next(1) = x(1) + dt_ * cart_accel;
+    x_next(0) = x(0) + dt_ * x_next(1);
+  }
+
+  /// Rows of A and B below the kinematic entries the caller set. ∂θ̈_i/∂θ_j =
+  /// k (δ_ij (g cos θ_i + ẍ sin θ_i) − cos θ_i ∂ẍ/∂θ_j), k = ¾ / l: dense through ẍ.
+  void physical_jacobians(const State& x, const Control& u, StateJacobian& a,
+                          ControlJacobian& b) const {
+    using std::cos, std::sin;
+    // A named struct, not a structured binding: clang before 16 cannot capture bindings.
+    const PhysicalPartials p = physical_partials(x, u(0));
+    const Scalar dt2 = dt_ * dt_, k = Scalar(0.75) / half_length_;
+    auto rows = [&](Index r, Scalar own_theta, Scalar own_omega, Scalar gain) {
+      // Position row r and velocity row r + 1 of an acceleration gain·ẍ + own terms.
+      for (Index j = 0; j < poles_; ++j) {
+        const Index col = 2 + 2 * j;
+        const Scalar theta = gain * p.d_theta(j) + (col == r ? own_theta : Scalar(0));
+        const Scalar omega = gain * p.d_omega(j) + (col == r ? own_omega : Scalar(0));
+        a(r, col) += dt2 * theta;
+        a(r, col + 1) += dt2 * omega;
+        a(r + 1, col) += dt_ * theta;
+        a(r + 1, col + 1) += dt_ * omega;
+      }
+      b(r) = dt2 * gain * p.d_force;
+      b(r + 1) = dt_ * gain * p.d_force;
+    };
+    rows(0, Scalar(0), Scalar(0), Scalar(1));
+    for (Index i = 0; i < poles_; ++i) {
+      const Index r = 2 + 2 * i;
+      const Scalar s = sin(x(r)), c = cos(x(r));
+      a(r, r) = Scalar(1);
+      a(r, r + 1) = dt_;
+      a(r + 1, r + 1) = Scalar(1);
+      rows(r, k * (gravity_ * c + p.cart_accel * s), Scalar(0), -k * c);
+    }
+  }
+
+  /// Aᵀλ and Bᵀλ in O(P): the pole adjoints reach ẍ through one sum, Σ_i k cos θ_i ā_i.
+  void physical_vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
+                    Control* lambda_u) const {
+    using std::cos, std::sin;
+    const auto [cart_accel, d_force, d_theta, d_omega] = physical_partials(x, u(0));
+    const Scalar dt2 = dt_ * dt_, k = Scalar(0.75) / half_length_;
+    Scalar cart_adj = dt2 * lambda(0) + dt_ * lambda(1);  // adjoint of ẍ, completed below
+    for (Index i = 0; i < poles_; ++i) {
+      const Index r = 2 + 2 * i;
+      cart_adj -= k * cos(x(r)) * (dt2 * lambda(r) + dt_ * lambda(r + 1));
+    }
+    if (lambda_u != nullptr) (*lambda_u)(0) = cart_adj * d_force;
+    if (lambda_x == nullptr) return;
+    lambda_x->resize(state_dim());
+    (*lambda_x)(0) = lambda(0);
+    (*lambda_x)(1) = dt_ * lambda(0) + lambda(1);
+    for (Index i = 0; i < poles_; ++i) {
+      const Index r = 2 + 2 * i;
+      const Scalar pole_adj = dt2 * lambda(r) + dt_ * lambda(r + 1);
+      const Scalar own = k * (gravity_ * cos(x(r)) + cart_accel * sin(x(r)));
+      (*lambda_x)(r) = lambda(r) + pole_adj * own + cart_adj * d_theta(i);
+      (*lambda_x)(r + 1) = dt_ * lambda(r) + lambda(r + 1) + cart_adj * d_omega(i);
+    }
+  }
+
   /// θ̈ of one pole and its cart term q, with partials (quotient rule on N / D).
   [[nodiscard]] detail::PoleTerms<Scalar> pole_terms(Scalar theta, Scalar omega,
                                                      Scalar force) const {
-    using std::cos;
-    using std::sin;
+    using std::cos, std::sin;
     const Scalar s = sin(theta);
     const Scalar c = cos(theta);
     const Scalar w2 = omega * omega;
@@ -244,6 +383,7 @@ private:
   Index poles_;
   Options options_{};
   Scalar dt_{}, gravity_{}, mass_ratio_{}, inv_total_mass_{}, half_length_{}, ml_over_m_{};
+  Scalar pole_mass_{}, physical_total_mass_{};  ///< m and M_P of the physical model
 };
 
 /// Final-state loss ℓ(x) = 1 − mean_i cos θ_i (0 when every pole is upright, 2 when all hang).
@@ -260,8 +400,7 @@ struct CartPoleUprightLoss {
   Scalar operator()(const State& x, State* grad) const {
     detail::require(x.size() >= 4 && x.size() % 2 == 0, "CartPoleUprightLoss: state size ",
                     x.size(), ", expected 2 + 2 * poles with poles >= 1");
-    using std::cos;
-    using std::sin;
+    using std::cos, std::sin;
     const Index poles = (x.size() - 2) / 2;
     const Scalar inv_poles = Scalar(1) / static_cast<Scalar>(poles);
     if (grad != nullptr) grad->setZero(x.size());

@@ -41,6 +41,7 @@ struct TaskOptions {
   NonFinitePolicy on_non_finite = NonFinitePolicy::Stop;
   // task sizes
   long poles = 1;
+  bool physical = false;  ///< cart pole and guidance: the physical variants, not the reference quirks
   long drivers = 2;
   long evaders = 4;
   double rc = 0.1;
@@ -62,8 +63,8 @@ struct TaskOptions {
       "--samples N, --lr X, --seed N, --shuffle, --truncation K, --on-nonfinite stop|skip-batch, "
       "--steps N, --dt X, --T X, --float, --double, --threads N, --csv FILE, --save-params FILE, "
       "--init-params FILE, --init-states FILE, --dump-gradients FILE";
-  if (task == Task::CartPole) flags += ", --poles 1..4";
-  if (task == Task::Guidance) flags += ", --drivers D, --evaders E, --rc X";
+  if (task == Task::CartPole) flags += ", --poles 1..4, --physical";
+  if (task == Task::Guidance) flags += ", --drivers D, --evaders E, --rc X, --physical";
   if (task == Task::Quantum) flags += ", --target 2..4, --nx N";
   return flags;
 }
@@ -110,6 +111,8 @@ struct TaskOptions {
     else if (f == "--init-states") o.init_states = args.value();
     else if (f == "--dump-gradients") o.dump_gradients = args.value();
     else if (f == "--poles" && task == Task::CartPole) o.poles = parse_integer(f, args.value(), 1, 4);
+    else if (f == "--physical" && (task == Task::CartPole || task == Task::Guidance))
+      args.no_value(), o.physical = true;
     else if (f == "--drivers" && task == Task::Guidance) o.drivers = parse_integer(f, args.value(), 1, 16);
     else if (f == "--evaders" && task == Task::Guidance) o.evaders = parse_integer(f, args.value(), 1, 64);
     else if (f == "--rc" && task == Task::Guidance) o.rc = parse_number(f, args.value(), 0, 1e9);

@@ -1,0 +1,551 @@
+// Speed of one training epoch at the paper's settings, against the machine's own peak.
+//
+// One row per task × method × scalar: cart pole (1 and 4 poles, MLP 2×100 tanh), guidance
+// (2 drivers, 4 evaders, MLP 2×100 tanh, rc = 0.1) and quantum control (target n = 4, the
+// paper's "target state 3"; the paper's CNN), methods R, M, C, S, in float and double. An
+// epoch is exactly `Trainer::train_epoch`: 256 training samples in batches of 8 (32 Adam
+// updates, lr 1e-3) over the full horizon, then the evaluation of the 256-sample train and
+// test sets. Extra rows (quantum, R, float) repeat the epoch on finer grids, Nx = 64, 128,
+// 256, with the CNN widened to match, to show that the simulator's work grows linearly in Nx.
+//
+// Columns:
+//   ms/epoch     best of --repeats timed epochs (after one warm-up epoch), 1 thread
+//   GFLOP        network work of the epoch: the dense/conv multiply-adds of every forward,
+//                parameter-VJP and input-VJP call the engine made (counted at the call, 2 flops
+//                per multiply-add)
+//   GFLOP/s      GFLOP / time; %peak: that over the peak of this run (an n×n Eigen matrix
+//                product on one core, same scalar, best of several sizes and repeats)
+//   ms Nt, xNt   the same epoch with --threads N threads, and the speed-up over 1 thread
+//   sim ns       one simulator step plus one full VJP (Aᵀλ and Bᵀλ) per sample, on the
+//                states of the last training batch (the per-sample work of the engine)
+//   traj KiB     the stored trajectory of one batch of 8 (states, controls, network workspace)
+//   RSS MiB      peak resident memory (getrusage ru_maxrss) of a process that ran the row
+//
+// Every row runs in its own child process, so that its RSS is its own.
+//
+// Usage: bench [--csv FILE] [--repeats R] [--threads N] [--tasks LIST] [--scalars LIST]
+//              [--methods LETTERS]
+//   --tasks    comma list of cartpole1, cartpole4, guidance, quantum, quantum-nx (default all)
+//   --scalars  comma list of float, double (default both)
+//   --methods  letters out of RMCS (default RMCS)
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <functional>
+#include <string>
+#include <thread>
+#include <type_traits>
+#include <utility>
+#include <variant>
+#include <vector>
+
+#include <sbptt/sbptt.hpp>
+
+namespace {
+
+using sbptt::Index;
+using sbptt::Matrix;
+using sbptt::Method;
+using sbptt::Network;
+
+struct Settings {
+  std::string csv;
+  int repeats = 2;
+  Index threads = 2;
+  std::vector<std::string> tasks = {"cartpole1", "cartpole4", "guidance", "quantum",
+                                    "quantum-nx"};
+  std::vector<std::string> scalars = {"float", "double"};
+  std::string methods = "RMCS";
+};
+
+/// What one row measures (plain data: it crosses a pipe from the child process).
+struct RowResult {
+  long long nx = 0, steps = 0, params = 0;  ///< state size (Nx for quantum), horizon, θ size
+  double ms_epoch = 0, gflop = 0, ms_threads = 0, sim_ns = 0;
+  double trajectory_bytes = 0, rss_kib = 0;
+  int ok = 0;
+  char error[200] = {};
+};
+
+struct Row {
+  std::string task, scalar, method;
+  RowResult result;
+};
+
+/// A `Network` seen through the Controller concept, counting the multiply-adds it executes.
+template <class S>
+class CountingNetwork {
+public:
+  using Scalar = S;
+  using Workspace = typename Network<S>::Workspace;
+
+  explicit CountingNetwork(Network<S>& net) : net_(net) {
+    for (const auto& layer : net.layers()) {
+      const Index macs = std::visit(
+          [](const auto& l) -> Index {
+            if constexpr (std::is_same_v<std::decay_t<decltype(l)>, sbptt::Conv1d>) {
+              return l.output_length() * l.out_channels * l.in_channels * l.kernel;
+            } else {
+              return l.inputs * l.outputs;
+            }
+          },
+          layer);
+      per_sample_ += macs;
+      if (&layer != &net.layers().front()) hidden_input_ += macs;
+    }
+    first_input_ = per_sample_ - hidden_input_;
+  }
+
+  [[nodiscard]] Index input_dim() const { return net_.input_dim(); }
+  [[nodiscard]] Index output_dim() const { return net_.output_dim(); }
+  [[nodiscard]] Index num_params() const { return net_.num_params(); }
+  [[nodiscard]] const sbptt::Vector<S>& params() const { return net_.params(); }
+  [[nodiscard]] sbptt::Vector<S>& params() { return net_.params(); }
+
+  void forward(const Matrix<S>& x, Matrix<S>& y, Workspace& ws) const {
+    net_.forward(x, y, ws);
+    macs_.fetch_add(per_sample_ * x.cols(), std::memory_order_relaxed);
+  }
+  /// Parameter VJP of every layer, input VJP of every layer but the first, and of the first
+  /// one only when dX is asked for (exactly what `Network::backward` executes).
+  void backward(const Workspace& ws, const Matrix<S>& dy, sbptt::Vector<S>& grad,
+                Matrix<S>* dx) const {
+    net_.backward(ws, dy, grad, dx);
+    const Index per = per_sample_ + hidden_input_ + (dx != nullptr ? first_input_ : 0);
+    macs_.fetch_add(per * dy.cols(), std::memory_order_relaxed);
+  }
+
+  [[nodiscard]] long long macs() const { return macs_.load(); }
+  void reset() { macs_ = 0; }
+
+private:
+  Network<S>& net_;
+  Index per_sample_ = 0, hidden_input_ = 0, first_input_ = 0;
+  mutable std::atomic<long long> macs_{0};
+};
+
+double now_ms() {
+  return std::chrono::duration<double, std::milli>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+/// Best GFLOP/s of an n×n product on this thread (Eigen without threads: one core).
+template <class S>
+double measure_peak() {
+  double best = 0;
+  for (const Index n : {512, 768, 1024}) {
+    const Matrix<S> a = Matrix<S>::Random(n, n), b = Matrix<S>::Random(n, n);
+    Matrix<S> c(n, n);
+    for (int repeat = 0; repeat < 4; ++repeat) {
+      const double start = now_ms();
+      c.noalias() = a * b;
+      const double ms = now_ms() - start;
+      best = std::max(best, 2.0 * static_cast<double>(n * n) * static_cast<double>(n) / (ms * 1e6));
+    }
+  }
+  return best;
+}
+
+/// ns per sample of `step` + full `vjp` over the stored trajectory of the engine.
+template <class Sim, class Engine>
+double simulator_ns(const Sim& sim, const Engine& engine) {
+  const auto& tr = engine.trajectory();
+  typename Sim::State x(sim.state_dim()), next(sim.state_dim()), lx(sim.state_dim());
+  typename Sim::Control u(sim.control_dim()), lu(sim.control_dim());
+  double best = 1e300;
+  typename Sim::Scalar sum = 0;  // consumed below, so that no call can be optimised away
+  for (int repeat = 0; repeat < 3; ++repeat) {
+    const double start = now_ms();
+    for (Index n = 0; n < tr.steps(); ++n) {
+      const auto i = static_cast<std::size_t>(n);
+      for (Index b = 0; b < tr.batch(); ++b) {
+        x = tr.states[i].col(b);
+        u = tr.controls[i].col(b);
+        sim.step(x, u, next);
+        sim.vjp(x, u, next, &lx, &lu);  // λ = x_{n+1}: any vector does
+        sum += next(0) + lx(0) + lu(0);
+      }
+    }
+    best = std::min(best, now_ms() - start);
+  }
+  volatile double sink = static_cast<double>(sum);
+  (void)sink;
+  return best * 1e6 / static_cast<double>(tr.steps() * tr.batch());
+}
+
+/// One row: warm-up + timed epochs at 1 and at N threads.
+template <class Sim, class Objective>
+RowResult measure(const Settings& settings, const Sim& sim,
+                  const Network<typename Sim::Scalar>& initial, const Objective& objective,
+                  Index steps, const Matrix<typename Sim::Scalar>& train,
+                  const Matrix<typename Sim::Scalar>& test, Method method) {
+  using S = typename Sim::Scalar;
+  RowResult r;
+  for (const Index threads : {Index{1}, settings.threads}) {
+    Network<S> net = initial;
+    CountingNetwork<S> counted(net);
+    sbptt::TrainerOptions options;
+    options.method = method;
+    options.batch = 8;
+    options.threads = threads;
+    sbptt::Trainer trainer(sim, counted, objective, steps,
+                           sbptt::Adam<S>(sbptt::AdamOptions<S>{S(1e-3)}), options);
+    trainer.train_epoch(train, test);  // warm-up: buffers sized, pages touched
+    counted.reset();
+    double best = 1e300;
+    for (int repeat = 0; repeat < settings.repeats; ++repeat) {
+      const double start = now_ms();
+      trainer.train_epoch(train, test);
+      best = std::min(best, now_ms() - start);
+    }
+    if (threads == 1) {
+      r.ms_epoch = best;
+      r.gflop = 2.0 * static_cast<double>(counted.macs()) / settings.repeats / 1e9;
+      r.sim_ns = simulator_ns(sim, trainer.engine());
+      r.trajectory_bytes = static_cast<double>(trainer.engine().trajectory().bytes());
+    } else {
+      r.ms_threads = best;
+    }
+    if (settings.threads == 1) r.ms_threads = r.ms_epoch;
+    if (settings.threads == 1) break;
+  }
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  r.rss_kib = static_cast<double>(usage.ru_maxrss);
+  r.ok = 1;
+  return r;
+}
+
+/// Glorot-uniform MLP 2×100 tanh with the last kernel zeroed (the paper's cart pole/guidance).
+template <class S>
+Network<S> paper_mlp(Index inputs, Index outputs) {
+  auto net = Network<S>::mlp(inputs, {100, 100}, outputs);
+  sbptt::Rng rng(42);
+  sbptt::GlorotOptions options;
+  options.zero_last_kernel = true;
+  sbptt::glorot_uniform(net, rng, options);
+  return net;
+}
+
+/// The paper's quantum CNN, for Nx grid points: conv 2→60 k3 s2 tanh, conv 60→60 k3 s2 tanh,
+/// dense → 1 (Nx = 32: 15 and 7 positions, 11,701 parameters).
+template <class S>
+Network<S> paper_cnn(Index nx) {
+  const sbptt::Conv1d first{nx, 2, 60, 3, 2, sbptt::Activation::Tanh};
+  const sbptt::Conv1d second{first.output_length(), 60, 60, 3, 2, sbptt::Activation::Tanh};
+  Network<S> net({first, second, sbptt::Dense{second.output_dim(), 1}});
+  sbptt::Rng rng(42);
+  sbptt::glorot_uniform(net, rng);
+  return net;
+}
+
+template <class S, int Poles>
+RowResult cartpole_row(const Settings& settings, Method method) {
+  const sbptt::CartPole<S, Poles> sim;
+  sbptt::Rng rng(42);
+  const Matrix<S> train = sbptt::cartpole_initial_states(sim, rng, 256);
+  const Matrix<S> test = sbptt::cartpole_initial_states(sim, rng, 256);
+  const auto net = paper_mlp<S>(sim.state_dim(), 1);
+  RowResult r = measure(settings, sim, net, sbptt::cartpole_objective<S, Poles>(), sim.steps(),
+                        train, test, method);
+  r.nx = sim.state_dim();
+  r.steps = sim.steps();
+  r.params = net.num_params();
+  return r;
+}
+
+template <class S>
+RowResult guidance_row(const Settings& settings, Method method) {
+  const sbptt::GuidanceByRepulsion<S, 2, 4> sim;
+  sbptt::Rng rng(42);
+  const Matrix<S> train = sbptt::guidance_initial_states(sim, rng, 256);
+  const Matrix<S> test = sbptt::guidance_initial_states(sim, rng, 256);
+  const auto net = paper_mlp<S>(sim.state_dim(), sim.control_dim());
+  RowResult r = measure(settings, sim, net, sbptt::guidance_objective(sim, 0.1), sim.steps(),
+                        train, test, method);
+  r.nx = sim.state_dim();
+  r.steps = sim.steps();
+  r.params = net.num_params();
+  return r;
+}
+
+template <class S, int Nx>
+RowResult quantum_row(const Settings& settings, Method method) {
+  const sbptt::Schrodinger1D<S, Nx> sim;
+  sbptt::Rng rng(42);
+  const Matrix<S> train = sim.initial_states(rng, 256);
+  const Matrix<S> test = sim.initial_states(rng, 256);
+  const auto net = paper_cnn<S>(Nx);
+  RowResult r = measure(settings, sim, net, sbptt::quantum_objective(sim, 4), sim.steps(), train,
+                        test, method);
+  r.nx = Nx;
+  r.steps = sim.steps();
+  r.params = net.num_params();
+  return r;
+}
+
+/// Runs `body` in a child process and returns what it wrote into the pipe.
+RowResult in_child(const std::function<RowResult()>& body) {
+  int fds[2];
+  if (pipe(fds) != 0) throw sbptt::IoError("bench: pipe() failed");
+  std::fflush(nullptr);
+  const pid_t pid = fork();
+  if (pid < 0) throw sbptt::IoError("bench: fork() failed");
+  if (pid == 0) {
+    close(fds[0]);
+    RowResult r;
+    try {
+      r = body();
+    } catch (const std::exception& e) {
+      std::snprintf(r.error, sizeof r.error, "%s", e.what());
+    }
+    const ssize_t written = write(fds[1], &r, sizeof r);
+    _exit(written == static_cast<ssize_t>(sizeof r) ? 0 : 1);
+  }
+  close(fds[1]);
+  RowResult r;
+  const ssize_t got = read(fds[0], &r, sizeof r);
+  close(fds[0]);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  if (got != static_cast<ssize_t>(sizeof r)) {
+    r = RowResult{};
+    std::snprintf(r.error, sizeof r.error, "child process failed (status %d)", status);
+  }
+  return r;
+}
+
+std::vector<std::string> split(const std::string& text) {
+  std::vector<std::string> parts;
+  std::string part;
+  for (const char c : text + ",") {
+    if (c == ',') {
+      if (!part.empty()) parts.push_back(part);
+      part.clear();
+    } else {
+      part += c;
+    }
+  }
+  return parts;
+}
+
+Settings parse(int argc, char** argv) {
+  Settings s;
+  sbptt::ArgumentCursor cursor(argc, argv);
+  const char* accepted = "--csv, --repeats, --threads, --tasks, --scalars, --methods";
+  const auto check_list = [](const std::string& flag, const std::vector<std::string>& values,
+                             const std::vector<std::string>& allowed) {
+    if (values.empty())
+      throw sbptt::InvalidArgument(flag + " needs at least one value");
+    for (const auto& v : values) {
+      if (std::find(allowed.begin(), allowed.end(), v) == allowed.end()) {
+        std::string list;
+        for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+        throw sbptt::InvalidArgument(flag + " value '" + v + "' is unknown; expected " + list);
+      }
+    }
+  };
+  while (cursor.next()) {
+    const std::string flag = cursor.flag();
+    if (flag == "--csv") {
+      s.csv = cursor.value();
+    } else if (flag == "--repeats") {
+      s.repeats = static_cast<int>(sbptt::parse_integer(flag, cursor.value(), 1, 100));
+    } else if (flag == "--threads") {
+      s.threads = sbptt::parse_integer(flag, cursor.value(), 1, 64);
+    } else if (flag == "--tasks") {
+      s.tasks = split(cursor.value());
+      check_list(flag, s.tasks, {"cartpole1", "cartpole4", "guidance", "quantum", "quantum-nx"});
+    } else if (flag == "--scalars") {
+      s.scalars = split(cursor.value());
+      check_list(flag, s.scalars, {"float", "double"});
+    } else if (flag == "--methods") {
+      s.methods = cursor.value();
+      if (s.methods.empty() || s.methods.find_first_not_of("RMCS") != std::string::npos)
+        throw sbptt::InvalidArgument("--methods '" + s.methods +
+                                     "' is not valid; expected letters out of RMCS");
+    } else {
+      cursor.unknown(accepted);
+    }
+  }
+  return s;
+}
+
+std::string cpu_model() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("model name", 0) == 0) return line.substr(line.find(':') + 2);
+  return "unknown";
+}
+
+bool wanted(const Settings& s, const std::string& task) {
+  return std::find(s.tasks.begin(), s.tasks.end(), task) != s.tasks.end();
+}
+
+const Row* find_row(const std::vector<Row>& rows, const std::string& task,
+                    const std::string& scalar, const std::string& method, long long nx = 0) {
+  for (const auto& row : rows)
+    if (row.task == task && row.scalar == scalar && row.method == method && row.result.ok != 0 &&
+        (nx == 0 || row.result.nx == nx))
+      return &row;
+  return nullptr;
+}
+
+/// The issue's targets, measured in this run.
+void summarize(const std::vector<Row>& rows, const double peak[2]) {
+  std::printf("\ntargets (1 thread):\n");
+  if (const Row* r = find_row(rows, "cartpole4", "float", "R")) {
+    const double fraction = r->result.gflop / (r->result.ms_epoch / 1e3) / peak[0];
+    std::printf("  cart pole 4, float, R: %.1f%% of the float peak (target >= 40%%): %s\n",
+                100 * fraction, fraction >= 0.4 ? "met" : "MISSED");
+  }
+  for (const char* task : {"cartpole1", "cartpole4", "guidance", "quantum"}) {
+    for (const char* scalar : {"float", "double"}) {
+      const Row* c = find_row(rows, task, scalar, "C", std::string(task) == "quantum" ? 32 : 0);
+      const Row* r = find_row(rows, task, scalar, "R", std::string(task) == "quantum" ? 32 : 0);
+      if (c == nullptr || r == nullptr) continue;
+      const double ratio = c->result.ms_epoch / r->result.ms_epoch;
+      std::printf("  %-9s %-6s C/R epoch time %.2f (target <= 1.5): %s\n", task, scalar, ratio,
+                  ratio <= 1.5 ? "met" : "MISSED");
+    }
+  }
+  bool header = false;
+  for (const long long nx : {32, 64, 128, 256}) {
+    const Row* r = find_row(rows, "quantum", "float", "R", nx);
+    if (r == nullptr) continue;
+    if (!header) std::printf("  quantum simulator work (float), step + VJP per sample:\n");
+    header = true;
+    std::printf("    Nx = %3lld: %8.0f ns, %6.2f ns per grid point\n", nx, r->result.sim_ns,
+                r->result.sim_ns / static_cast<double>(nx));
+  }
+}
+
+void write_csv(const Settings& settings, const std::vector<Row>& rows, const double peak[2]) {
+  std::string text =
+      "task,scalar,method,nx,steps,params,ms_epoch,gflop_epoch,gflops,peak_gflops,"
+      "fraction_of_peak,threads,ms_epoch_threads,speedup_threads,sim_ns_per_sample_step,"
+      "trajectory_bytes_per_batch,peak_rss_kib\n";
+  char line[512];
+  for (const auto& row : rows) {
+    const RowResult& r = row.result;
+    if (r.ok == 0) continue;
+    const double p = peak[row.scalar == "float" ? 0 : 1];
+    const double gflops = r.gflop / (r.ms_epoch / 1e3);
+    std::snprintf(line, sizeof line,
+                  "%s,%s,%s,%lld,%lld,%lld,%.3f,%.6f,%.3f,%.3f,%.4f,%lld,%.3f,%.3f,%.1f,%.0f,%.0f\n",
+                  row.task.c_str(), row.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
+                  r.params, r.ms_epoch, r.gflop, gflops, p, gflops / p,
+                  static_cast<long long>(settings.threads), r.ms_threads,
+                  r.ms_epoch / r.ms_threads, r.sim_ns, r.trajectory_bytes, r.rss_kib);
+    text += line;
+  }
+  sbptt::write_file_atomically(settings.csv, text);
+  std::printf("\nwrote %s\n", settings.csv.c_str());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Settings settings;
+  try {
+    settings = parse(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench: %s\n", e.what());
+    return 2;
+  }
+  try {
+    std::printf("sbptt bench: %s, %u hardware threads; epoch = Trainer::train_epoch "
+                "(256 train in batches of 8, + evaluation of 256 train and 256 test)\n",
+                cpu_model().c_str(), std::thread::hardware_concurrency());
+    const double empty_rss = in_child([] {
+      RowResult r;
+      rusage usage{};
+      getrusage(RUSAGE_SELF, &usage);
+      r.rss_kib = static_cast<double>(usage.ru_maxrss);
+      return r;
+    }).rss_kib;
+    double peak[2] = {measure_peak<float>(), measure_peak<double>()};
+    std::printf("peak (one core, Eigen n×n product): float %.1f GFLOP/s, double %.1f GFLOP/s; "
+                "RSS of an idle child %.1f MiB\n\n",
+                peak[0], peak[1], empty_rss / 1024);
+
+    struct Job {
+      std::string task, scalar;
+      char method;
+      std::function<RowResult()> run;
+    };
+    std::vector<Job> jobs;
+    const auto add = [&](const std::string& task, auto float_row, auto double_row) {
+      if (!wanted(settings, task)) return;
+      for (const auto& scalar : settings.scalars) {
+        for (const char letter : settings.methods) {
+          const Method method = sbptt::parse_method(std::string(1, letter));
+          jobs.push_back({task, scalar, letter, [=, &settings] {
+                            return scalar == "float" ? float_row(settings, method)
+                                                     : double_row(settings, method);
+                          }});
+        }
+      }
+    };
+    add("cartpole1", cartpole_row<float, 1>, cartpole_row<double, 1>);
+    add("cartpole4", cartpole_row<float, 4>, cartpole_row<double, 4>);
+    add("guidance", guidance_row<float>, guidance_row<double>);
+    add("quantum", quantum_row<float, 32>, quantum_row<double, 32>);
+    const bool float_r = settings.methods.find('R') != std::string::npos &&
+                         std::find(settings.scalars.begin(), settings.scalars.end(), "float") !=
+                             settings.scalars.end();
+    if (wanted(settings, "quantum-nx") && float_r) {
+      // Finer grids, R in float only, one timed epoch each: they show the growth in Nx.
+      Settings once = settings;
+      once.repeats = 1;
+      jobs.push_back({"quantum", "float", 'R',
+                      [once] { return quantum_row<float, 64>(once, Method::Regular); }});
+      jobs.push_back({"quantum", "float", 'R',
+                      [once] { return quantum_row<float, 128>(once, Method::Regular); }});
+      jobs.push_back({"quantum", "float", 'R',
+                      [once] { return quantum_row<float, 256>(once, Method::Regular); }});
+    }
+
+    std::printf("%-9s %-6s %-1s %4s %5s %6s %9s %7s %7s %6s %9s %5s %8s %8s %7s\n", "task",
+                "scalar", "m", "Nx", "steps", "params", "ms/epoch", "GFLOP", "GFLOP/s", "%peak",
+                ("ms " + std::to_string(settings.threads) + "t").c_str(),
+                ("x" + std::to_string(settings.threads) + "t").c_str(), "sim ns", "trajKiB",
+                "RSS MiB");
+    std::vector<Row> rows;
+    for (const auto& job : jobs) {
+      Row row{job.task, job.scalar, std::string(1, job.method), in_child(job.run)};
+      const RowResult& r = row.result;
+      if (r.ok == 0) {
+        std::printf("%-9s %-6s %-1s failed: %s\n", job.task.c_str(), job.scalar.c_str(),
+                    row.method.c_str(), r.error);
+        rows.push_back(row);
+        continue;
+      }
+      const double p = peak[job.scalar == "float" ? 0 : 1];
+      const double gflops = r.gflop / (r.ms_epoch / 1e3);
+      std::printf("%-9s %-6s %-1s %4lld %5lld %6lld %9.1f %7.3f %7.2f %5.1f%% %9.1f %5.2f %8.0f "
+                  "%8.0f %7.1f\n",
+                  job.task.c_str(), job.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
+                  r.params, r.ms_epoch, r.gflop, gflops, 100 * gflops / p, r.ms_threads,
+                  r.ms_epoch / r.ms_threads, r.sim_ns, r.trajectory_bytes / 1024,
+                  r.rss_kib / 1024);
+      std::fflush(stdout);
+      rows.push_back(row);
+    }
+    summarize(rows, peak);
+    if (!settings.csv.empty()) write_csv(settings, rows, peak);
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench: %s\n", e.what());
+    return 1;
+  }
+}

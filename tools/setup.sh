@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Installs the Debian packages sbptt needs, only those that are missing. Run as root, or as a
-# user with sudo.
+# Installs the Debian packages sbptt needs, only those that are missing, and any package named
+# on the command line (the check scripts add clang, its sanitizer runtimes and clang-tidy).
+# Run as root, or as a user with sudo.
 set -euo pipefail
-packages=(cmake make g++ libeigen3-dev catch2 python3 python3-matplotlib)
+packages=(cmake make g++ libeigen3-dev catch2 python3 python3-matplotlib "$@")
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

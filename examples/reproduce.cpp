@@ -212,6 +212,7 @@ struct Run {
   long seed = first_seed;
   long epochs = 0;
   long samples = 0;
+  bool use_float = false;  ///< the task program runs in float (as the reference's float32)
 
   [[nodiscard]] const TaskInfo& info() const { return tasks[task]; }
   [[nodiscard]] std::string name() const {
@@ -220,10 +221,13 @@ struct Run {
   }
   /// The task program's flags, without --csv (which depends on the out dir).
   [[nodiscard]] std::vector<std::string> flags() const {
-    return {info().complexity_flag, format_number(complexity), "--method",
-            std::string(sbptt::label(method)), "--clip", sbptt::to_string(clip), "--epochs",
-            std::to_string(epochs), "--samples", std::to_string(samples), "--seed",
-            std::to_string(seed)};
+    std::vector<std::string> f{info().complexity_flag, format_number(complexity), "--method",
+                               std::string(sbptt::label(method)), "--clip",
+                               sbptt::to_string(clip), "--epochs", std::to_string(epochs),
+                               "--samples", std::to_string(samples), "--seed",
+                               std::to_string(seed)};
+    if (use_float) f.emplace_back("--float");
+    return f;
   }
   /// The runs/<name>.run file: what the run is, so that summary.csv and the plots can be
   /// derived from the out dir alone, and a resumed sweep can check it plans the same run.
@@ -236,8 +240,9 @@ struct Run {
                   "\n");
   }
   [[nodiscard]] double estimated_seconds() const {
-    return info().seconds_per_sample_epoch * method_cost(method) * static_cast<double>(epochs) *
-               static_cast<double>(samples) +
+    const double precision_cost = use_float ? 0.45 : 1.0;  // docs/benchmarks.md, float vs double
+    return info().seconds_per_sample_epoch * method_cost(method) * precision_cost *
+               static_cast<double>(epochs) * static_cast<double>(samples) +
            0.15;  // start-up and data generation
   }
   /// Grid order: task, complexity from easy to hard, method R M C S N, clip none value norm,
@@ -281,7 +286,7 @@ std::optional<Run> parse_description(const std::string& text) {
 constexpr const char* accepted_flags =
     "--profile quick|paper, --tasks cartpole,guidance,quantum, --methods R,M,C,S,N, "
     "--clips none,value,norm, --complexities LIST, --seeds N, --epochs N, --samples N, "
-    "--jobs N, --out DIR, --bin-dir DIR, --dry-run, --no-plot, --python EXE, "
+    "--float, --jobs N, --out DIR, --bin-dir DIR, --dry-run, --no-plot, --python EXE, "
     "--plot-script FILE, --help";
 
 struct Options {
@@ -293,7 +298,7 @@ struct Options {
   std::optional<long> seeds, epochs, samples;
   long jobs = 2;
   std::string out, bin_dir, python, plot_script;
-  bool dry_run = false, plot = true, help = false;
+  bool dry_run = false, plot = true, help = false, use_float = false;
 };
 
 std::string non_empty(const std::string& flag, std::string value) {
@@ -358,6 +363,7 @@ Options parse_options(int argc, const char* const* argv) {
     else if (f == "--python") o.python = non_empty(f, args.value());
     else if (f == "--plot-script") o.plot_script = non_empty(f, args.value());
     else if (f == "--dry-run") args.no_value(), o.dry_run = true;
+    else if (f == "--float") args.no_value(), o.use_float = true;
     else if (f == "--no-plot") args.no_value(), o.plot = false;
     else if (f == "--help") args.no_value(), o.help = true;
     else args.unknown(accepted_flags);
@@ -407,7 +413,7 @@ std::vector<Run> make_plan(const Options& o) {
       for (ClipMode c : clips)
         for (long k = 0; k < seeds; ++k)
           plan.push_back({s.task, s.complexity, m, c, first_seed + k, o.epochs.value_or(s.epochs),
-                          o.samples.value_or(s.samples)});
+                          o.samples.value_or(s.samples), o.use_float});
   }
   // Drop duplicates (a method or clip listed twice) and sort into grid order.
   std::sort(plan.begin(), plan.end(),

@@ -5,6 +5,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/setup.sh
-cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DSBPTT_BUILD_TESTS=OFF >/dev/null
+# Only the programs are built; the test options stay as a previous tools/test.sh left them.
+cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j "$(nproc)" --target reproduce toy cartpole guidance quantum rotation
 ./build/examples/reproduce --profile quick --jobs "$(nproc)" --out out/quick "$@"

@@ -40,6 +40,11 @@ fs::path scratch(const std::string& name) {
   return dir / name;
 }
 
+std::string file_text(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), {}};
+}
+
 double printed_loss(const std::string& output) {
   const auto at = output.find("loss=");
   REQUIRE(at != std::string::npos);
@@ -131,11 +136,46 @@ TEST_CASE("--init-params then --save-params round-trips bit for bit", "[programs
   REQUIRE(run("cartpole", "--epochs 1 --samples 8 --steps 10 --save-params " + first.string()).status == 0);
   REQUIRE(run("cartpole", "--epochs 0 --init-params " + first.string() + " --save-params " +
                               second.string()).status == 0);
-  std::ifstream a(first, std::ios::binary), b(second, std::ios::binary);
-  const std::string text_a((std::istreambuf_iterator<char>(a)), {}),
-      text_b((std::istreambuf_iterator<char>(b)), {});
-  CHECK(text_a.size() > 10000);
-  CHECK(text_a == text_b);
+  const std::string text = file_text(first);
+  CHECK(text.size() > 10000);
+  CHECK(text == file_text(second));
+}
+
+TEST_CASE("--threads 2 trains to the same parameters, bit for bit, as one thread", "[programs]") {
+  // Quantum with split_above_ns's default splits its per-sample loops, and C runs its two
+  // sweeps at once: every threaded path of the engine is on.
+  for (const std::string& call : {std::string("cartpole --poles 2 --method C --epochs 2 --samples 16 --steps 20"),
+                                  std::string("quantum --method C --epochs 1 --samples 16 --steps 8")}) {
+    const std::string program = call.substr(0, call.find(' '));
+    const std::string arguments = call.substr(call.find(' ') + 1);
+    const fs::path one = scratch(program + "_t1.params"), two = scratch(program + "_t2.params");
+    const Result r1 = run(program, arguments + " --threads 1 --save-params " + one.string());
+    const Result r2 = run(program, arguments + " --threads 2 --save-params " + two.string());
+    INFO(call << "\n" << r1.output << r2.output);
+    REQUIRE(r1.status == 0);
+    REQUIRE(r2.status == 0);
+    const std::string text = file_text(one);
+    CHECK(text.size() > 10000);
+    CHECK(text == file_text(two));
+  }
+}
+
+TEST_CASE("--physical runs the physical variants of the cart pole and guidance", "[programs]") {
+  const fs::path dump = scratch("physical_dump.csv");
+  auto loss = [&](const std::string& program, const std::string& arguments) {
+    const Result r = run(program, arguments + " --samples 4 --dump-gradients " + dump.string());
+    INFO(program << " " << arguments << "\n" << r.output);
+    REQUIRE(r.status == 0);
+    return printed_loss(r.output);
+  };
+  // One pole on a cart of mass M − m is the reference system; two poles feel each other.
+  CHECK(std::abs(loss("cartpole", "--poles 1") - loss("cartpole", "--poles 1 --physical")) < 1e-12);
+  CHECK(std::abs(loss("cartpole", "--poles 2") - loss("cartpole", "--poles 2 --physical")) > 1e-6);
+  // Flocking as intended repels the evaders where the reference attracts them.
+  CHECK(std::abs(loss("guidance", "") - loss("guidance", "--physical")) > 1e-6);
+  const Result toy = run("toy", "--physical");
+  CHECK(toy.status == 2);
+  CHECK(toy.output.find("unknown flag '--physical'") != std::string::npos);
 }
 
 TEST_CASE("bad flags get exit code 2 and a message naming the value", "[programs]") {

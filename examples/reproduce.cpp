@@ -272,6 +272,7 @@ std::optional<Run> parse_description(const std::string& text) {
     run.seed = sbptt::parse_integer("seed", fields["seed"], 0, std::numeric_limits<long>::max());
     run.epochs = sbptt::parse_integer("epochs", fields["epochs"], 0, 1'000'000'000);
     run.samples = sbptt::parse_integer("samples", fields["samples"], 0, 1'000'000'000);
+    run.use_float = fields["args"].ends_with(" --float");  // the one setting kept only in args
     if (run.description() != text) return std::nullopt;
     return run;
   } catch (const sbptt::Error&) {

@@ -3,6 +3,7 @@
 #include <catch2/catch.hpp>
 
 #include <array>
+#include <type_traits>
 
 #include "sbptt/bptt/engine.hpp"
 #include "sbptt/bptt/losses.hpp"
@@ -15,31 +16,42 @@ using sbptt::testing::PolynomialPolicy;
 
 namespace {
 
-using Sim = LinearSystem<double, 1, 1>;
-using Loss = SquaredDistanceLoss<Sim::State>;
+template <class Scalar>
+using Sim = LinearSystem<Scalar, 1, 1>;
+template <class Scalar>
+using Loss = SquaredDistanceLoss<typename Sim<Scalar>::State>;
 
+/// Relative tolerance for checks that are exact up to round-off in `Scalar`.
+template <class Scalar>
+constexpr double round_off = std::is_same_v<Scalar, float> ? 1e-5 : 1e-13;
+
+template <class Scalar = double>
 struct Toy {
-  Sim sim = Sim::scalar(1.0, 1.0);
-  PolynomialPolicy<double> policy{{2, 1}};
-  Engine<Sim, PolynomialPolicy<double>, Loss> engine{sim, policy, objective(), 4};
+  Sim<Scalar> sim = Sim<Scalar>::scalar(1, 1);
+  PolynomialPolicy<Scalar> policy{{2, 1}};
+  Engine<Sim<Scalar>, PolynomialPolicy<Scalar>, Loss<Scalar>> engine{sim, policy, objective(), 4};
 
-  static Objective<Loss> objective() {
-    Sim::State target;
-    target(0) = 2.0;
-    return {Loss{target}, LossTiming::Final, 1.0, 0.0};
+  static Objective<Loss<Scalar>> objective() {
+    typename Sim<Scalar>::State target;
+    target(0) = 2;
+    return {Loss<Scalar>{target}, LossTiming::Final, 1, 0};
   }
 
-  GradientPair<double> at(double theta1, double theta2) {
-    policy.params() << theta1, theta2;
-    return engine.regular_and_modified(Matrix<double>::Constant(1, 1, -0.3));
+  GradientPair<Scalar> at(double theta1, double theta2) {
+    policy.params() << static_cast<Scalar>(theta1), static_cast<Scalar>(theta2);
+    return engine.regular_and_modified(Matrix<Scalar>::Constant(1, 1, Scalar(-0.3)));
   }
 
-  Vector<double> vector_at(double theta1, double theta2, FlowMode mode) {
-    policy.params() << theta1, theta2;
-    engine.forward(Matrix<double>::Constant(1, 1, -0.3));
-    Vector<double> g;
+  Vector<Scalar> vector_at(double theta1, double theta2, FlowMode mode) {
+    policy.params() << static_cast<Scalar>(theta1), static_cast<Scalar>(theta2);
+    engine.forward(Matrix<Scalar>::Constant(1, 1, Scalar(-0.3)));
+    Vector<Scalar> g;
     engine.reverse(mode, g);
     return g;
+  }
+
+  [[nodiscard]] double state(int n) const {
+    return static_cast<double>(engine.trajectory().states[static_cast<std::size_t>(n)](0, 0));
   }
 
   /// ∂v₂/∂θ1 − ∂v₁/∂θ2 of the field of `mode`, by central differences.
@@ -52,6 +64,21 @@ struct Toy {
     return dv2 - dv1;
   }
 };
+
+/// Σ_n r Π_{k>n} κ_k ∂c_n/∂θ with ∂c_n/∂θ = (x_n², x_n): the adjoint r = x_4 − y carried back
+/// by κ_k, the factor of the mode (1 + K_k for Full, K_k for NetworkOnly), K_k = 2θ1 x_k + θ2.
+template <class Scalar, class Kappa>
+std::array<double, 2> carried_sum(const Toy<Scalar>& toy, Kappa kappa) {
+  double carried = toy.state(4) - 2.0;
+  std::array<double, 2> g{0, 0};
+  for (int n = 3; n >= 0; --n) {
+    const double x = toy.state(n);
+    g[0] += carried * x * x;
+    g[1] += carried * x;
+    carried *= kappa(x);
+  }
+  return g;
+}
 
 struct Row {
   std::array<double, 2> theta;
@@ -72,14 +99,15 @@ const Row table[] = {
 
 }  // namespace
 
-TEST_CASE("toy: g_R, g_M and g_C match the table of paper.md §3.1", "[bptt][toy]") {
-  Toy toy;
+TEMPLATE_TEST_CASE("toy: g_R, g_M and g_C match the table of paper.md §3.1", "[bptt][toy]", float,
+                   double) {
+  Toy<TestType> toy;
   for (const Row& row : table) {
     INFO("theta = (" << row.theta[0] << ", " << row.theta[1] << ")");
     const auto pair = toy.at(row.theta[0], row.theta[1]);
-    CHECK(toy.engine.trajectory().states[4](0, 0) == Approx(row.x4).epsilon(1e-5));
+    CHECK(toy.state(4) == Approx(row.x4).epsilon(1e-5));
     CHECK(pair.loss == Approx(row.loss).epsilon(1e-5));
-    Vector<double> combined;
+    Vector<TestType> combined;
     combine(pair.modified, pair.regular, combined);
     for (Index i = 0; i < 2; ++i) {
       const auto k = static_cast<std::size_t>(i);
@@ -91,7 +119,7 @@ TEST_CASE("toy: g_R, g_M and g_C match the table of paper.md §3.1", "[bptt][toy
 }
 
 TEST_CASE("toy: the regular gradient equals finite differences of the loss", "[bptt][toy]") {
-  Toy toy;
+  Toy<> toy;
   const double h = 1e-6;
   for (const Row& row : table) {
     const auto pair = toy.at(row.theta[0], row.theta[1]);
@@ -105,52 +133,51 @@ TEST_CASE("toy: the regular gradient equals finite differences of the loss", "[b
   }
 }
 
-TEST_CASE("toy: with P_x = 1, g_M = (x_4 − y) Σ_n ∂c_n/∂θ and g_S is the last step's term",
-          "[bptt][toy]") {
-  Toy toy;
+TEMPLATE_TEST_CASE("toy: with P_x = 1, g_M = (x_4 − y) Σ_n ∂c_n/∂θ and g_S is the last step's "
+                   "term", "[bptt][toy]", float, double) {
+  Toy<TestType> toy;
   const auto pair = toy.at(0.5, 1.5);
-  const auto& states = toy.engine.trajectory().states;
-  const double residual = states[4](0, 0) - 2.0;
+  const double residual = toy.state(4) - 2.0;
   double sum_x2 = 0, sum_x = 0;
   for (int n = 0; n < 4; ++n) {
-    const double x = states[static_cast<std::size_t>(n)](0, 0);
-    sum_x2 += x * x;
-    sum_x += x;
+    sum_x2 += toy.state(n) * toy.state(n);
+    sum_x += toy.state(n);
   }
-  CHECK(pair.modified(0) == Approx(residual * sum_x2).epsilon(1e-13));
-  CHECK(pair.modified(1) == Approx(residual * sum_x).epsilon(1e-13));
+  const double tolerance = round_off<TestType>;
+  CHECK(pair.modified(0) == Approx(residual * sum_x2).epsilon(tolerance));
+  CHECK(pair.modified(1) == Approx(residual * sum_x).epsilon(tolerance));
 
   const auto stopped = toy.vector_at(0.5, 1.5, FlowMode::Stopped);
-  const double x3 = states[3](0, 0);
-  CHECK(stopped(0) == Approx(residual * x3 * x3).epsilon(1e-13));
-  CHECK(stopped(1) == Approx(residual * x3).epsilon(1e-13));
+  const double x3 = toy.state(3);
+  CHECK(stopped(0) == Approx(residual * x3 * x3).epsilon(tolerance));
+  CHECK(stopped(1) == Approx(residual * x3).epsilon(tolerance));
 }
 
-TEST_CASE("toy: NetworkOnly keeps only the network path, g_N = r Σ_n ∂c_n/∂θ Π_{k>n} K_k",
-          "[bptt][toy]") {
-  // Without the physics term A = 1, the adjoint of x_n is carried back by the controller's
-  // input Jacobian alone: λ_n = K_n μ_n, μ_n = λ_{n+1}, K_n = 2θ1 x_n + θ2.
-  Toy toy;
+TEMPLATE_TEST_CASE("toy: Full carries the adjoint by 1 + K_k, NetworkOnly by K_k alone, "
+                   "g = r Σ_n ∂c_n/∂θ Π_{k>n} κ_k", "[bptt][toy]", float, double) {
+  // The physics Jacobian of P(x, c) = x + c is 1 in both arguments, so the step's total
+  // derivative is 1 + K_k; without the physics term only the controller's K_k remains.
+  Toy<TestType> toy;
   for (const Row& row : table) {
     const double t1 = row.theta[0], t2 = row.theta[1];
-    const auto network = toy.vector_at(t1, t2, FlowMode::NetworkOnly);
-    const auto& states = toy.engine.trajectory().states;
-    double carried = states[4](0, 0) - 2.0;  // r, then r Π_{k>n} K_k
-    double g1 = 0, g2 = 0;
-    for (int n = 3; n >= 0; --n) {
-      const double x = states[static_cast<std::size_t>(n)](0, 0);
-      g1 += carried * x * x;
-      g2 += carried * x;
-      carried *= 2 * t1 * x + t2;
-    }
+    auto input_jacobian = [&](double x) { return 2 * t1 * x + t2; };
     INFO("theta = (" << t1 << ", " << t2 << ")");
-    CHECK(network(0) == Approx(g1).epsilon(1e-13));
-    CHECK(network(1) == Approx(g2).epsilon(1e-13));
+    const auto network = toy.vector_at(t1, t2, FlowMode::NetworkOnly);
+    const auto g_n = carried_sum(toy, input_jacobian);
+    const auto full = toy.vector_at(t1, t2, FlowMode::Full);
+    const auto g_r = carried_sum(toy, [&](double x) { return 1 + input_jacobian(x); });
+    // Full's terms cancel at θ = (2, −1); the margin is round-off of the largest term there.
+    const double margin = round_off<TestType> * 10;
+    for (Index i = 0; i < 2; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      CHECK(network(i) == Approx(g_n[k]).epsilon(round_off<TestType>));
+      CHECK(full(i) == Approx(g_r[k]).epsilon(round_off<TestType>).margin(margin));
+    }
   }
 }
 
 TEST_CASE("toy: the modified field has curl, the gradient field has none", "[bptt][toy]") {
-  Toy toy;
+  Toy<> toy;
   CHECK(toy.curl(0, 0, FlowMode::PhysicsOnly) == Approx(1.242).epsilon(1e-3));
   CHECK(toy.curl(1, 1, FlowMode::PhysicsOnly) == Approx(7.010).epsilon(1e-3));
   CHECK(toy.curl(0.5, 0.5, FlowMode::PhysicsOnly) == Approx(4.794).epsilon(1e-3));
@@ -176,12 +203,12 @@ public:
 TEST_CASE("toy: one forward pass serves both sweeps", "[bptt][toy]") {
   CountingPolicy counting{{2, 1}};
   counting.params() << 1, 1;
-  const Sim sim = Sim::scalar(1.0, 1.0);
-  Engine<Sim, CountingPolicy, Loss> counted{sim, counting, Toy::objective(), 4};
+  const auto sim = Sim<double>::scalar(1.0, 1.0);
+  Engine<Sim<double>, CountingPolicy, Loss<double>> counted{sim, counting, Toy<>::objective(), 4};
   counted.regular_and_modified(Matrix<double>::Constant(1, 1, -0.3));
   CHECK(counting.forward_calls == 4);  // 4 steps, one rollout
 
-  Toy toy;
+  Toy<> toy;
   const auto pair = toy.at(1, 1);
   CHECK(pair.regular.isApprox(toy.vector_at(1, 1, FlowMode::Full), 1e-15));
   CHECK(pair.modified.isApprox(toy.vector_at(1, 1, FlowMode::PhysicsOnly), 1e-15));

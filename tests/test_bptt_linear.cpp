@@ -8,6 +8,7 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <type_traits>
 #include <vector>
 
 #include "sbptt/bptt/engine.hpp"
@@ -104,7 +105,15 @@ TEST_CASE("linear system: Full gradient equals the product-rule closed form", "[
   }
 }
 
-TEST_CASE("linear system: every mode equals its closed form, final and continuous", "[bptt]") {
+/// Relative tolerance and absolute margin of a closed-form comparison in `Scalar`.
+template <class Scalar>
+constexpr double closed_form_tolerance = std::is_same_v<Scalar, float> ? 1e-5 : 1e-12;
+template <class Scalar>
+constexpr double closed_form_margin = std::is_same_v<Scalar, float> ? 1e-6 : 1e-15;
+
+TEMPLATE_TEST_CASE("linear system: every mode equals its closed form, final and continuous",
+                   "[bptt]", float, double) {
+  const double tolerance = closed_form_tolerance<TestType>, margin = closed_form_margin<TestType>;
   for (auto timing : {LossTiming::Final, LossTiming::Continuous}) {
     for (FlowMode mode : all_modes) {
       for (int m : {1, 2, 5, 8}) {
@@ -114,14 +123,16 @@ TEST_CASE("linear system: every mode equals its closed form, final and continuou
         s.weight = timing == LossTiming::Final ? 1.0 : 1.0 / m;
         const std::vector<FlowMode> modes(static_cast<std::size_t>(m), mode);
         INFO("mode " << label(mode) << ", steps " << m);
-        CHECK(engine_gradient<double>(s, mode, 0) ==
-              Approx(closed_form(s, modes, 0)).epsilon(1e-12).margin(1e-15));
+        CHECK(static_cast<double>(engine_gradient<TestType>(s, mode, 0)) ==
+              Approx(closed_form(s, modes, 0)).epsilon(tolerance).margin(margin));
       }
     }
   }
 }
 
-TEST_CASE("linear system: per-step schedules and truncation windows", "[bptt]") {
+TEMPLATE_TEST_CASE("linear system: per-step schedules and truncation windows", "[bptt]", float,
+                   double) {
+  const double tolerance = closed_form_tolerance<TestType>, margin = closed_form_margin<TestType>;
   Rng rng(7);
   for (int trial = 0; trial < 40; ++trial) {
     Setup s;
@@ -133,8 +144,8 @@ TEST_CASE("linear system: per-step schedules and truncation windows", "[bptt]") 
       modes.push_back(all_modes[static_cast<std::size_t>(rng.uniform(0, 4))]);
     const int truncation = trial % 4;  // 0 = none
     INFO("trial " << trial << ", truncation " << truncation);
-    CHECK(engine_gradient<double>(s, FlowSchedule(modes), truncation) ==
-          Approx(closed_form(s, modes, truncation)).epsilon(1e-12).margin(1e-15));
+    CHECK(static_cast<double>(engine_gradient<TestType>(s, FlowSchedule(modes), truncation)) ==
+          Approx(closed_form(s, modes, truncation)).epsilon(tolerance).margin(margin));
   }
 }
 
@@ -177,17 +188,6 @@ TEST_CASE("linear system: Full gradient with a control regulariser equals finite
   const std::vector<FlowMode> modified(static_cast<std::size_t>(s.steps), FlowMode::PhysicsOnly);
   CHECK(engine_gradient<double>(s, FlowMode::PhysicsOnly, 0, nullptr, rc) ==
         Approx(closed_form(s, modified, 0) + direct).epsilon(1e-12));
-}
-
-TEMPLATE_TEST_CASE("linear system: float and double agree with the closed forms", "[bptt]",
-                   float, double) {
-  const double tolerance = std::is_same_v<TestType, float> ? 1e-5 : 1e-12;
-  for (FlowMode mode : all_modes) {
-    Setup s;
-    const std::vector<FlowMode> modes(static_cast<std::size_t>(s.steps), mode);
-    CHECK(static_cast<double>(engine_gradient<TestType>(s, mode, 0)) ==
-          Approx(closed_form(s, modes, 0)).epsilon(tolerance).margin(tolerance));
-  }
 }
 
 TEST_CASE("engine diagnostics: adjoint norms follow |κ|^(m-n), and non-finite values are located",

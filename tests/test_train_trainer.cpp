@@ -112,14 +112,15 @@ TEST_CASE("trainer: a non-finite update leaves the last finite parameters", "[tr
     Trainer trainer(sim, policy, to_origin(LossTiming::Final), 10,
                     Adam<double>(AdamOptions<double>{0.01}), options);
     trainer.train_epoch(train, train);
-    REQUIRE(trainer.last_non_finite());
-    CHECK(trainer.last_non_finite()->batch == 0);
-    CHECK(trainer.last_non_finite()->where.quantity == Quantity::State);
-    CHECK(std::isfinite(policy.params()(0)));
-    CHECK(trainer.stopped() == (policy_kind == NonFinitePolicy::Stop));
-    // Stop leaves θ as it was; SkipBatch went on with the finite second batch.
-    if (policy_kind == NonFinitePolicy::Stop) CHECK(policy.params()(0) == 0.01);
-    else CHECK(policy.params()(0) != 0.01);
+    REQUIRE_FALSE(trainer.non_finite_events().empty());
+    CHECK(trainer.non_finite_events().front().batch == 0);
+    CHECK(trainer.non_finite_events().front().where.quantity == Quantity::State);
+    // Stop ends the epoch at batch 0; SkipBatch steps on batch 1, but the set still overflows
+    // in both evaluations, so it stops too. Both keep θ as the epoch found it.
+    CHECK(trainer.stopped());
+    CHECK(trainer.non_finite_events().size() ==
+          (policy_kind == NonFinitePolicy::Stop ? 1u : 3u));
+    CHECK(policy.params()(0) == 0.01);
   }
 }
 
@@ -177,4 +178,159 @@ TEST_CASE("trainer: C stays finite when g_R overflows; R stops and keeps its par
       CHECK(policy.params() == start);
     }
   }
+}
+
+TEST_CASE("trainer: a loss that overflows from finite states is reported as the loss",
+          "[train]") {
+  // x' = x with c = 0: the states stay at their start, but ½ x² of 1e200 overflows.
+  const Sim sim = Sim::scalar(1.0, 1.0);
+  Policy policy({1});
+  TrainerOptions options;
+  options.method = Method::Regular;
+  options.batch = 2;
+  Trainer trainer(sim, policy, to_origin(LossTiming::Final), 3,
+                  Adam<double>(AdamOptions<double>{0.01}), options);
+  trainer.train_epoch(samples({1.0, 1e200}), samples({1.0}));
+  REQUIRE(trainer.last_non_finite());
+  const NonFiniteEvent& event = *trainer.last_non_finite();
+  CHECK(event.where.quantity == Quantity::Loss);
+  CHECK(event.where.step == 3);
+  CHECK(event.where.sample == 1);
+  CHECK(event.where.value == std::numeric_limits<double>::infinity());
+  CHECK(event.phase == Phase::Update);
+  CHECK(trainer.stopped());
+  CHECK(policy.params()(0) == 0.0);
+}
+
+namespace {
+
+/// Fault injection: the parameter gradient of θ2 is NaN while states and adjoints stay finite.
+struct NanGradientPolicy : Policy {
+  NanGradientPolicy() : Policy({1, 0}) {}
+  void backward(const Workspace& ws, const Matrix<double>& dy, Vector<double>& grad,
+                Matrix<double>* dx) const {
+    Policy::backward(ws, dy, grad, dx);
+    grad(1) = std::numeric_limits<double>::quiet_NaN();
+  }
+};
+
+/// Adam whose `fail_at`-th step (counted in a counter the trainer's backup cannot rewind)
+/// leaves θ1 infinite after taking its step, as an overflowing update would.
+struct OverflowingAdam : Adam<double> {
+  OverflowingAdam(int* calls, int fail_at)
+      : Adam<double>(AdamOptions<double>{0.01}), calls_(calls), fail_at_(fail_at) {}
+  void step(Vector<double>& params, const Vector<double>& grad) {
+    Adam<double>::step(params, grad);
+    if (++*calls_ == fail_at_) params(0) = std::numeric_limits<double>::infinity();
+  }
+  int* calls_;
+  int fail_at_;
+};
+
+}  // namespace
+
+TEST_CASE("trainer: a non-finite parameter gradient is reported as the gradient", "[train]") {
+  const Sim sim = Sim::scalar(0.9, 0.5);
+  NanGradientPolicy policy;
+  policy.params() << 0.2, 0.1;
+  const Vector<double> start = policy.params();
+  TrainerOptions options;
+  options.method = Method::Modified;
+  options.batch = 2;
+  Trainer trainer(sim, policy, to_origin(LossTiming::Continuous), 5,
+                  Adam<double>(AdamOptions<double>{0.01}), options);
+  trainer.train_epoch(samples({0.5, -1.0}), samples({1.0}));
+  REQUIRE(trainer.last_non_finite());
+  const NonFinite& where = trainer.last_non_finite()->where;
+  CHECK(where.quantity == Quantity::Gradient);
+  CHECK(where.sample == 1);  // the parameter index
+  CHECK(std::isnan(where.value));
+  CHECK(policy.params() == start);
+}
+
+TEST_CASE("trainer: a skipped batch leaves no trace in the parameters or in Adam's m, v, t",
+          "[train]") {
+  // The second of three steps overflows θ after Adam has updated its moments; skipping it
+  // must give exactly the run that never saw that batch.
+  const Sim sim = Sim::scalar(0.9, 0.5);
+  int calls = 0, unused = 0;
+  Policy skipping({1}), reference({1});
+  skipping.params()(0) = reference.params()(0) = 0.3;
+  TrainerOptions options;
+  options.method = Method::Regular;
+  options.batch = 1;
+  options.on_non_finite = NonFinitePolicy::SkipBatch;
+  Trainer with_skip(sim, skipping, to_origin(LossTiming::Final), 3, OverflowingAdam(&calls, 2),
+                    options);
+  Trainer without(sim, reference, to_origin(LossTiming::Final), 3, OverflowingAdam(&unused, 0),
+                  options);
+  const EpochRecord record = with_skip.train_epoch(samples({0.5, -1.0, 1.5}), samples({1.0}));
+  without.train_epoch(samples({0.5, 1.5}), samples({1.0}));
+  REQUIRE(with_skip.last_non_finite());
+  CHECK(with_skip.last_non_finite()->where.quantity == Quantity::Gradient);
+  CHECK(with_skip.last_non_finite()->where.sample == 0);
+  CHECK(with_skip.last_non_finite()->batch == 1);
+  CHECK_FALSE(with_skip.stopped());
+  CHECK(with_skip.non_finite_events().size() == 1);
+  CHECK(with_skip.optimizer().iterations() == 2);
+  CHECK(skipping.params()(0) == reference.params()(0));
+  CHECK(std::isfinite(record.test_loss));
+}
+
+TEST_CASE("trainer: a non-finite evaluation stops training and rolls the epoch back",
+          "[train]") {
+  // From 1e306 the ρ ≈ 3 system overflows in the evaluation of the test set, while the
+  // training batches start from 1 and stay finite.
+  const Sim sim = Sim::scalar(3.0, 1.0);
+  for (auto policy_kind : {NonFinitePolicy::Stop, NonFinitePolicy::SkipBatch}) {
+    Policy policy({1});
+    policy.params()(0) = 0.01;
+    TrainerOptions options;
+    options.method = Method::Regular;
+    options.batch = 1;
+    options.on_non_finite = policy_kind;
+    Trainer trainer(sim, policy, to_origin(LossTiming::Final), 10,
+                    Adam<double>(AdamOptions<double>{0.01}), options);
+    trainer.train_epoch(samples({1.0, 0.5}), samples({2.0, 1e306}));
+    REQUIRE(trainer.last_non_finite());
+    const NonFiniteEvent& event = *trainer.last_non_finite();
+    CHECK(event.phase == Phase::TestEvaluation);
+    CHECK(event.where.quantity == Quantity::State);
+    CHECK(event.where.sample == 1);
+    CHECK(trainer.stopped());
+    // Back to the parameters and optimizer state before the epoch: the last ones evaluated.
+    CHECK(policy.params()(0) == 0.01);
+    CHECK(trainer.optimizer().iterations() == 0);
+  }
+}
+
+TEST_CASE("trainer: Stop mid-epoch returns to the parameters the last epoch evaluated",
+          "[train]") {
+  const Sim sim = Sim::scalar(3.0, 1.0);
+  Policy policy({1});
+  policy.params()(0) = 0.01;
+  TrainerOptions options;
+  options.method = Method::Regular;
+  options.batch = 1;
+  Trainer trainer(sim, policy, to_origin(LossTiming::Final), 10,
+                  Adam<double>(AdamOptions<double>{0.01}), options);
+  trainer.train_epoch(samples({1.0, 1e306}), samples({1.0}));
+  REQUIRE(trainer.stopped());
+  CHECK(trainer.last_non_finite()->batch == 1);
+  CHECK(policy.params()(0) == 0.01);  // batch 0's step is undone: it was never evaluated
+  CHECK(trainer.optimizer().iterations() == 0);
+}
+
+TEST_CASE("trainer: skip-batch stops when no batch of an epoch was finite", "[train]") {
+  const Sim sim = Sim::scalar(3.0, 1.0);
+  Policy policy({1});
+  TrainerOptions options;
+  options.method = Method::Regular;
+  options.batch = 1;
+  options.on_non_finite = NonFinitePolicy::SkipBatch;
+  Trainer trainer(sim, policy, to_origin(LossTiming::Final), 10,
+                  Adam<double>(AdamOptions<double>{0.01}), options);
+  trainer.train_epoch(samples({1e306, -1e306}), samples({1.0}));
+  CHECK(trainer.non_finite_events().size() == 2);
+  CHECK(trainer.stopped());
 }

@@ -6,15 +6,20 @@
 /// - R, M, S, N: one forward pass, one sweep of that mode, clip, optimizer step;
 /// - C: one forward pass, the Full and PhysicsOnly sweeps over it, combine, clip, step.
 ///
-/// Non-finite values: the batch's forward pass, its sweep(s) and the stepped parameters are
-/// checked. In C mode a non-finite g_R is not an error: its NaN components fail the sign test
-/// and drop out, as in the reference. On a non-finite value the parameters are left as they
-/// were before the batch, and the event is recorded; `NonFinitePolicy` chooses whether the
-/// epoch ends there (Stop) or goes on with the next batch (SkipBatch).
+/// Non-finite values: the batch's forward pass, its sweep(s), the stepped parameters and the
+/// epoch's evaluation of the train and test sets are checked. In C mode a non-finite g_R is
+/// not an error: its NaN components fail the sign test and drop out, as in the reference.
+/// A non-finite batch leaves the parameters and the optimizer state (Adam's m, v, t) as they
+/// were before it, and is recorded; `NonFinitePolicy` chooses whether training stops there
+/// (Stop) or goes on with the next batch (SkipBatch). Training also stops, whatever the
+/// policy, when the evaluation is non-finite or when no batch of the epoch was finite.
+/// A stop rolls parameters and optimizer back to the start of the epoch: the last parameters
+/// whose evaluation was finite (a mid-epoch state was never evaluated, so it is not kept).
 #include <chrono>
 #include <cmath>
 #include <numeric>
 #include <optional>
+#include <string_view>
 #include <vector>
 
 #include "sbptt/bptt/engine.hpp"
@@ -45,11 +50,24 @@ struct TrainerOptions {
   Index threads = 1;
 };
 
+/// The part of an epoch that met a non-finite value.
+enum class Phase { Update, TrainEvaluation, TestEvaluation };
+
+[[nodiscard]] constexpr std::string_view to_string(Phase phase) {
+  switch (phase) {
+    case Phase::Update: return "update";
+    case Phase::TrainEvaluation: return "train-set evaluation";
+    case Phase::TestEvaluation: return "test-set evaluation";
+  }
+  return "?";
+}
+
 /// Where training met a non-finite value.
 struct NonFiniteEvent {
   long epoch = 0;
-  Index batch = 0;  ///< index of the mini-batch within the epoch
+  Index batch = 0;  ///< index of the mini-batch within the epoch; -1 in an evaluation
   NonFinite where;  ///< quantity, step and sample (for a gradient: the parameter index)
+  Phase phase = Phase::Update;
 };
 
 template <class Sim, class Ctrl, class Loss, class Optimizer>
@@ -64,6 +82,8 @@ public:
         options_(options),
         clipped_(optimizer, options.clip, static_cast<Scalar>(options.clip_threshold)),
         combined_(std::move(optimizer), options.clip, static_cast<Scalar>(options.clip_threshold)),
+        saved_optimizer_(combined_.inner()),
+        epoch_optimizer_(combined_.inner()),
         shuffle_rng_(options.shuffle_seed) {
     detail::require(options.batch > 0, "Trainer: batch = ", options.batch,
                     "; expected at least 1 sample per batch");
@@ -75,9 +95,15 @@ public:
   }
 
   /// One epoch over `train` (state_dim × N_train), then the evaluation of `train` and `test`.
+  /// When `stopped()` afterwards, the record is not meaningful and the parameters are those
+  /// from before the epoch.
   EpochRecord train_epoch(const Matrix<Scalar>& train, const Matrix<Scalar>& test) {
     EpochRecord record;
     record.epoch = ++epoch_;
+    events_.clear();
+    stopped_ = false;
+    epoch_params_ = controller_.params();
+    epoch_optimizer_ = optimizer();
     order_.resize(static_cast<std::size_t>(train.cols()));
     std::iota(order_.begin(), order_.end(), Index{0});
     if (options_.shuffle) shuffle(order_);
@@ -90,7 +116,7 @@ public:
       gather(train, k, batch_states_);
       const std::optional<NonFinite> bad = update(batch_states_);
       if (bad) {
-        last_non_finite_ = NonFiniteEvent{record.epoch, k, *bad};
+        note(NonFiniteEvent{record.epoch, k, *bad, Phase::Update});
         if (options_.on_non_finite == NonFinitePolicy::Stop) break;
         continue;
       }
@@ -102,26 +128,28 @@ public:
     }
     record.seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    const double per = done > 0 ? 1.0 / static_cast<double>(done) : std::nan("");
+    if (stopped_ || done == 0) return roll_back(record);
+    const double per = 1.0 / static_cast<double>(done);
     record.batch_loss = loss_sum * per;
     record.update_norm2 = norm_sum * per;
     if (options_.method == Method::Combined) {
       record.cos_m_r = cos_sum * per;
       record.agree_fraction = agree_sum * per;
     }
-    record.train_loss = static_cast<double>(engine_.evaluate(train));
-    record.test_loss = static_cast<double>(engine_.evaluate(test));
-    return record;
+    record.train_loss = evaluate(train, record.epoch, Phase::TrainEvaluation);
+    record.test_loss = evaluate(test, record.epoch, Phase::TestEvaluation);
+    return stopped_ ? roll_back(record) : record;
   }
 
-  /// The last non-finite event, if any batch produced one.
+  /// The last non-finite event of any epoch so far, if there was one.
   [[nodiscard]] const std::optional<NonFiniteEvent>& last_non_finite() const {
     return last_non_finite_;
   }
-  /// True when the policy is Stop and a non-finite value ended the last epoch early.
-  [[nodiscard]] bool stopped() const {
-    return last_non_finite_ && options_.on_non_finite == NonFinitePolicy::Stop;
-  }
+  /// Every non-finite event of the last epoch, in order (the skipped batches, with SkipBatch).
+  [[nodiscard]] const std::vector<NonFiniteEvent>& non_finite_events() const { return events_; }
+  /// True when the last epoch ended training (see the file comment): its record is void and
+  /// the parameters are those from before it.
+  [[nodiscard]] bool stopped() const { return stopped_; }
   [[nodiscard]] Engine<Sim, Ctrl, Loss>& engine() { return engine_; }
   /// The optimizer that takes the steps of the configured method (e.g. to change its rate).
   [[nodiscard]] Optimizer& optimizer() {
@@ -145,10 +173,32 @@ private:
     }
   }
 
+  void note(const NonFiniteEvent& event) {
+    events_.push_back(event);
+    last_non_finite_ = event;
+    if (event.phase != Phase::Update || options_.on_non_finite == NonFinitePolicy::Stop)
+      stopped_ = true;
+  }
+
+  EpochRecord& roll_back(EpochRecord& record) {
+    stopped_ = true;
+    controller_.params() = epoch_params_;
+    optimizer() = epoch_optimizer_;
+    return record;
+  }
+
+  double evaluate(const Matrix<Scalar>& set, long epoch, Phase phase) {
+    const auto loss = static_cast<double>(engine_.evaluate(set));
+    if (engine_.forward_non_finite())
+      note(NonFiniteEvent{epoch, -1, *engine_.forward_non_finite(), phase});
+    return loss;
+  }
+
   /// One optimizer step on one mini-batch; returns the first non-finite value, if any, in
-  /// which case the parameters are unchanged.
+  /// which case the parameters and the optimizer state are unchanged.
   std::optional<NonFinite> update(const Matrix<Scalar>& states) {
     backup_ = controller_.params();
+    saved_optimizer_ = optimizer();
     std::optional<NonFinite> bad;
     if (options_.method == Method::Combined) {
       engine_.regular_and_modified(states, pair_, options_.truncation);
@@ -180,7 +230,10 @@ private:
         }
       }
     }
-    if (bad) controller_.params() = backup_;
+    if (bad) {
+      controller_.params() = backup_;
+      optimizer() = saved_optimizer_;
+    }
     return bad;
   }
 
@@ -189,16 +242,19 @@ private:
   TrainerOptions options_;
   ClippedUpdate<Optimizer> clipped_;
   CombinedUpdate<Optimizer> combined_;
+  Optimizer saved_optimizer_, epoch_optimizer_;  ///< before the batch, before the epoch
   Rng shuffle_rng_;
   long epoch_ = 0;
   std::vector<Index> order_;
   Matrix<Scalar> batch_states_;
-  Vector<Scalar> gradient_, backup_;
+  Vector<Scalar> gradient_, backup_, epoch_params_;
   GradientPair<Scalar> pair_;
   Scalar last_loss_ = 0;
   double last_norm2_ = 0;
   ComparisonDiagnostics last_comparison_;
   std::optional<NonFiniteEvent> last_non_finite_;
+  std::vector<NonFiniteEvent> events_;
+  bool stopped_ = false;
 };
 
 }  // namespace sbptt

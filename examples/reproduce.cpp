@@ -6,10 +6,10 @@
 //   reproduce --profile paper --seeds 3 --jobs 8    # the published settings
 //   reproduce --profile paper --tasks cartpole --complexities 4 --methods R,C --dry-run
 //
-// Resume contract: a child writes runs/<name>.partial.csv; when it exits 0 (or 3: a non-finite
-// value stopped training, a result in itself) the runner renames that file to runs/<name>.csv.
-// On start every <name>.csv is kept and skipped, every .partial.csv is discarded and its run
-// redone. Children die with the runner (PR_SET_PDEATHSIG), even when it is SIGKILLed.
+// Resume contract: a child writes runs/<name>.partial.csv and its output goes to
+// runs/<name>.partial.log; when it exits 0 (or 3: a non-finite value stopped training, a result
+// in itself) the runner renames them to runs/<name>.log and runs/<name>.csv. On start every
+// <name>.csv is kept and skipped, every .partial.* is discarded and its run redone. Children die with the runner (PR_SET_PDEATHSIG), even when it is SIGKILLed.
 //
 // Exit codes: 0 every planned run finished, 1 a run failed or an error, 2 bad flags,
 // 130 interrupted (SIGINT/SIGTERM/SIGHUP; the finished runs are kept).
@@ -34,6 +34,7 @@
 #include <iostream>
 #include <map>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -287,7 +288,7 @@ std::optional<Run> parse_description(const std::string& text) {
 constexpr const char* accepted_flags =
     "--profile quick|paper, --tasks cartpole,guidance,quantum, --methods R,M,C,S,N, "
     "--clips none,value,norm, --complexities LIST, --seeds N, --epochs N, --samples N, "
-    "--float, --jobs N, --out DIR, --bin-dir DIR, --dry-run, --no-plot, --python EXE, "
+    "--float, --jobs N, --threads N, --out DIR, --bin-dir DIR, --dry-run, --no-plot, --python EXE, "
     "--plot-script FILE, --help";
 
 struct Options {
@@ -298,6 +299,7 @@ struct Options {
   std::optional<std::vector<double>> complexities;
   std::optional<long> seeds, epochs, samples;
   long jobs = 2;
+  long threads = 1;  ///< per task program; not part of a run's identity (see command_line)
   std::string out, bin_dir, python, plot_script;
   bool dry_run = false, plot = true, help = false, use_float = false;
 };
@@ -359,6 +361,7 @@ Options parse_options(int argc, const char* const* argv) {
     else if (f == "--epochs") o.epochs = sbptt::parse_integer(f, args.value(), 1, many);
     else if (f == "--samples") o.samples = sbptt::parse_integer(f, args.value(), 1, many);
     else if (f == "--jobs") o.jobs = sbptt::parse_integer(f, args.value(), 1, 256);
+    else if (f == "--threads") o.threads = sbptt::parse_integer(f, args.value(), 1, 256);
     else if (f == "--out") o.out = non_empty(f, args.value());
     else if (f == "--bin-dir") o.bin_dir = non_empty(f, args.value());
     else if (f == "--python") o.python = non_empty(f, args.value());
@@ -423,6 +426,23 @@ std::vector<Run> make_plan(const Options& o) {
                          [](const Run& a, const Run& b) { return a.name() == b.name(); }),
              plan.end());
   return plan;
+}
+
+/// runs/<name><suffix>: the files of one run.
+fs::path run_file(const fs::path& runs, const Run& run, const char* suffix) {
+  return runs / (run.name() + suffix);
+}
+
+/// The task program's command line. --threads is passed here and kept out of Run::flags(),
+/// which make the run's .run file: results are bitwise identical for any thread count
+/// (docs/benchmarks.md), so a sweep resumed with another --threads keeps its finished runs.
+std::vector<std::string> command_line(const Run& run, const fs::path& bin_dir,
+                                      const fs::path& runs, long threads) {
+  std::vector<std::string> argv{(bin_dir / run.info().name).string()};
+  for (const auto& f : run.flags()) argv.push_back(f);
+  argv.insert(argv.end(), {"--threads", std::to_string(threads), "--csv",
+                           run_file(runs, run, ".partial.csv").string()});
+  return argv;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -663,15 +683,22 @@ public:
     double estimate = 0;
     for (const Run* run : todo) estimate += run->estimated_seconds();
     std::printf("reproduce: profile %s, %zu runs planned (%zu finished, %zu to do), --jobs %ld, "
-                "estimated %s of compute, about %s wall time\n",
+                "--threads %ld, estimated %s of compute, about %s wall time\n",
                 options_.profile.c_str(), plan_.size(), plan_.size() - todo.size(), todo.size(),
-                options_.jobs, format_duration(estimate).c_str(),
+                options_.jobs, options_.threads, format_duration(estimate).c_str(),
                 format_duration(estimate / static_cast<double>(std::min<std::size_t>(
                                                static_cast<std::size_t>(options_.jobs),
                                                std::max<std::size_t>(todo.size(), 1))))
                     .c_str());
     std::printf("reproduce: output in %s (runs/, summary.csv, plots/)\n", out_.c_str());
     std::fflush(stdout);
+    // More threads than cores make the runs wait for each other; the spin-then-sleep pool
+    // copes, but the seconds columns then measure contention, not the method.
+    const unsigned cores = std::thread::hardware_concurrency();
+    if (cores > 0 && options_.jobs * options_.threads > static_cast<long>(cores))
+      std::cerr << "reproduce: note: --jobs " << options_.jobs << " x --threads "
+                << options_.threads << " threads on " << cores
+                << " cores; the timing columns will include the contention\n";
     // Longest first: the best simple schedule for parallel jobs of unequal length.
     std::stable_sort(todo.begin(), todo.end(), [](const Run* a, const Run* b) {
       return a->estimated_seconds() > b->estimated_seconds();
@@ -714,25 +741,26 @@ private:
                                   "' (it holds ", path.string(), ")"));
   }
 
-  /// Partial logs of runs a killed sweep left behind, and temporaries of interrupted atomic
-  /// writes: their runs are redone.
+  /// Partial training logs and outputs of runs a killed sweep left behind (or of failed runs),
+  /// and temporaries of interrupted atomic writes: their runs are redone.
   void discard_partial_runs() {
-    std::size_t discarded = 0;
+    std::set<std::string> discarded;  // a run killed before its first epoch has no .partial.csv
     for (const auto& entry : fs::directory_iterator(runs_)) {
       const std::string file = entry.path().filename().string();
-      if (file.find(".partial.csv") != std::string::npos || file.find(".tmp.") != std::string::npos) {
-        if (file.size() > 12 && file.compare(file.size() - 12, 12, ".partial.csv") == 0)
-          ++discarded;
-        fs::remove(entry.path());
-      }
+      const auto partial = file.find(".partial.");
+      if (partial == std::string::npos && file.find(".tmp.") == std::string::npos) continue;
+      if (partial != std::string::npos && (file.ends_with(".partial.csv") ||
+                                           file.ends_with(".partial.log")))
+        discarded.insert(file.substr(0, partial));
+      fs::remove(entry.path());
     }
     for (const auto& entry : fs::directory_iterator(out_))
       if (entry.path().filename().string().rfind("summary.csv.tmp.", 0) == 0)
         fs::remove(entry.path());
-    if (discarded > 0)
+    if (!discarded.empty())
       std::printf("reproduce: discarded %zu unfinished run(s) of an interrupted sweep; they are "
                   "redone\n",
-                  discarded);
+                  discarded.size());
   }
 
   /// Every finished run in the out dir (also of earlier sweeps with other filters).
@@ -769,13 +797,11 @@ private:
 
   bool start(const Run& run) {
     const std::string name = run.name();
-    const fs::path partial = runs_ / (name + ".partial.csv");
-    fs::remove(partial);
-    sbptt::write_file_atomically((runs_ / (name + ".run")).string(), run.description());
-    std::vector<std::string> argv{(bin_dir_ / run.info().name).string()};
-    for (const auto& f : run.flags()) argv.push_back(f);
-    argv.insert(argv.end(), {"--csv", partial.string()});
-    const fs::path log = runs_ / (name + ".log");
+    fs::remove(run_file(runs_, run, ".partial.csv"));
+    sbptt::write_file_atomically(run_file(runs_, run, ".run").string(), run.description());
+    const auto argv = command_line(run, bin_dir_, runs_, options_.threads);
+    // Like the CSV, the log gets its final name only when the run has finished.
+    const fs::path log = run_file(runs_, run, ".partial.log");
     const int log_fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (log_fd < 0) throw sbptt::IoError(concat("cannot write '", log.string(), "'"));
     std::string command = "#";
@@ -796,22 +822,29 @@ private:
   void finished(const Child& child, int status) {
     const Run& run = *child.run;
     const std::string name = run.name();
-    const fs::path partial = runs_ / (name + ".partial.csv");
-    const fs::path csv = runs_ / (name + ".csv");
-    const fs::path log = runs_ / (name + ".log");
+    const fs::path partial = run_file(runs_, run, ".partial.csv");
+    const fs::path csv = run_file(runs_, run, ".csv");
+    const fs::path partial_log = run_file(runs_, run, ".partial.log");
     {  // for retuning the profiles: the whole run, start-up and evaluation included
       const double wall =
           std::chrono::duration<double>(std::chrono::steady_clock::now() - child.started).count();
-      std::ofstream(log, std::ios::app) << "# reproduce: " << describe_status(status) << " after "
-                                        << wall << " s wall time\n";
+      std::ofstream(partial_log, std::ios::app) << "# reproduce: " << describe_status(status)
+                                                << " after " << wall << " s wall time\n";
     }
     std::string failure;
     if (WIFEXITED(status) && (WEXITSTATUS(status) == 0 || WEXITSTATUS(status) == 3)) {
-      if (fs::exists(partial)) {
-        fs::rename(partial, csv);  // atomic: the run is finished exactly when this happens
-      } else if (WEXITSTATUS(status) == 3) {
-        // Stopped in the first epoch: no row was logged, which is the result.
-        sbptt::write_file_atomically(csv.string(), std::string(sbptt::TrainingLog::header) + "\n");
+      const bool logged = fs::exists(partial);
+      if (logged || WEXITSTATUS(status) == 3) {
+        // The log first: a crash between the two renames leaves a run to redo, never a
+        // finished run whose log the next sweep would discard as partial.
+        fs::rename(partial_log, run_file(runs_, run, ".log"));
+        if (logged) {
+          fs::rename(partial, csv);  // atomic: the run is finished exactly when this happens
+        } else {
+          // Stopped in the first epoch: no row was logged, which is the result.
+          sbptt::write_file_atomically(csv.string(),
+                                       std::string(sbptt::TrainingLog::header) + "\n");
+        }
       } else {
         failure = concat("exited 0 but wrote no training log ", partial.string());
       }
@@ -833,8 +866,8 @@ private:
       if (interrupted) return;  // we stopped it
       failure = concat("killed by signal ", WTERMSIG(status), " (", strsignal(WTERMSIG(status)), ")");
     }
-    failures_.push_back(concat("  ", name, ": ", failure, "; log ", log.string(), ":\n",
-                               tail_of(log, 3)));
+    failures_.push_back(concat("  ", name, ": ", failure, "; log ", partial_log.string(),
+                               ":\n", tail_of(partial_log, 3)));
     if (!tty_) std::cerr << "reproduce: " << name << " failed: " << failure << "\n";
   }
 
@@ -981,13 +1014,14 @@ void plot(const Options& o, const fs::path& own_dir) {
 void print_plan(const Options& o, const std::vector<Run>& plan, const fs::path& bin_dir) {
   double estimate = 0;
   std::size_t todo = 0;
+  const fs::path runs = fs::path(o.out) / "runs";
   for (const auto& run : plan) {
-    std::string command = (bin_dir / run.info().name).string();
-    for (const auto& f : run.flags()) command += " " + f;
-    const fs::path runs = fs::path(o.out) / "runs";
-    const bool finished = fs::exists(runs / (run.name() + ".csv"));
-    std::printf("%-34s %s --csv %s%s\n", run.name().c_str(), command.c_str(),
-                (runs / (run.name() + ".partial.csv")).c_str(), finished ? "  (finished)" : "");
+    std::string command;
+    for (const auto& a : command_line(run, bin_dir, runs, o.threads))
+      command += (command.empty() ? "" : " ") + a;
+    const bool finished = fs::exists(run_file(runs, run, ".csv"));
+    std::printf("%-34s %s%s\n", run.name().c_str(), command.c_str(),
+                finished ? "  (finished)" : "");
     if (!finished) estimate += run.estimated_seconds(), ++todo;
   }
   std::printf("%zu runs planned (profile %s, %zu finished, %zu to do), estimated %s of "

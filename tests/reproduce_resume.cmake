@@ -5,13 +5,16 @@
 # Against fake task programs (a shell script that keeps the task-program contract: the flags,
 # the training log rewritten atomically after every epoch, exit 0 or 3) it
 #   1. runs a 12-run grid uninterrupted (sweep A);
-#   2. runs the same grid in another directory (sweep B), SIGKILLs the runner while runs are
-#      both finished and under way, and checks that no child survives it;
-#   3. restarts sweep B and checks that (a) no finished run was redone (every one was started
-#      once, its CSV keeps inode and mtime) while the interrupted ones were redone, and (b)
-#      B's summary.csv equals A's in every column except the two timing ones.
-# Then, when the real task programs sit beside the runner, a 3-run sweep with them (their
-# flags and logs fit the runner), and plots when python3 with matplotlib is there.
+#   2. runs the same grid in another directory (sweep B, --threads 2), SIGKILLs the runner while
+#      runs are both finished and under way, and checks that no child survives it and that only
+#      the finished runs have a <name>.log, the interrupted ones only a <name>.partial.log;
+#   3. restarts sweep B with --threads 3 and checks that (a) no finished run was redone (every
+#      one was started once, its CSV keeps inode and mtime) while the interrupted ones were
+#      redone, (b) B's summary.csv equals A's in every column except the two timing ones, and
+#      (c) no partial file remains and every finished run has its complete log;
+# and that each program got the --threads of its sweep (1 by default). Then, when the real task
+# programs sit beside the runner, a 3-run sweep with them (their flags and logs fit the runner)
+# resumed with another --threads, and plots when python3 with matplotlib is there.
 cmake_minimum_required(VERSION 3.20)
 foreach(var REPRODUCE WORK_DIR)
   if(NOT DEFINED ${var})
@@ -28,10 +31,11 @@ file(MAKE_DIRECTORY "${WORK_DIR}/fake")
 # seed 43 "diverges": two epochs, exit 3. It notes every start and its pid in the out dir.
 set(fake [=[#!/bin/sh
 task=$(basename "$0")
-csv= epochs=1 seed=0 method= clip= complexity=
+csv= epochs=1 seed=0 method= clip= complexity= threads=1
 while [ $# -gt 0 ]; do
   case "$1" in
     --csv) csv=$2; shift 2 ;;
+    --threads) threads=$2; shift 2 ;;
     --epochs) epochs=$2; shift 2 ;;
     --seed) seed=$2; shift 2 ;;
     --method) method=$2; shift 2 ;;
@@ -45,6 +49,7 @@ out=$(dirname "$(dirname "$csv")")
 name=$(basename "$csv" .partial.csv)
 echo "$$" >> "$out/fake_pids"
 echo "$name" >> "$out/fake_invocations"
+echo "$name $threads" >> "$out/fake_threads"
 stop=$epochs
 [ "$method" = R ] && [ "$seed" = 43 ] && stop=2
 echo "epoch,batch_loss,train_loss,test_loss,update_norm2,cos_m_r,agree_fraction,seconds" > "$csv.rows"
@@ -117,6 +122,14 @@ check("unknown flag: exit 2 naming it" rc EQUAL 2 AND err MATCHES "--bogus")
 execute_process(COMMAND "${REPRODUCE}" --jobs 0 RESULT_VARIABLE rc ERROR_VARIABLE err
                 OUTPUT_QUIET)
 check("--jobs 0: exit 2 naming it" rc EQUAL 2 AND err MATCHES "--jobs")
+execute_process(COMMAND "${REPRODUCE}" --threads 0 RESULT_VARIABLE rc ERROR_VARIABLE err
+                OUTPUT_QUIET)
+check("--threads 0: exit 2 naming the value" rc EQUAL 2 AND err MATCHES "--threads 0")
+execute_process(COMMAND "${REPRODUCE}" --tasks cartpole --complexities 4 --methods C --seeds 1
+                --threads 4 --dry-run --out "${WORK_DIR}/dry" RESULT_VARIABLE rc
+                OUTPUT_VARIABLE out ERROR_QUIET)
+check("--dry-run shows --threads 4 on the command line" rc EQUAL 0 AND out MATCHES
+      "cartpole --poles 4 [^\n]* --threads 4 --csv ")
 
 # --- A: uninterrupted ------------------------------------------------------------------------
 execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${A}" RESULT_VARIABLE rc
@@ -131,6 +144,32 @@ file(READ "${A}/summary.csv" summary_a)
 string(REGEX MATCHALL ",stopped," stopped_rows "${summary_a}")
 list(LENGTH stopped_rows stopped_count)
 check("sweep A: the 3 runs that exited 3 are finished with status stopped" stopped_count EQUAL 3)
+file(STRINGS "${A}/fake_threads" threads_a)
+list(FILTER threads_a EXCLUDE REGEX " 1$")
+check("sweep A passed the default --threads 1 to every run (not: ${threads_a})" NOT threads_a)
+
+# Every finished run in <dir> has its whole log (the program's output and the runner's last
+# line) under its final name, and no partial file is left.
+function(check_logs dir)
+  file(GLOB csvs "${dir}/runs/*.csv")
+  list(FILTER csvs EXCLUDE REGEX "\\.partial\\.csv$")
+  list(LENGTH csvs n)
+  set(complete 0)
+  foreach(csv IN LISTS csvs)
+    string(REGEX REPLACE "\\.csv$" ".log" log "${csv}")
+    if(EXISTS "${log}")
+      file(READ "${log}" text)
+      if(text MATCHES "^# [^\n]* --csv [^\n]*\n.*: epoch 1\n.*# reproduce: exit code [03] after ")
+        math(EXPR complete "${complete} + 1")
+      endif()
+    endif()
+  endforeach()
+  check("${dir}: all ${n} finished runs have a complete .log (${complete})" n EQUAL complete
+        AND n GREATER 0)
+  file(GLOB partial "${dir}/runs/*.partial.*")
+  check("${dir}: no partial file is left (${partial})" NOT partial)
+endfunction()
+check_logs("${A}")
 if(out_a MATCHES "plots: ")
   file(GLOB pngs "${A}/plots/*.png")
   list(LENGTH pngs png_count)
@@ -171,19 +210,46 @@ done
 echo "no task program outlived the runner"
 ]=])
 file(WRITE "${WORK_DIR}/kill.sh" "${kill_script}")
-execute_process(COMMAND sh "${WORK_DIR}/kill.sh" "${REPRODUCE}" "${B}" ${grid}
+execute_process(COMMAND sh "${WORK_DIR}/kill.sh" "${REPRODUCE}" "${B}" ${grid} --threads 2
                 RESULT_VARIABLE rc OUTPUT_VARIABLE out_kill ERROR_VARIABLE err_kill)
 message(STATUS "sweep B, first part:\n${out_kill}${err_kill}")
 check("sweep B was killed mid-way and left no orphan" rc EQUAL 0)
 file(STRINGS "${WORK_DIR}/finished_before.txt" finished_before)
 file(STRINGS "${WORK_DIR}/partial_before.txt" partial_before)
+foreach(entry IN LISTS finished_before)
+  string(REGEX REPLACE " .*" "" name "${entry}")
+  check("killed sweep: finished run ${name} has its .log and no .partial.log"
+        EXISTS "${B}/runs/${name}.log" AND NOT EXISTS "${B}/runs/${name}.partial.log")
+endforeach()
+foreach(name IN LISTS partial_before)
+  check("killed sweep: interrupted run ${name} has a .partial.log and no .log"
+        EXISTS "${B}/runs/${name}.partial.log" AND NOT EXISTS "${B}/runs/${name}.log")
+endforeach()
+file(STRINGS "${B}/fake_threads" threads_first)
 
 # --- B: resume ---------------------------------------------------------------------------------
-execute_process(COMMAND "${REPRODUCE}" ${grid} --no-plot --out "${B}" RESULT_VARIABLE rc
+execute_process(COMMAND "${REPRODUCE}" ${grid} --threads 3 --no-plot --out "${B}" RESULT_VARIABLE rc
                 OUTPUT_VARIABLE out_b ERROR_VARIABLE err_b)
 message(STATUS "sweep B, resumed:\n${out_b}${err_b}")
-check("resumed sweep B exits 0" rc EQUAL 0)
+check("resumed sweep B (another --threads) exits 0" rc EQUAL 0)
 check("the resumed sweep discarded the interrupted runs" out_b MATCHES "discarded [1-9]")
+check_logs("${B}")
+file(STRINGS "${B}/fake_threads" threads_all)
+list(LENGTH threads_first first_count)
+set(wrong "")
+set(index 0)
+foreach(entry IN LISTS threads_all)
+  if(index LESS first_count)
+    set(expected 2)
+  else()
+    set(expected 3)
+  endif()
+  if(NOT entry MATCHES " ${expected}$")
+    list(APPEND wrong "${entry} (expected ${expected})")
+  endif()
+  math(EXPR index "${index} + 1")
+endforeach()
+check("each of B's runs got the --threads of its sweep (wrong: ${wrong})" NOT wrong)
 
 file(STRINGS "${B}/fake_invocations" invocations)
 foreach(entry IN LISTS finished_before)
@@ -226,10 +292,13 @@ if(EXISTS "${examples_dir}/cartpole" AND EXISTS "${examples_dir}/guidance"
    AND EXISTS "${examples_dir}/quantum")
   # In float, whose setting the .run files keep only in their args line; the second, finished
   # sweep must read those files back into its summary.
+  # The second sweep has another --threads, which must not make the finished runs differ.
   set(real_grid --profile quick --complexities 4,0.001 --methods C --clips norm --seeds 1
                 --epochs 2 --samples 8 --float --no-plot --out "${WORK_DIR}/real")
+  set(threads_first 2)
+  set(threads_again 1)
   foreach(pass first again)
-    execute_process(COMMAND "${REPRODUCE}" ${real_grid}
+    execute_process(COMMAND "${REPRODUCE}" ${real_grid} --threads ${threads_${pass}}
                     RESULT_VARIABLE rc OUTPUT_VARIABLE out_real ERROR_VARIABLE err_real)
     message(STATUS "real task programs, ${pass}:\n${out_real}${err_real}")
     check("sweep with the real task programs exits 0 (${pass})" rc EQUAL 0)
@@ -239,7 +308,19 @@ if(EXISTS "${examples_dir}/cartpole" AND EXISTS "${examples_dir}/guidance"
     list(LENGTH real_rows n)
     check("the real programs' logs give 3 finished rows with 2 epochs (${pass})" n EQUAL 3)
   endforeach()
-  check("the second sweep found all 3 runs finished" out_real MATCHES "3 finished, 0 to do")
+  check("the second sweep (another --threads) found all 3 runs finished"
+        out_real MATCHES "3 finished, 0 to do")
+  file(GLOB real_logs "${WORK_DIR}/real/runs/*.log")
+  list(FILTER real_logs EXCLUDE REGEX "\\.partial\\.log$")
+  set(with_threads 0)
+  foreach(log IN LISTS real_logs)
+    file(STRINGS "${log}" head LIMIT_COUNT 1)
+    if(head MATCHES " --threads 2 --csv ")
+      math(EXPR with_threads "${with_threads} + 1")
+    endif()
+  endforeach()
+  check("the real programs ran with --threads 2 (${with_threads} of 3 logs say so)"
+        with_threads EQUAL 3)
 else()
   message(STATUS "real task programs not built beside the runner; skipped that part")
 endif()

@@ -3,13 +3,31 @@
 // assertion counted so that Release builds see it. (Counted, not thrown as in
 // test_nn_no_malloc.cpp: an exception in the middle of an Eigen resize would leave the matrix
 // half-built, and the engine's buffers must stay usable for the check that the guard fires.)
-// Covers the paper's cart pole (MLP) and quantum (CNN) settings at batch 8, in float and
-// double, with 1 and 2 threads.
+// A replaced global operator new counts every other heap allocation. Covers forward, both
+// reverse sweeps, the combined pair and evaluate, for the paper's cart pole (MLP) and quantum
+// (CNN) settings at batch 8, in float and double, with 1 and 2 threads.
 #include <atomic>
+#include <cstdlib>
+#include <new>
 
 namespace {
 std::atomic<int> eigen_failures{0};
+/// Every operator new of the program: containers, strings and task queues that Eigen's check
+/// cannot see.
+std::atomic<long> heap_allocations{0};
 }  // namespace
+
+// GCC pairs the free() below with the library's operator new, not with this replacement.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+#endif
+void* operator new(std::size_t size) {
+  heap_allocations.fetch_add(1);
+  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 #define EIGEN_RUNTIME_NO_MALLOC
 #define eigen_assert(x)               \
@@ -18,6 +36,8 @@ std::atomic<int> eigen_failures{0};
   } while (false)
 
 #include <catch2/catch.hpp>
+
+#include <array>
 
 #include "sbptt/bptt/engine.hpp"
 #include "sbptt/nn/init.hpp"
@@ -54,6 +74,7 @@ void check_no_allocation(Engine& engine, const Matrix<Scalar>& x0, Index threads
   engine.reverse(FlowMode::Full, g_full);
   engine.reverse(FlowMode::PhysicsOnly, g_physics);
   engine.regular_and_modified(x0, pair);
+  const Scalar evaluated = engine.evaluate(x0);
   const Vector<Scalar> first_full = g_full;
   // With threads, the combined pair runs its sweeps on whichever thread is free, and the
   // network's thread-local scratch of a worker grows on that worker's first backward: the
@@ -62,16 +83,26 @@ void check_no_allocation(Engine& engine, const Matrix<Scalar>& x0, Index threads
 
   const Matrix<Scalar> narrower = x0.leftCols(x0.cols() - 1);
   eigen_failures = 0;
+  std::array<Scalar, 2> losses{}, evaluations{};
+  long allocations = 0;
   {
     MallocGuard guard;
-    for (int repeat = 0; repeat < 2; ++repeat) {
-      CHECK(engine.forward(x0) == loss);
+    const long before = heap_allocations;
+    for (std::size_t repeat = 0; repeat < 2; ++repeat) {
+      losses[repeat] = engine.forward(x0);
       engine.reverse(FlowMode::Full, g_full);
       engine.reverse(FlowMode::PhysicsOnly, g_physics);
       if (pair_guarded) engine.regular_and_modified(x0, pair);
+      evaluations[repeat] = engine.evaluate(x0);
     }
+    allocations = heap_allocations - before;
   }
   CHECK(eigen_failures == 0);
+  CHECK(allocations == 0);
+  for (std::size_t repeat = 0; repeat < 2; ++repeat) {
+    CHECK(losses[repeat] == loss);
+    CHECK(evaluations[repeat] == evaluated);
+  }
   CHECK(g_full == first_full);
   CHECK(pair.regular == g_full);
   CHECK(pair.modified == g_physics);
@@ -123,4 +154,10 @@ TEST_CASE("engine no-malloc check: the guard itself fires", "[bptt][malloc]") {
     CHECK(m.size() == 100);
   }
   CHECK(eigen_failures == 1);
+
+  // A direct call, which unlike a new-expression may not be elided.
+  const long before = heap_allocations;
+  void* counted = ::operator new(64);
+  CHECK(heap_allocations - before == 1);
+  ::operator delete(counted);
 }

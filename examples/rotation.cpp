@@ -9,8 +9,9 @@
 //   combined  v = combine(rotated, plain)  (rotated plays g_M, the true gradient plays g_R)
 //
 // Usage: rotation [--k K] [--lr LR] [--iterations N] [--csv FILE]
-// Prints the loss of each method at a few iterations and at the end; --csv writes the
-// trajectories (iteration, method, theta1, theta2, loss; iteration 0 is the start).
+// Prints the loss of each method at a few iterations and at the end, and writes the
+// trajectories (iteration, method, theta1, theta2, loss; iteration 0 is the start) to
+// rotation.csv, or to the --csv FILE.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -36,7 +37,7 @@ struct Settings {
   double k = 2.0;
   double lr = 0.1;
   long iterations = 200;
-  std::string csv;
+  std::string csv = "rotation.csv";
 };
 
 struct Point {
@@ -93,7 +94,8 @@ void usage(std::ostream& out) {
          "  --k K           rotation strength, finite (default 2)\n"
          "  --lr LR         Adam learning rate, finite and > 0 (default 0.1)\n"
          "  --iterations N  Adam steps per method, integer in [1, 1e6] (default 200)\n"
-         "  --csv FILE      write iteration,method,theta1,theta2,loss rows to FILE\n";
+         "  --csv FILE      write the iteration,method,theta1,theta2,loss rows to FILE\n"
+         "                  (default rotation.csv)\n";
 }
 
 // Throws sbptt::InvalidArgument naming the flag and what was expected.
@@ -178,10 +180,8 @@ int main(int argc, char** argv) {
       std::printf("%-9s final loss %.4g; %s; second-half range [%.3g, %.3g]\n", name,
                   path->back().loss, reached.c_str(), low, high);
     }
-    if (!s.csv.empty()) {
-      sbptt::write_file_atomically(s.csv, csv_text(runs));
-      std::printf("trajectories written to %s\n", s.csv.c_str());
-    }
+    sbptt::write_file_atomically(s.csv, csv_text(runs));
+    std::printf("trajectories written to %s\n", s.csv.c_str());
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "rotation: " << e.what() << "\n";

@@ -23,10 +23,14 @@ import os
 import sys
 import tempfile
 
-import matplotlib
+try:
+    import matplotlib
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+except ImportError as error:  # a missing package is a setup problem, not a bug: no traceback
+    sys.exit(f"plot_accuracy: {sys.executable} cannot import {error.name or 'matplotlib'}; "
+             "install python3-matplotlib (Debian) or run this script with a python3 that has it")
 
 SIM_COLOURS = {"cartpole": "#d62728", "guidance": "#1f77b4", "quantum": "#2ca02c"}
 SWEEP_MARKERS = {"dt": "o", "nx": "s"}
@@ -144,9 +148,10 @@ def main():
         os.chmod(temporary, 0o666 & ~umask)  # mkstemp creates 0600; a plot is for reading
         os.replace(temporary, target)
     except OSError as error:
+        fail(f"cannot write '{target}': {error.strerror}")
+    finally:  # also when savefig raises something else than OSError
         if os.path.exists(temporary):
             os.remove(temporary)
-        fail(f"cannot write '{target}': {error.strerror}")
     print(f"wrote {target}")
 
 

@@ -30,15 +30,20 @@ import math
 import os
 import sys
 import tempfile
+import textwrap
 import warnings
 
-import matplotlib
+try:
+    import matplotlib
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import matplotlib.ticker  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-import numpy as np  # noqa: E402
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.ticker
+    from matplotlib.lines import Line2D
+    import numpy as np
+except ImportError as error:  # a missing package is a setup problem, not a bug: no traceback
+    sys.exit(f"plot_results: {sys.executable} cannot import {error.name or 'matplotlib'}; "
+             "install python3-matplotlib (Debian) or run this script with a python3 that has it")
 
 METHOD_COLOURS = {"R": "#d62728", "M": "#1f77b4", "C": "#2ca02c", "S": "#7f7f7f", "N": "#9467bd"}
 METHOD_NAMES = {"R": "R (regular)", "M": "M (modified)", "C": "C (combined)", "S": "S (stopped)",
@@ -48,6 +53,9 @@ CLIP_STYLES = {"norm": "-", "value": "--", "none": ":"}
 CLIP_MARKERS = {"norm": "o", "value": "s", "none": "^"}
 CLIP_ORDER = ["none", "value", "norm"]
 TASK_ORDER = ["cartpole", "guidance", "quantum"]
+PANEL_SIZE = (5.2, 3.9)  # inches
+# One panel alone is narrower than the titles and legends written for a row of them.
+MIN_WIDTH = 8.5  # inches
 # title of a complexity panel; whether a smaller value is harder
 TASKS = {
     "cartpole": ("Number of poles: {}", False),
@@ -98,7 +106,9 @@ def save(fig, path):
     fd, temporary = tempfile.mkstemp(prefix=".tmp.", suffix=".png", dir=directory)
     os.close(fd)
     try:
-        fig.savefig(temporary, format="png", dpi=110)
+        # "tight" grows the picture to whatever sticks out (a legend below the panels, a long
+        # title) instead of cutting it off.
+        fig.savefig(temporary, format="png", dpi=110, bbox_inches="tight", pad_inches=0.15)
         os.chmod(temporary, 0o644)
         os.replace(temporary, path)
     finally:
@@ -113,6 +123,24 @@ def grid_shape(n):
         return 1, n
     cols = math.ceil(math.sqrt(n))
     return math.ceil(n / cols), cols
+
+
+def panels(rows, cols):
+    width = max(PANEL_SIZE[0] * cols, MIN_WIDTH)
+    return plt.subplots(rows, cols, figsize=(width, PANEL_SIZE[1] * rows), squeeze=False)
+
+
+def finish_figure(fig, title, handles):
+    """Title above and legend below the panels, both broken into lines that fit the width."""
+    width = fig.get_figwidth()
+    fig.suptitle("\n".join(textwrap.wrap(title, width=int(width * 9))))
+    # A legend entry needs about 1.9 inches; more rows rather than a legend wider than the
+    # figure.
+    ncol = max(1, min(len(handles), int(width / 1.9)))
+    # Hung below the figure: tight_layout leaves no room for it, savefig's tight box does.
+    fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0), ncol=ncol,
+               frameon=False)
+    fig.tight_layout()
 
 
 def legend_handles(methods, clips):
@@ -187,8 +215,7 @@ def positive_floor(values):
 
 def curve_figure(runs, task, window, against_time):
     complexities = sort_complexities(task, {r["complexity"] for r in runs if r["task"] == task})
-    rows, cols = grid_shape(len(complexities))
-    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 3.9 * rows), squeeze=False)
+    fig, axes = panels(*grid_shape(len(complexities)))
     methods, clips, seeds = set(), set(), set()
     for ax, complexity in zip(axes.flat, complexities):
         lines = []
@@ -217,10 +244,8 @@ def curve_figure(runs, task, window, against_time):
         ax.set_visible(False)
     seeds_text = (f"{min(seeds)}" if min(seeds) == max(seeds) else f"{min(seeds)}–{max(seeds)}")
     what = "against training time" if against_time else "against epoch"
-    fig.suptitle(f"{task}: test loss {what}, mean ± std over {seeds_text} seed(s)")
-    fig.legend(handles=legend_handles(methods, clips), loc="lower center",
-               ncol=len(methods) + len(clips), frameon=False)
-    fig.tight_layout(rect=(0, 0.07, 1, 0.95))
+    finish_figure(fig, f"{task}: test loss {what}, mean ± std over {seeds_text} seed(s)",
+                  legend_handles(methods, clips))
     return fig
 
 
@@ -230,7 +255,7 @@ def hardest(runs, task):
 
 
 def update_norm_figure(runs, tasks):
-    fig, axes = plt.subplots(1, len(tasks), figsize=(5.2 * len(tasks), 3.9), squeeze=False)
+    fig, axes = panels(1, len(tasks))
     methods, clips = set(), set()
     for ax, task in zip(axes.flat, tasks):
         complexity = hardest(runs, task)
@@ -256,16 +281,13 @@ def update_norm_figure(runs, tasks):
         ax.set_xlabel("epoch")
         ax.set_ylabel("update size ‖update‖² before clipping")
         finish_axes(ax, True)
-    fig.suptitle("Update size (update_norm2) at the hardest setting: geometric mean ×/÷ "
-                 "geometric std over seeds")
-    fig.legend(handles=legend_handles(methods, clips), loc="lower center",
-               ncol=len(methods) + len(clips), frameon=False)
-    fig.tight_layout(rect=(0, 0.1, 1, 0.93))
+    finish_figure(fig, "Update size (update_norm2) at the hardest setting: geometric mean ×/÷ "
+                  "geometric std over seeds", legend_handles(methods, clips))
     return fig
 
 
 def speed_figure(runs, tasks):
-    fig, axes = plt.subplots(1, len(tasks), figsize=(5.2 * len(tasks), 3.9), squeeze=False)
+    fig, axes = panels(1, len(tasks))
     methods, clips = set(), set()
     for ax, task in zip(axes.flat, tasks):
         complexity = hardest(runs, task)
@@ -281,13 +303,11 @@ def speed_figure(runs, tasks):
         ax.set_xlabel("training seconds per epoch")
         ax.set_ylabel("final test loss")
         finish_axes(ax, False)
-    fig.suptitle("Speed against error: one point per run")
     handles = [Line2D([], [], color=METHOD_COLOURS[m], marker="o", ls="", label=METHOD_NAMES[m])
                for m in METHOD_ORDER if m in methods]
     handles += [Line2D([], [], color="black", marker=CLIP_MARKERS[c], ls="", label=f"clip {c}")
                 for c in CLIP_ORDER if c in clips]
-    fig.legend(handles=handles, loc="lower center", ncol=len(handles), frameon=False)
-    fig.tight_layout(rect=(0, 0.1, 1, 0.93))
+    finish_figure(fig, "Speed against error: one point per run", handles)
     return fig
 
 

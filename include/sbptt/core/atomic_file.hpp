@@ -2,8 +2,10 @@
 /// \file Whole-file writes that never leave a half-written file: the content goes to a
 /// temporary file in the same directory, which is then renamed over the target (rename is
 /// atomic within one file system, so a reader sees the old file or the new one).
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <functional>
 #include <string>
@@ -34,8 +36,10 @@ inline void write_file_atomically(const std::string& path, std::string_view cont
     }
   }
   if (std::rename(temporary.c_str(), path.c_str()) != 0) {
+    const int error = errno;  // before remove() can overwrite it
     std::remove(temporary.c_str());
-    throw IoError(detail::concat("cannot rename '", temporary, "' to '", path, "'"));
+    throw IoError(detail::concat("cannot rename '", temporary, "' to '", path,
+                                 "': ", std::strerror(error)));
   }
 }
 

@@ -4,13 +4,15 @@
 // log, progress line and non-finite handling. Each program only builds its simulator,
 // objective, controller and initial states.
 //
-// Exit codes: 0 success, 1 error (unreadable file, ...), 2 bad flags, 3 a non-finite value
-// stopped training (the last finite parameters are saved when --save-params is given).
+// Exit codes: 0 success, 1 error (unreadable file, out of memory, ...), 2 bad flags, 3 a
+// non-finite value stopped training (--save-params still saves the parameters the trainer rolled
+// back to: those of the last logged epoch, or the initial ones).
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <unistd.h>
 #include <iostream>
+#include <new>
 #include <string>
 
 #include <sbptt/sbptt.hpp>
@@ -35,17 +37,26 @@ inline Horizon resolve_horizon(const TaskOptions& o, Index default_steps, double
     detail::require(steps >= 1 && std::abs(steps * h.dt - *o.horizon) < 1e-9 * *o.horizon,
                     "--T ", *o.horizon, " is not a whole number of steps of dt = ", h.dt,
                     "; give --steps too, or a --dt that divides T");
+    detail::require(steps <= static_cast<double>(max_count), "--T ", *o.horizon, " is ", steps,
+                    " steps of dt = ", h.dt, "; expected at most ", max_count, " steps");
     h.steps = static_cast<Index>(steps);
   }
   return h;
 }
 
 /// Fails before any work when an output file could not be written: its directory must exist
-/// and be writable (an hours-long run must not die at its first save).
+/// and be writable, and the path itself must be a regular file or new (an hours-long run must
+/// not die at its first save, nor lose its work when the final rename fails).
 inline void require_writable(const std::string& path, const char* flag) {
   if (path.empty()) return;
-  const std::filesystem::path parent = std::filesystem::absolute(path).parent_path();
   std::error_code error;
+  const auto status = std::filesystem::status(path, error);
+  detail::require<IoError>(!std::filesystem::exists(status) ||
+                               std::filesystem::is_regular_file(status),
+                           flag, " '", path, "' exists and is not a regular file (",
+                           std::filesystem::is_directory(status) ? "a directory" : "a special file",
+                           "); expected a file path to write");
+  const std::filesystem::path parent = std::filesystem::absolute(path).parent_path();
   detail::require<IoError>(std::filesystem::exists(parent, error), flag, " '", path,
                            "': directory '", parent.string(), "' does not exist");
   detail::require<IoError>(std::filesystem::is_directory(parent, error), flag, " '", path,
@@ -94,6 +105,20 @@ int dump_gradients(const TaskOptions& o, const Sim& sim, Ctrl& controller,
   return 0;
 }
 
+/// "non-finite state (inf) in epoch 2, batch 1, step 9, sample 0", for the user's stderr.
+inline std::string describe(const NonFiniteEvent& event) {
+  const NonFinite& where = event.where;
+  std::string text =
+      detail::concat("non-finite ", to_string(where.quantity), " (", where.value, ") in ");
+  text += event.phase == Phase::Update
+              ? detail::concat("epoch ", event.epoch, ", batch ", event.batch)
+              : detail::concat("the ", to_string(event.phase), " of epoch ", event.epoch);
+  text += where.quantity == Quantity::Gradient
+              ? detail::concat(", parameter ", where.sample)
+              : detail::concat(", step ", where.step, ", sample ", where.sample);
+  return text;
+}
+
 /// Trains `controller` for o.epochs epochs (or dumps gradients), writing the log and params.
 template <class Sim, class Ctrl, class Loss>
 int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objective<Loss>& objective,
@@ -132,17 +157,34 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
   TrainingLog log;
   const double initial = static_cast<double>(trainer.engine().evaluate(data.test));
   std::fprintf(stderr, "%s: initial test loss %.6g\n", name, initial);
+  if (const auto& where = trainer.engine().forward_non_finite())
+    std::fprintf(stderr, "%s: warning: the initial parameters give a %s\n", name,
+                 describe(NonFiniteEvent{0, -1, *where, Phase::TestEvaluation}).c_str());
+  // Skipped batches are listed up to this many, then counted, so that a diverging run does
+  // not flood stderr.
+  constexpr long shown_skips = 5;
+  long skips = 0;
   int status = 0;
   for (long epoch = 1; epoch <= o.epochs; ++epoch) {
     const EpochRecord record = trainer.train_epoch(data.train, data.test);
+    for (const NonFiniteEvent& event : trainer.non_finite_events()) {
+      const bool skipped =
+          event.phase == Phase::Update && o.on_non_finite == NonFinitePolicy::SkipBatch;
+      if (skipped && ++skips > shown_skips) continue;
+      std::fprintf(stderr, "%s: %s%s\n", name, describe(event).c_str(),
+                   skipped ? "; batch skipped" : "");
+    }
     if (trainer.stopped()) {
-      const auto& event = *trainer.last_non_finite();
       std::fprintf(stderr,
-                   "%s: non-finite %s (%g) in epoch %ld, batch %ld, step %ld, sample %ld; "
-                   "training stopped, keeping the last finite parameters\n",
-                   name, std::string(to_string(event.where.quantity)).c_str(), event.where.value,
-                   event.epoch, static_cast<long>(event.batch),
-                   static_cast<long>(event.where.step), static_cast<long>(event.where.sample));
+                   "%s: training stopped in epoch %ld%s; keeping the parameters %s\n", name, epoch,
+                   trainer.non_finite_events().back().phase == Phase::Update &&
+                           o.on_non_finite == NonFinitePolicy::SkipBatch
+                       ? " (no batch of it was finite)"
+                       : "",
+                   epoch == 1 ? "it started from"
+                              : detail::concat("of epoch ", epoch - 1,
+                                               ", the last whose evaluation was finite")
+                                    .c_str());
       status = 3;
       break;
     }
@@ -152,6 +194,9 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
       std::fprintf(stderr, "%s: epoch %ld  batch %.6g  train %.6g  test %.6g  %.3fs\n", name,
                    epoch, record.batch_loss, record.train_loss, record.test_loss, record.seconds);
   }
+  if (skips > shown_skips)
+    std::fprintf(stderr, "%s: %ld skipped batches in all (%ld not listed)\n", name, skips,
+                 skips - shown_skips);
   if (!o.save_params.empty()) save_parameters(o.save_params, controller);
   if (status == 0 && !log.rows().empty())
     std::printf("final test loss %.9g\n", log.rows().back().test_loss);
@@ -182,6 +227,14 @@ int task_main(Task task, int argc, char** argv, Body&& body) {
   } catch (const InvalidArgument& e) {
     std::cerr << name << ": " << e.what() << "\n";
     return 2;
+  } catch (const std::bad_alloc&) {
+    const std::string nx = task == Task::Quantum ? ", --nx " + std::to_string(options.nx) : "";
+    std::cerr << name << ": out of memory for --samples " << options.samples
+              << " (and as many test samples), --batch " << options.batch << ", --steps "
+              << (options.steps ? std::to_string(*options.steps) : "default") << nx
+              << ", --threads " << options.threads
+              << "; expected sizes whose data and trajectories fit in memory\n";
+    return 1;
   } catch (const std::exception& e) {
     std::cerr << name << ": " << e.what() << "\n";
     return 1;

@@ -4,10 +4,12 @@
 #include <catch2/catch.hpp>
 
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "sbptt/nn/parameters_io.hpp"
@@ -21,9 +23,11 @@ struct Result {
   std::string output;  // stdout and stderr
 };
 
-Result run(const std::string& program, const std::string& arguments) {
-  const std::string command =
-      std::string(SBPTT_EXAMPLES_DIR) + "/" + program + " " + arguments + " 2>&1";
+/// Runs `program` through the shell; `shell_prefix` (e.g. a ulimit) goes before it.
+Result run(const std::string& program, const std::string& arguments,
+           const std::string& shell_prefix = "") {
+  const std::string command = shell_prefix + std::string(SBPTT_EXAMPLES_DIR) + "/" + program +
+                              " " + arguments + " 2>&1";
   Result result;
   FILE* pipe = popen(command.c_str(), "r");
   REQUIRE(pipe != nullptr);
@@ -141,6 +145,37 @@ TEST_CASE("--init-params then --save-params round-trips bit for bit", "[programs
   CHECK(text == file_text(second));
 }
 
+TEST_CASE("--init-params then --save-params keeps 17-digit values exactly", "[programs]") {
+  // Hand-written values that need all 17 digits (thirds), and the extremes of the range: a
+  // writer that rounds to fewer digits or flushes subnormals changes one of them.
+  std::vector<double> values(10701);  // 1-pole cart pole: 4 → 100 → 100 → 1
+  for (std::size_t i = 0; i < values.size(); ++i)
+    values[i] = (i % 2 ? -1.0 : 1.0) * static_cast<double>(i + 1) / 3.0 * 1e-5;
+  values[7] = 4.9406564584124654e-324;   // the smallest subnormal
+  values[8] = -2.2250738585072014e-308;  // the smallest normal
+  values[9] = 0.10000000000000001;       // 0.1, which %.15g would also print as 0.1
+  std::string text;
+  char line[64];
+  for (double v : values) {
+    std::snprintf(line, sizeof line, "%.17g\n", v);
+    text += line;
+  }
+  const fs::path in = scratch("digits.params"), out = scratch("digits_out.params");
+  std::ofstream(in, std::ios::binary) << text;
+  const Result r = run("cartpole", "--epochs 0 --samples 8 --init-params " + in.string() +
+                                       " --save-params " + out.string());
+  INFO(r.output);
+  REQUIRE(r.status == 0);
+  CHECK(file_text(out) == text);  // the format is %.17g, so even the text is the same
+  std::ifstream saved(out);
+  std::string number;
+  std::size_t i = 0, exact = 0;
+  while (std::getline(saved, number) && i < values.size())
+    exact += std::strtod(number.c_str(), nullptr) == values[i++] ? 1 : 0;
+  CHECK(i == values.size());
+  CHECK(exact == values.size());
+}
+
 TEST_CASE("--threads 2 trains to the same parameters, bit for bit, as one thread", "[programs]") {
   // Quantum with split_above_ns's default splits its per-sample loops, and C runs its two
   // sweeps at once: every threaded path of the engine is on.
@@ -192,7 +227,14 @@ TEST_CASE("bad flags get exit code 2 and a message naming the value", "[programs
                         Case{"toy", "--frobnicate", "unknown flag '--frobnicate'"},
                         Case{"toy", "--poles 2", "unknown flag '--poles'"},
                         Case{"guidance", "--rc", "--rc needs a value"},
-                        Case{"cartpole", "--method X", "method 'X' is unknown"}}) {
+                        Case{"cartpole", "--method X", "method 'X' is unknown"},
+                        Case{"cartpole", "--samples 1000000000", "--samples 1000000000 is out of range"},
+                        Case{"guidance", "--steps 1000001", "--steps 1000001 is out of range"},
+                        Case{"cartpole", "--T 1e9", "expected at most 1000000 steps"},
+                        Case{"quantum", "--epochs 10000000", "--epochs 10000000 is out of range"},
+                        Case{"toy", "--dt 0.5", "--dt: the toy system x' = x + c is a map with no time step"},
+                        Case{"toy", "--T 4", "--T: the toy system"},
+                        Case{"cartpole", "--nx 64", "unknown flag '--nx'"}}) {
     const Result r = run(c.program, c.arguments);
     INFO(c.program << " " << c.arguments << "\n" << r.output);
     CHECK(r.status == 2);
@@ -210,13 +252,58 @@ TEST_CASE("unreadable inputs and unwritable outputs fail at once with exit 1", "
         Case{"--init-states /nonexistent/s.csv", "cannot open states file '/nonexistent/s.csv'"},
         Case{"--init-states " + scratch("narrow.csv").string(), "2 columns; expected exactly state_dim = 4"},
         Case{"--csv /nonexistent/dir/log.csv", "directory '/nonexistent/dir' does not exist"},
-        Case{"--save-params " + (scratch("narrow.csv") / "p.txt").string(), "is not a directory"}}) {
+        Case{"--save-params " + (scratch("narrow.csv") / "p.txt").string(), "is not a directory"},
+        // A directory passes the parent's checks; it must fail now, not at the final rename.
+        Case{"--csv " + scratch("").string(), "exists and is not a regular file (a directory)"},
+        Case{"--save-params " + scratch("").string(), "exists and is not a regular file"}}) {
     const Result r = run("cartpole", "--epochs 1 --samples 8 --steps 3 " + c.arguments);
     INFO(c.arguments << "\n" << r.output);
     CHECK(r.status == 1);
     CHECK(r.output.find(c.expected) != std::string::npos);
     CHECK(r.output.find("epoch 1") == std::string::npos);  // failed before training
   }
+}
+
+TEST_CASE("running out of memory names the sizes asked for", "[programs]") {
+  // 2 × 1e6 samples of 2 × 1024 numbers (32 GB) cannot fit under a 2 GB address-space limit.
+  const Result r = run("quantum", "--samples 1000000 --nx 1024 --epochs 1", "ulimit -v 2000000; ");
+  INFO(r.output);
+  CHECK(r.status == 1);
+  CHECK(r.output.find("out of memory for --samples 1000000") != std::string::npos);
+  CHECK(r.output.find("--nx 1024") != std::string::npos);
+}
+
+TEST_CASE("skip-batch reports each skipped batch and never ends silently on NaN",
+          "[programs]") {
+  // lr 1e6 makes the first update overflow the next batch and then the evaluation.
+  const fs::path params = scratch("skip.params"), log = scratch("skip.csv");
+  fs::remove(log);
+  const Result r = run("cartpole", "--epochs 3 --samples 16 --method R --lr 1e6 "
+                                   "--on-nonfinite skip-batch --csv " + log.string() +
+                                   " --save-params " + params.string());
+  INFO(r.output);
+  CHECK(r.status == 3);
+  CHECK(r.output.find("non-finite state (-inf) in epoch 1, batch 1, step 9, sample 0; batch "
+                      "skipped") != std::string::npos);
+  CHECK(r.output.find("training stopped in epoch 1") != std::string::npos);
+  CHECK(r.output.find("final test loss") == std::string::npos);
+  CHECK(file_text(log).find("nan") == std::string::npos);
+  CHECK(sbptt::load_parameters<double>(params, 10701).allFinite());  // load rejects NaN/Inf
+}
+
+TEST_CASE("a non-finite evaluation stops training at that epoch", "[programs]") {
+  // One batch per epoch: the update is finite, the evaluation after it is not.
+  const fs::path log = scratch("evaluation.csv");
+  fs::remove(log);
+  const Result r = run("cartpole", "--epochs 3 --samples 8 --method R --lr 1e6 --csv " +
+                                       log.string());
+  INFO(r.output);
+  CHECK(r.status == 3);
+  CHECK(r.output.find("non-finite state (-inf) in the train-set evaluation of epoch 1, step 9, "
+                      "sample 0") != std::string::npos);
+  CHECK(r.output.find("keeping the parameters it started from") != std::string::npos);
+  CHECK(r.output.find("epoch 2") == std::string::npos);
+  CHECK(file_text(log).find("nan") == std::string::npos);
 }
 
 TEST_CASE("an overflow stops training with a message and finite saved parameters",
@@ -234,24 +321,33 @@ TEST_CASE("an overflow stops training with a message and finite saved parameters
   }
 }
 
-TEST_CASE("combined update, paper settings: 2-pole cart pole from ~1.9 to below 1.0 in 20 epochs",
-          "[programs]") {
-  const fs::path log = scratch("cartpole20.csv");
-  const Result r = run("cartpole", "--poles 2 --method C --epochs 20 --csv " + log.string());
-  INFO(r.output);
-  REQUIRE(r.status == 0);
-  std::ifstream in(log);
-  std::string line, first, last;
-  std::getline(in, line);
-  std::getline(in, first);
-  last = first;
-  while (std::getline(in, line)) last = line;
-  auto test_loss = [](const std::string& row) {
-    std::stringstream fields(row);
-    std::string field;
-    for (int i = 0; i < 4; ++i) std::getline(fields, field, ',');
-    return std::stod(field);
+TEST_CASE("combined update, paper settings: 2-pole cart pole from ~1.9 to below 1.0 in 20 epochs, "
+          "and below R", "[programs]") {
+  // Test losses of the first and last logged epochs of a 20-epoch run of `method`.
+  auto first_and_last = [](const std::string& method) {
+    const fs::path log = scratch("cartpole20_" + method + ".csv");
+    const Result r = run("cartpole", "--poles 2 --method " + method + " --epochs 20 --csv " +
+                                         log.string());
+    INFO(r.output);
+    REQUIRE(r.status == 0);
+    std::ifstream in(log);
+    std::string line, first, last;
+    std::getline(in, line);
+    std::getline(in, first);
+    last = first;
+    while (std::getline(in, line)) last = line;
+    auto test_loss = [](const std::string& row) {
+      std::stringstream fields(row);
+      std::string field;
+      for (int i = 0; i < 4; ++i) std::getline(fields, field, ',');
+      return std::stod(field);
+    };
+    return std::pair{test_loss(first), test_loss(last)};
   };
-  CHECK(test_loss(first) > 1.5);
-  CHECK(test_loss(last) < 1.0);
+  const auto [c_first, c_last] = first_and_last("C");
+  CHECK(c_first > 1.5);
+  CHECK(c_last < 1.0);
+  // Below 1.0 alone does not single out C (R ends near 0.9, M near 0.76, C near 0.48).
+  const auto r_last = first_and_last("R").second;
+  CHECK(c_last < r_last);
 }

@@ -56,13 +56,19 @@ struct TaskOptions {
   std::string csv, save_params, init_params, init_states, dump_gradients;
 };
 
+/// Upper bound of the count flags (--epochs, --batch, --samples, --steps, --truncation): far
+/// above the paper's runs (1000 epochs, 256 samples, 128 steps), and low enough that a typo of
+/// a few zeros is a flag error rather than an allocation failure an hour in.
+inline constexpr long max_count = 1'000'000;
+
 /// The accepted flags, for help and error messages.
 [[nodiscard]] inline std::string task_flags(Task task) {
   std::string flags =
       "--method R|M|C|S|N, --clip none|value|norm, --clip-threshold X, --epochs N, --batch N, "
       "--samples N, --lr X, --seed N, --shuffle, --truncation K, --on-nonfinite stop|skip-batch, "
-      "--steps N, --dt X, --T X, --float, --double, --threads N, --csv FILE, --save-params FILE, "
+      "--steps N, --float, --double, --threads N, --csv FILE, --save-params FILE, "
       "--init-params FILE, --init-states FILE, --dump-gradients FILE";
+  if (task != Task::Toy) flags += ", --dt X, --T X";
   if (task == Task::CartPole) flags += ", --poles 1..4, --physical";
   if (task == Task::Guidance) flags += ", --drivers D, --evaders E, --rc X, --physical";
   if (task == Task::Quantum) flags += ", --target 2..4, --nx N";
@@ -80,26 +86,28 @@ struct TaskOptions {
     o.lr = 0.01;
   }
   ArgumentCursor args(argc, argv);
-  constexpr long many = 1'000'000'000;
   while (args.next()) {
     const std::string& f = args.flag();
     if (f == "--method") o.method = parse_method(args.value());
     else if (f == "--clip") o.clip = parse_clip_mode(args.value());
     else if (f == "--clip-threshold") o.clip_threshold = parse_number(f, args.value(), 1e-300, 1e300);
-    else if (f == "--epochs") o.epochs = parse_integer(f, args.value(), 0, many);
-    else if (f == "--batch") o.batch = parse_integer(f, args.value(), 1, many);
-    else if (f == "--samples") o.samples = parse_integer(f, args.value(), 1, many);
+    else if (f == "--epochs") o.epochs = parse_integer(f, args.value(), 0, max_count);
+    else if (f == "--batch") o.batch = parse_integer(f, args.value(), 1, max_count);
+    else if (f == "--samples") o.samples = parse_integer(f, args.value(), 1, max_count);
     else if (f == "--lr") o.lr = parse_number(f, args.value(), 1e-300, 1e300);
     else if (f == "--seed") o.seed = static_cast<std::uint64_t>(parse_integer(f, args.value(), 0, std::numeric_limits<long>::max()));
     else if (f == "--shuffle") args.no_value(), o.shuffle = true;
-    else if (f == "--truncation") o.truncation = parse_integer(f, args.value(), 0, many);
+    else if (f == "--truncation") o.truncation = parse_integer(f, args.value(), 0, max_count);
     else if (f == "--on-nonfinite") {
       const std::string v = args.value();
       if (v == "stop") o.on_non_finite = NonFinitePolicy::Stop;
       else if (v == "skip-batch") o.on_non_finite = NonFinitePolicy::SkipBatch;
       else throw InvalidArgument(detail::concat("--on-nonfinite '", v, "'; expected stop or skip-batch"));
     }
-    else if (f == "--steps") o.steps = parse_integer(f, args.value(), 1, many);
+    else if (f == "--steps") o.steps = parse_integer(f, args.value(), 1, max_count);
+    else if ((f == "--dt" || f == "--T") && task == Task::Toy)
+      throw InvalidArgument(detail::concat(f, ": the toy system x' = x + c is a map with no time "
+                                              "step; expected --steps alone to set the horizon"));
     else if (f == "--dt") o.dt = parse_number(f, args.value(), 1e-12, 1e6);
     else if (f == "--T") o.horizon = parse_number(f, args.value(), 1e-12, 1e9);
     else if (f == "--float") args.no_value(), o.use_float = true;

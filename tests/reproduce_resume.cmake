@@ -11,7 +11,8 @@
 #   3. restarts sweep B with --threads 3 and checks that (a) no finished run was redone (every
 #      one was started once, its CSV keeps inode and mtime) while the interrupted ones were
 #      redone, (b) B's summary.csv equals A's in every column except the two timing ones, and
-#      (c) no partial file remains and every finished run has its complete log;
+#      (c) no partial file remains (also none of a run it does not plan) and every finished
+#      run has its complete log;
 # and that each program got the --threads of its sweep (1 by default). Then, when the real task
 # programs sit beside the runner, a 3-run sweep with them (their flags and logs fit the runner)
 # resumed with another --threads, and plots when python3 with matplotlib is there.
@@ -226,6 +227,9 @@ foreach(name IN LISTS partial_before)
         EXISTS "${B}/runs/${name}.partial.log" AND NOT EXISTS "${B}/runs/${name}.log")
 endforeach()
 file(STRINGS "${B}/fake_threads" threads_first)
+# The output of a run that an earlier, killed sweep with other filters left behind: this sweep
+# does not plan the run, and must remove the stale partial log all the same.
+file(WRITE "${B}/runs/guidance_rc1_R_norm_s42.partial.log" "# an earlier sweep's run\n")
 
 # --- B: resume ---------------------------------------------------------------------------------
 execute_process(COMMAND "${REPRODUCE}" ${grid} --threads 3 --no-plot --out "${B}" RESULT_VARIABLE rc

@@ -697,7 +697,8 @@ public:
     const unsigned cores = std::thread::hardware_concurrency();
     if (cores > 0 && options_.jobs * options_.threads > static_cast<long>(cores))
       std::cerr << "reproduce: note: --jobs " << options_.jobs << " x --threads "
-                << options_.threads << " threads on " << cores
+                << options_.threads << " = " << options_.jobs * options_.threads
+                << " threads on " << cores
                 << " cores; the timing columns will include the contention\n";
     // Longest first: the best simple schedule for parallel jobs of unequal length.
     std::stable_sort(todo.begin(), todo.end(), [](const Run* a, const Run* b) {

@@ -9,7 +9,8 @@
 // Resume contract: a child writes runs/<name>.partial.csv and its output goes to
 // runs/<name>.partial.log; when it exits 0 (or 3: a non-finite value stopped training, a result
 // in itself) the runner renames them to runs/<name>.log and runs/<name>.csv. On start every
-// <name>.csv is kept and skipped, every .partial.* is discarded and its run redone. Children die with the runner (PR_SET_PDEATHSIG), even when it is SIGKILLed.
+// <name>.csv is kept and skipped, every .partial.* is discarded and its run redone. Children
+// die with the runner (PR_SET_PDEATHSIG), even when it is SIGKILLed.
 //
 // Exit codes: 0 every planned run finished, 1 a run failed or an error, 2 bad flags,
 // 130 interrupted (SIGINT/SIGTERM/SIGHUP; the finished runs are kept).

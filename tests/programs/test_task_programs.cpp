@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "sbptt/nn/parameters_io.hpp"
+#include "support/address_sanitizer.hpp"
 
 namespace fs = std::filesystem;
 
@@ -265,6 +266,8 @@ TEST_CASE("unreadable inputs and unwritable outputs fail at once with exit 1", "
 }
 
 TEST_CASE("running out of memory names the sizes asked for", "[programs]") {
+  // Under ASan the programs cannot even start in 2 GB of address space (its shadow memory).
+  if (sbptt::testing::address_sanitizer) return;
   // 2 × 1e6 samples of 2 × 1024 numbers (32 GB) cannot fit under a 2 GB address-space limit.
   const Result r = run("quantum", "--samples 1000000 --nx 1024 --epochs 1", "ulimit -v 2000000; ");
   INFO(r.output);

@@ -33,6 +33,20 @@ Matrix<double> samples(std::initializer_list<double> values) {
   return m;
 }
 
+/// x' = 3x + c: from 1e306 a state overflows within the 10 steps, from 1 it does not.
+const Sim unstable = Sim::scalar(3.0, 1.0);
+
+/// R updates of one sample per batch on `unstable`, Adam at lr 0.01, a final loss.
+Trainer<Sim, Policy, Loss, Adam<double>> unstable_trainer(Policy& policy,
+                                                         NonFinitePolicy on_non_finite) {
+  TrainerOptions options;
+  options.method = Method::Regular;
+  options.batch = 1;
+  options.on_non_finite = on_non_finite;
+  return {unstable, policy, to_origin(LossTiming::Final), 10,
+          Adam<double>(AdamOptions<double>{0.01}), options};
+}
+
 }  // namespace
 
 TEST_CASE("trainer: R, M and C all converge to the dead-beat optimum θ* = −a/b", "[train]") {
@@ -99,18 +113,11 @@ TEST_CASE("trainer: the log fields follow their definitions", "[train]") {
 }
 
 TEST_CASE("trainer: a non-finite update leaves the last finite parameters", "[train]") {
-  // An unstable system (ρ ≈ 3) overflows within 10 steps from 1e306, not from 1.
-  const Sim sim = Sim::scalar(3.0, 1.0);
   const Matrix<double> train = samples({1e306, 1.0});
   for (auto policy_kind : {NonFinitePolicy::Stop, NonFinitePolicy::SkipBatch}) {
     Policy policy({1});
     policy.params()(0) = 0.01;
-    TrainerOptions options;
-    options.method = Method::Regular;
-    options.batch = 1;
-    options.on_non_finite = policy_kind;
-    Trainer trainer(sim, policy, to_origin(LossTiming::Final), 10,
-                    Adam<double>(AdamOptions<double>{0.01}), options);
+    auto trainer = unstable_trainer(policy, policy_kind);
     trainer.train_epoch(train, train);
     REQUIRE_FALSE(trainer.non_finite_events().empty());
     CHECK(trainer.non_finite_events().front().batch == 0);
@@ -279,18 +286,11 @@ TEST_CASE("trainer: a skipped batch leaves no trace in the parameters or in Adam
 
 TEST_CASE("trainer: a non-finite evaluation stops training and rolls the epoch back",
           "[train]") {
-  // From 1e306 the ρ ≈ 3 system overflows in the evaluation of the test set, while the
-  // training batches start from 1 and stay finite.
-  const Sim sim = Sim::scalar(3.0, 1.0);
+  // The test set overflows from 1e306 in its evaluation; the training batches stay finite.
   for (auto policy_kind : {NonFinitePolicy::Stop, NonFinitePolicy::SkipBatch}) {
     Policy policy({1});
     policy.params()(0) = 0.01;
-    TrainerOptions options;
-    options.method = Method::Regular;
-    options.batch = 1;
-    options.on_non_finite = policy_kind;
-    Trainer trainer(sim, policy, to_origin(LossTiming::Final), 10,
-                    Adam<double>(AdamOptions<double>{0.01}), options);
+    auto trainer = unstable_trainer(policy, policy_kind);
     trainer.train_epoch(samples({1.0, 0.5}), samples({2.0, 1e306}));
     REQUIRE(trainer.last_non_finite());
     const NonFiniteEvent& event = *trainer.last_non_finite();
@@ -306,14 +306,9 @@ TEST_CASE("trainer: a non-finite evaluation stops training and rolls the epoch b
 
 TEST_CASE("trainer: Stop mid-epoch returns to the parameters the last epoch evaluated",
           "[train]") {
-  const Sim sim = Sim::scalar(3.0, 1.0);
   Policy policy({1});
   policy.params()(0) = 0.01;
-  TrainerOptions options;
-  options.method = Method::Regular;
-  options.batch = 1;
-  Trainer trainer(sim, policy, to_origin(LossTiming::Final), 10,
-                  Adam<double>(AdamOptions<double>{0.01}), options);
+  auto trainer = unstable_trainer(policy, NonFinitePolicy::Stop);
   trainer.train_epoch(samples({1.0, 1e306}), samples({1.0}));
   REQUIRE(trainer.stopped());
   CHECK(trainer.last_non_finite()->batch == 1);
@@ -322,14 +317,8 @@ TEST_CASE("trainer: Stop mid-epoch returns to the parameters the last epoch eval
 }
 
 TEST_CASE("trainer: skip-batch stops when no batch of an epoch was finite", "[train]") {
-  const Sim sim = Sim::scalar(3.0, 1.0);
   Policy policy({1});
-  TrainerOptions options;
-  options.method = Method::Regular;
-  options.batch = 1;
-  options.on_non_finite = NonFinitePolicy::SkipBatch;
-  Trainer trainer(sim, policy, to_origin(LossTiming::Final), 10,
-                  Adam<double>(AdamOptions<double>{0.01}), options);
+  auto trainer = unstable_trainer(policy, NonFinitePolicy::SkipBatch);
   trainer.train_epoch(samples({1e306, -1e306}), samples({1.0}));
   CHECK(trainer.non_finite_events().size() == 2);
   CHECK(trainer.stopped());

@@ -164,27 +164,27 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
   // not flood stderr.
   constexpr long shown_skips = 5;
   long skips = 0;
+  auto skipped = [&](const NonFiniteEvent& event) {
+    return event.phase == Phase::Update && o.on_non_finite == NonFinitePolicy::SkipBatch;
+  };
   int status = 0;
   for (long epoch = 1; epoch <= o.epochs; ++epoch) {
     const EpochRecord record = trainer.train_epoch(data.train, data.test);
     for (const NonFiniteEvent& event : trainer.non_finite_events()) {
-      const bool skipped =
-          event.phase == Phase::Update && o.on_non_finite == NonFinitePolicy::SkipBatch;
-      if (skipped && ++skips > shown_skips) continue;
+      if (skipped(event) && ++skips > shown_skips) continue;
       std::fprintf(stderr, "%s: %s%s\n", name, describe(event).c_str(),
-                   skipped ? "; batch skipped" : "");
+                   skipped(event) ? "; batch skipped" : "");
     }
     if (trainer.stopped()) {
-      std::fprintf(stderr,
-                   "%s: training stopped in epoch %ld%s; keeping the parameters %s\n", name, epoch,
-                   trainer.non_finite_events().back().phase == Phase::Update &&
-                           o.on_non_finite == NonFinitePolicy::SkipBatch
-                       ? " (no batch of it was finite)"
-                       : "",
-                   epoch == 1 ? "it started from"
-                              : detail::concat("of epoch ", epoch - 1,
-                                               ", the last whose evaluation was finite")
-                                    .c_str());
+      // A stop after a skipped batch means the whole epoch was skipped.
+      const char* why =
+          skipped(trainer.non_finite_events().back()) ? " (no batch of it was finite)" : "";
+      const std::string kept =
+          epoch == 1 ? std::string("it started from")
+                     : detail::concat("of epoch ", epoch - 1,
+                                      ", the last whose evaluation was finite");
+      std::fprintf(stderr, "%s: training stopped in epoch %ld%s; keeping the parameters %s\n",
+                   name, epoch, why, kept.c_str());
       status = 3;
       break;
     }

@@ -1,0 +1,358 @@
+// reproduce: the local executor, a pool of --jobs child processes that runs the plan resumably.
+#pragma once
+
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/ioctl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <sbptt/core/atomic_file.hpp>
+
+#include "options.hpp"
+#include "processes.hpp"
+#include "run_files.hpp"
+#include "summary.hpp"
+
+namespace reproduce {
+
+class Sweep {
+public:
+  Sweep(const Options& options, std::vector<Run> plan, fs::path bin_dir)
+      : options_(options), plan_(std::move(plan)), bin_dir_(std::move(bin_dir)),
+        out_(options.out), runs_(out_ / "runs") {}
+
+  /// Returns the exit code of the runner.
+  int execute() {
+    fs::create_directories(runs_);
+    lock();
+    discard_partial_runs();
+    std::vector<const Run*> todo;
+    std::vector<std::string> mismatched;
+    for (const Run& run : plan_) {
+      const fs::path csv = runs_ / (run.name() + ".csv");
+      if (!fs::exists(csv)) {
+        todo.push_back(&run);
+        continue;
+      }
+      if (read_text(runs_ / (run.name() + ".run")) != run.description())
+        mismatched.push_back(run.name());
+    }
+    if (!mismatched.empty()) {
+      std::cerr << "reproduce: " << mismatched.size() << " finished run(s) in " << runs_
+                << " were made with other settings than planned now (e.g. " << mismatched[0]
+                << ": see its .run file); rerun with the old settings, choose another --out, "
+                   "or remove runs/<name>.* to redo them\n";
+      return 1;
+    }
+    load_finished();
+    double estimate = 0;
+    for (const Run* run : todo) estimate += run->estimated_seconds();
+    std::printf("reproduce: profile %s, %zu runs planned (%zu finished, %zu to do), --jobs %ld, "
+                "--threads %ld, estimated %s of compute, about %s wall time\n",
+                options_.profile.c_str(), plan_.size(), plan_.size() - todo.size(), todo.size(),
+                options_.jobs, options_.threads, format_duration(estimate).c_str(),
+                format_duration(estimate / static_cast<double>(std::min<std::size_t>(
+                                               static_cast<std::size_t>(options_.jobs),
+                                               std::max<std::size_t>(todo.size(), 1))))
+                    .c_str());
+    std::printf("reproduce: output in %s (runs/, summary.csv, plots/)\n", out_.c_str());
+    std::fflush(stdout);
+    // More threads than cores make the runs wait for each other; the spin-then-sleep pool
+    // copes, but the seconds columns then measure contention, not the method.
+    const unsigned cores = std::thread::hardware_concurrency();
+    if (cores > 0 && options_.jobs * options_.threads > static_cast<long>(cores))
+      std::cerr << "reproduce: note: --jobs " << options_.jobs << " x --threads "
+                << options_.threads << " = " << options_.jobs * options_.threads
+                << " threads on " << cores
+                << " cores; the timing columns will include the contention\n";
+    // Longest first: the best simple schedule for parallel jobs of unequal length.
+    std::stable_sort(todo.begin(), todo.end(), [](const Run* a, const Run* b) {
+      return a->estimated_seconds() > b->estimated_seconds();
+    });
+    write_summary();
+    const int code = loop(todo);
+    write_summary();
+    if (code == 130) {
+      finish_progress();
+      std::cerr << "reproduce: interrupted; " << summaries_.size()
+                << " runs are finished and kept; run the same command again to continue\n";
+      return code;
+    }
+    finish_progress();
+    std::vector<Summary> rows;
+    for (const auto& [key, s] : summaries_) rows.push_back(s);
+    print_table(rows);
+    std::printf("\nsummary: %s\n", (out_ / "summary.csv").c_str());
+    if (!failures_.empty()) {
+      std::cerr << "reproduce: " << failures_.size() << " run(s) failed and will be redone by the "
+                << "next sweep:\n";
+      for (const auto& f : failures_) std::cerr << f;
+    }
+    return failures_.empty() ? 0 : 1;
+  }
+
+private:
+  struct Child {
+    const Run* run;
+    pid_t pid;
+    std::chrono::steady_clock::time_point started;
+  };
+
+  void lock() {
+    const fs::path path = out_ / ".lock";
+    lock_fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (lock_fd_ < 0) throw sbptt::IoError(concat("cannot open '", path.string(), "'"));
+    if (::flock(lock_fd_, LOCK_EX | LOCK_NB) != 0)
+      throw sbptt::IoError(concat("another reproduce is running in '", out_.string(),
+                                  "' (it holds ", path.string(), ")"));
+  }
+
+  /// Partial training logs and outputs of runs a killed sweep left behind (or of failed runs),
+  /// and temporaries of interrupted atomic writes: their runs are redone.
+  void discard_partial_runs() {
+    std::set<std::string> discarded;  // a run killed before its first epoch has no .partial.csv
+    for (const auto& entry : fs::directory_iterator(runs_)) {
+      const std::string file = entry.path().filename().string();
+      const auto partial = file.find(".partial.");
+      if (partial == std::string::npos && file.find(".tmp.") == std::string::npos) continue;
+      if (partial != std::string::npos && (file.ends_with(".partial.csv") ||
+                                           file.ends_with(".partial.log")))
+        discarded.insert(file.substr(0, partial));
+      fs::remove(entry.path());
+    }
+    for (const auto& entry : fs::directory_iterator(out_))
+      if (entry.path().filename().string().rfind("summary.csv.tmp.", 0) == 0)
+        fs::remove(entry.path());
+    if (!discarded.empty())
+      std::printf("reproduce: discarded %zu unfinished run(s) of an interrupted sweep; they are "
+                  "redone\n",
+                  discarded.size());
+  }
+
+  /// Every finished run in the out dir (also of earlier sweeps with other filters).
+  void load_finished() {
+    for (const auto& entry : fs::directory_iterator(runs_)) {
+      const fs::path path = entry.path();
+      if (path.extension() != ".run") continue;
+      const fs::path csv = fs::path(path).replace_extension(".csv");
+      if (!fs::exists(csv)) continue;
+      const auto run = parse_description(read_text(path));
+      if (!run || run->name() != path.stem().string()) {
+        std::cerr << "reproduce: warning: ignoring " << path << " (not a run description)\n";
+        continue;
+      }
+      add_summary(*run, csv);
+    }
+  }
+
+  bool add_summary(const Run& run, const fs::path& csv) {
+    try {
+      summaries_[run.order_key()] = summarize(run, csv);
+      return true;
+    } catch (const sbptt::Error& e) {
+      failures_.push_back(concat("  ", run.name(), ": ", e.what(), "\n"));
+      return false;
+    }
+  }
+
+  void write_summary() {
+    std::vector<Summary> rows;
+    for (const auto& [key, s] : summaries_) rows.push_back(s);
+    sbptt::write_file_atomically((out_ / "summary.csv").string(), summary_csv(rows));
+  }
+
+  bool start(const Run& run) {
+    const std::string name = run.name();
+    fs::remove(run_file(runs_, run, ".partial.csv"));
+    sbptt::write_file_atomically(run_file(runs_, run, ".run").string(), run.description());
+    const auto argv = command_line(run, bin_dir_, runs_, options_.threads);
+    // Like the CSV, the log gets its final name only when the run has finished.
+    const fs::path log = run_file(runs_, run, ".partial.log");
+    const int log_fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (log_fd < 0) throw sbptt::IoError(concat("cannot write '", log.string(), "'"));
+    std::string command = "#";
+    for (const auto& a : argv) command += " " + a;
+    command += "\n";
+    [[maybe_unused]] const auto written = ::write(log_fd, command.data(), command.size());
+    const pid_t pid = spawn(argv, log_fd);
+    ::close(log_fd);
+    if (pid < 0) {
+      failures_.push_back(concat("  ", name, ": fork failed: ", std::strerror(errno), "\n"));
+      return false;
+    }
+    running_.push_back({&run, pid, std::chrono::steady_clock::now()});
+    return true;
+  }
+
+  /// A child ended: keep its log as a finished run, or record the failure.
+  void finished(const Child& child, int status) {
+    const Run& run = *child.run;
+    const std::string name = run.name();
+    const fs::path partial = run_file(runs_, run, ".partial.csv");
+    const fs::path csv = run_file(runs_, run, ".csv");
+    const fs::path partial_log = run_file(runs_, run, ".partial.log");
+    {  // for retuning the profiles: the whole run, start-up and evaluation included
+      const double wall =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - child.started).count();
+      std::ofstream(partial_log, std::ios::app) << "# reproduce: " << describe_status(status)
+                                                << " after " << wall << " s wall time\n";
+    }
+    std::string failure;
+    if (WIFEXITED(status) && (WEXITSTATUS(status) == 0 || WEXITSTATUS(status) == 3)) {
+      const bool logged = fs::exists(partial);
+      if (logged || WEXITSTATUS(status) == 3) {
+        // The log first: a crash between the two renames leaves a run to redo, never a
+        // finished run whose log the next sweep would discard as partial.
+        fs::rename(partial_log, run_file(runs_, run, ".log"));
+        if (logged) {
+          fs::rename(partial, csv);  // atomic: the run is finished exactly when this happens
+        } else {
+          // Stopped in the first epoch: no row was logged, which is the result.
+          sbptt::write_file_atomically(csv.string(),
+                                       std::string(sbptt::TrainingLog::header) + "\n");
+        }
+      } else {
+        failure = concat("exited 0 but wrote no training log ", partial.string());
+      }
+      if (failure.empty()) {
+        if (add_summary(run, csv)) {
+          ++done_;
+          write_summary();
+        } else {
+          fs::remove(csv);  // not a valid log: redo it next time
+        }
+        return;
+      }
+    } else if (WIFEXITED(status)) {
+      const int code = WEXITSTATUS(status);
+      failure = code == 2   ? "exit code 2 (bad flags)"
+                : code == 127 ? "exit code 127 (could not execute the program)"
+                              : concat("exit code ", code);
+    } else if (WIFSIGNALED(status)) {
+      if (interrupted) return;  // we stopped it
+      failure = concat("killed by signal ", WTERMSIG(status), " (", strsignal(WTERMSIG(status)),
+                       ")");
+    }
+    failures_.push_back(concat("  ", name, ": ", failure, "; log ", partial_log.string(),
+                               ":\n", tail_of(partial_log, 3)));
+    if (!tty_) std::cerr << "reproduce: " << name << " failed: " << failure << "\n";
+  }
+
+  int loop(const std::vector<const Run*>& todo) {
+    tty_ = ::isatty(2) != 0;
+    total_ = plan_.size();
+    done_ = plan_.size() - todo.size();
+    started_ = std::chrono::steady_clock::now();
+    std::size_t next = 0;
+    auto last_progress = std::chrono::steady_clock::time_point{};
+    while (true) {
+      if (interrupted) {
+        for (const auto& c : running_) ::kill(c.pid, SIGTERM);
+        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+        while (!running_.empty()) {
+          reap();
+          if (std::chrono::steady_clock::now() > deadline)
+            for (const auto& c : running_) ::kill(c.pid, SIGKILL);
+          std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        }
+        return 130;
+      }
+      bool changed = false;
+      while (running_.size() < static_cast<std::size_t>(options_.jobs) && next < todo.size()) {
+        start(*todo[next++]);
+        changed = true;
+      }
+      if (running_.empty()) break;
+      changed = reap() || changed;
+      const auto now = std::chrono::steady_clock::now();
+      if ((tty_ && now - last_progress > std::chrono::milliseconds(500)) || (!tty_ && changed)) {
+        progress();
+        last_progress = now;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return 0;
+  }
+
+  /// Collects every ended child; true when one ended.
+  bool reap() {
+    bool any = false;
+    for (auto it = running_.begin(); it != running_.end();) {
+      int status = 0;
+      const pid_t pid = ::waitpid(it->pid, &status, WNOHANG);
+      if (pid == it->pid) {
+        const Child child = *it;
+        it = running_.erase(it);
+        finished(child, status);
+        any = true;
+      } else {
+        ++it;
+      }
+    }
+    return any;
+  }
+
+  void progress() {
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
+    std::string names;
+    for (const auto& c : running_) names += (names.empty() ? "" : ", ") + c.run->name();
+    std::string line = concat("[", done_, "/", total_, "] ",
+                              names.empty() ? "done" : "running: " + names, "  ",
+                              format_duration(elapsed));
+    if (!failures_.empty()) line += concat("  (", failures_.size(), " failed)");
+    if (tty_) {
+      winsize size{};
+      std::size_t width = 100;
+      if (::ioctl(2, TIOCGWINSZ, &size) == 0 && size.ws_col > 10) width = size.ws_col;
+      if (line.size() >= width) {  // shorten the names, keep the counts and the time
+        const std::string time = "... " + format_duration(elapsed);
+        line = line.substr(0, width - 1 - time.size()) + time;
+      }
+      std::fprintf(stderr, "\r%s\033[K", line.c_str());
+      progress_shown_ = true;
+    } else {
+      std::fprintf(stderr, "%s\n", line.c_str());
+    }
+    std::fflush(stderr);
+  }
+
+  void finish_progress() {
+    if (tty_ && progress_shown_) {
+      progress();
+      std::fprintf(stderr, "\n");
+      progress_shown_ = false;
+    }
+  }
+
+  const Options& options_;
+  std::vector<Run> plan_;
+  fs::path bin_dir_, out_, runs_;
+  int lock_fd_ = -1;
+  std::map<decltype(Run{}.order_key()), Summary> summaries_;
+  std::vector<std::string> failures_;
+  std::vector<Child> running_;
+  std::size_t done_ = 0, total_ = 0;
+  bool tty_ = false, progress_shown_ = false;
+  std::chrono::steady_clock::time_point started_;
+};
+
+}  // namespace reproduce

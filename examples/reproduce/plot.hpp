@@ -1,0 +1,83 @@
+// reproduce: the figures (tools/plot_results.py) and the printed plan of --dry-run.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "options.hpp"
+#include "processes.hpp"
+#include "run_files.hpp"
+
+namespace reproduce {
+
+inline void plot(const Options& o, const fs::path& own_dir) {
+  std::vector<fs::path> scripts;
+  if (!o.plot_script.empty()) scripts.push_back(o.plot_script);
+  else
+    scripts = {fs::path(__FILE__).parent_path().parent_path().parent_path() / "tools" /
+                   "plot_results.py",
+               own_dir.parent_path().parent_path() / "tools" / "plot_results.py",
+               own_dir / "plot_results.py"};
+  const auto script = std::find_if(scripts.begin(), scripts.end(),
+                                   [](const fs::path& p) { return fs::is_regular_file(p); });
+  if (script == scripts.end()) {
+    std::cerr << "reproduce: warning: tools/plot_results.py not found (tried "
+              << scripts.front() << "); no plots; pass --plot-script FILE\n";
+    return;
+  }
+  std::vector<std::string> pythons;
+  if (!o.python.empty()) pythons.push_back(o.python);
+  else pythons = {"python3", "/usr/bin/python3"};
+  std::string python;
+  for (const auto& p : pythons)
+    if (run_command({p, "-c", "import matplotlib"}, true) == 0) {
+      python = p;
+      break;
+    }
+  if (python.empty()) {
+    std::cerr << "reproduce: warning: no python3 with matplotlib (apt-get install "
+                 "python3-matplotlib); no plots\n";
+    return;
+  }
+  std::fflush(stdout);
+  const int code = run_command({python, script->string(), o.out}, false);
+  if (code != 0)
+    std::cerr << "reproduce: warning: " << script->string() << " failed (exit code " << code
+              << "); no plots\n";
+  else
+    std::printf("plots: %s\n", (fs::path(o.out) / "plots").c_str());
+}
+
+inline void print_plan(const Options& o, const std::vector<Run>& plan, const fs::path& bin_dir) {
+  double estimate = 0;
+  std::size_t todo = 0;
+  const fs::path runs = fs::path(o.out) / "runs";
+  for (const auto& run : plan) {
+    std::string command;
+    for (const auto& a : command_line(run, bin_dir, runs, o.threads))
+      command += (command.empty() ? "" : " ") + a;
+    const bool finished = fs::exists(run_file(runs, run, ".csv"));
+    std::printf("%-34s %s%s\n", run.name().c_str(), command.c_str(),
+                finished ? "  (finished)" : "");
+    if (!finished) estimate += run.estimated_seconds(), ++todo;
+  }
+  std::printf("%zu runs planned (profile %s, %zu finished, %zu to do), estimated %s of "
+              "compute, about %s wall time with --jobs %ld\n",
+              plan.size(), o.profile.c_str(), plan.size() - todo, todo,
+              format_duration(estimate).c_str(),
+              format_duration(estimate / static_cast<double>(std::min<std::size_t>(
+                                             static_cast<std::size_t>(o.jobs),
+                                             std::max<std::size_t>(todo, 1))))
+                  .c_str(),
+              o.jobs);
+}
+
+}  // namespace reproduce

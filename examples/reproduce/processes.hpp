@@ -1,0 +1,114 @@
+// reproduce: child processes (spawned in their own process group, dying with the runner) and
+// the signals that interrupt a sweep.
+#pragma once
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/prctl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "text.hpp"
+
+namespace reproduce {
+
+inline volatile std::sig_atomic_t interrupted = 0;
+extern "C" void on_signal(int signal_number) { interrupted = signal_number; }
+
+inline void install_signal_handlers() {
+  struct sigaction action {};
+  action.sa_handler = on_signal;
+  sigemptyset(&action.sa_mask);
+  for (int s : {SIGINT, SIGTERM, SIGHUP}) sigaction(s, &action, nullptr);
+}
+
+/// Forks and execs argv[0] with stdin from /dev/null and stdout + stderr into `log_fd` (or
+/// inherited when -1). The child gets its own process group (a terminal's Ctrl-C reaches
+/// only the runner, which then stops its children) and dies with the runner.
+inline pid_t spawn(const std::vector<std::string>& argv, int log_fd, bool search_path = false) {
+  std::vector<char*> pointers;
+  for (const auto& a : argv) pointers.push_back(const_cast<char*>(a.c_str()));
+  pointers.push_back(nullptr);
+  const int null_fd = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
+  const pid_t parent = ::getpid();
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    // Only async-signal-safe calls until exec.
+    ::setpgid(0, 0);
+    ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (::getppid() != parent) ::_exit(127);  // the runner died before prctl took effect
+    struct sigaction action {};
+    action.sa_handler = SIG_DFL;
+    for (int s : {SIGINT, SIGTERM, SIGHUP}) ::sigaction(s, &action, nullptr);
+    if (null_fd >= 0) ::dup2(null_fd, 0);
+    if (log_fd >= 0) {
+      ::dup2(log_fd, 1);
+      ::dup2(log_fd, 2);
+    }
+    if (search_path) ::execvp(pointers[0], pointers.data());
+    else ::execv(pointers[0], pointers.data());
+    const char message[] = "reproduce: cannot execute the program\n";
+    [[maybe_unused]] const auto ignored = ::write(2, message, sizeof message - 1);
+    ::_exit(127);
+  }
+  if (null_fd >= 0) ::close(null_fd);
+  return pid;
+}
+
+/// Runs a command to completion; returns its exit code (-1 when it did not exit normally).
+inline int run_command(const std::vector<std::string>& argv, bool quiet) {
+  int log_fd = -1;
+  if (quiet) log_fd = ::open("/dev/null", O_WRONLY | O_CLOEXEC);
+  const pid_t pid = spawn(argv, log_fd, true);
+  if (log_fd >= 0) ::close(log_fd);
+  if (pid < 0) return -1;
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0) {
+    if (errno != EINTR) return -1;
+    if (interrupted) ::kill(pid, SIGTERM);
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+inline std::string describe_status(int status) {
+  if (WIFEXITED(status)) return concat("exit code ", WEXITSTATUS(status));
+  if (WIFSIGNALED(status)) return concat("killed by signal ", WTERMSIG(status));
+  return "ended";
+}
+
+inline bool is_executable(const fs::path& path) {
+  return ::access(path.c_str(), X_OK) == 0 && fs::is_regular_file(path);
+}
+
+inline fs::path own_directory(const char* argv0) {
+  std::error_code error;
+  const fs::path self = fs::read_symlink("/proc/self/exe", error);
+  if (!error) return self.parent_path();
+  return fs::absolute(argv0).parent_path();
+}
+
+inline std::string tail_of(const fs::path& log, std::size_t count) {
+  const auto lines = split(read_text(log), '\n');
+  std::string text;
+  std::size_t shown = 0;
+  for (auto it = lines.rbegin(); it != lines.rend() && shown < count; ++it) {
+    if (it->empty()) continue;
+    text = "    " + *it + "\n" + text;
+    ++shown;
+  }
+  return text;
+}
+
+}  // namespace reproduce

@@ -1,0 +1,35 @@
+// reproduce: the files of one run in <out>/runs and the task program command that writes them.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "grid.hpp"
+
+namespace reproduce {
+
+/// runs/<name><suffix>: the files of one run.
+inline fs::path run_file(const fs::path& runs, const Run& run, const char* suffix) {
+  return runs / (run.name() + suffix);
+}
+
+/// The task program's command line. --threads is passed here and kept out of Run::flags(),
+/// which make the run's .run file: results are bitwise identical for any thread count
+/// (docs/benchmarks.md), so a sweep resumed with another --threads keeps its finished runs.
+inline std::vector<std::string> command_line(const Run& run, const fs::path& bin_dir,
+                                             const fs::path& runs, long threads) {
+  std::vector<std::string> argv{(bin_dir / run.info().name).string()};
+  for (const auto& f : run.flags()) argv.push_back(f);
+  argv.insert(argv.end(), {"--threads", std::to_string(threads), "--csv",
+                           run_file(runs, run, ".partial.csv").string()});
+  return argv;
+}
+
+}  // namespace reproduce

@@ -1,0 +1,126 @@
+// reproduce: summary.csv and the results table, from the training logs of finished runs.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <sbptt/train/training_log.hpp>
+
+#include "grid.hpp"
+
+namespace reproduce {
+
+struct Summary {
+  Run run;
+  long epochs_done = 0;
+  double final_test = NAN, min_test = NAN, final_train = NAN;
+  double mean_seconds = NAN, total_seconds = 0;
+  [[nodiscard]] std::string status() const {
+    return epochs_done == run.epochs ? "ok" : "stopped";
+  }
+};
+
+inline constexpr const char* summary_header =
+    "task,complexity,method,clip,seed,epochs,final_test_loss,min_test_loss,final_train_loss,"
+    "mean_seconds_per_epoch,total_seconds,status,run";
+
+/// Reads a finished training log (DESIGN §4). Throws ParseError naming the file and line.
+inline Summary summarize(const Run& run, const fs::path& csv) {
+  const std::string text = read_text(csv);
+  const auto lines = split(text, '\n');
+  if (lines.empty() || lines[0] != sbptt::TrainingLog::header)
+    throw sbptt::ParseError(concat("'", csv.string(), "': the first line is not the training-log "
+                                                      "header '",
+                                   sbptt::TrainingLog::header, "'"));
+  Summary s{run};
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    if (lines[i].empty()) continue;
+    const auto fields = split(lines[i], ',');
+    const std::string where = concat("'", csv.string(), "', line ", i + 1);
+    if (fields.size() != 8)
+      throw sbptt::ParseError(concat(where, ": ", fields.size(), " fields, expected 8"));
+    auto number = [&](std::size_t k) {
+      char* end = nullptr;
+      const double v = std::strtod(fields[k].c_str(), &end);
+      if (fields[k].empty() || end != fields[k].c_str() + fields[k].size())
+        throw sbptt::ParseError(concat(where, ", field ", k + 1, ": '", fields[k],
+                                       "' is not a number"));
+      return v;
+    };
+    const double train = number(2), test = number(3), seconds = number(7);
+    s.final_train = train;
+    s.final_test = test;
+    s.min_test = s.epochs_done == 0 ? test : std::min(s.min_test, test);
+    s.total_seconds += seconds;
+    ++s.epochs_done;
+  }
+  if (s.epochs_done > 0) s.mean_seconds = s.total_seconds / static_cast<double>(s.epochs_done);
+  return s;
+}
+
+inline std::string summary_csv(const std::vector<Summary>& rows) {
+  std::string text = std::string(summary_header) + "\n";
+  auto value = [](double v) { return std::isnan(v) ? std::string() : format_exact(v); };
+  for (const auto& s : rows) {
+    char seconds[96];
+    if (s.epochs_done > 0)
+      std::snprintf(seconds, sizeof seconds, "%.6f,%.6f", s.mean_seconds, s.total_seconds);
+    else
+      std::snprintf(seconds, sizeof seconds, ",%.6f", s.total_seconds);
+    text += concat(s.run.info().name, ",", format_number(s.run.complexity), ",",
+                   sbptt::label(s.run.method), ",", sbptt::to_string(s.run.clip), ",", s.run.seed,
+                   ",", s.epochs_done, ",", value(s.final_test), ",", value(s.min_test), ",",
+                   value(s.final_train), ",", seconds, ",", s.status(), ",", s.run.name(), "\n");
+  }
+  return text;
+}
+
+inline double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+/// The results table: per task, complexity, method and clip mode, the final test loss over
+/// seeds (median and min–max) and the mean training seconds per epoch.
+inline void print_table(const std::vector<Summary>& rows) {
+  std::printf("\n%-9s %-10s %-6s %-5s %5s  %-12s %-27s %9s  %s\n", "task", "complexity", "method",
+              "clip", "seeds", "median test", "[min, max] over seeds", "s/epoch", "stopped");
+  for (std::size_t i = 0; i < rows.size();) {
+    std::size_t j = i;
+    std::vector<double> finals;
+    double seconds = 0;
+    long seconds_count = 0, stopped = 0;
+    const Run& r = rows[i].run;
+    for (; j < rows.size() && rows[j].run.task == r.task &&
+           same_number(rows[j].run.complexity, r.complexity) && rows[j].run.method == r.method &&
+           rows[j].run.clip == r.clip;
+         ++j) {
+      if (!std::isnan(rows[j].final_test)) finals.push_back(rows[j].final_test);
+      if (!std::isnan(rows[j].mean_seconds)) seconds += rows[j].mean_seconds, ++seconds_count;
+      if (rows[j].status() != "ok") ++stopped;
+    }
+    char loss[32] = "-", spread[64] = "", time[32] = "-";
+    if (!finals.empty()) {
+      std::snprintf(loss, sizeof loss, "%.6g", median(finals));
+      const auto [lo, hi] = std::minmax_element(finals.begin(), finals.end());
+      if (finals.size() > 1) std::snprintf(spread, sizeof spread, "[%.6g, %.6g]", *lo, *hi);
+    }
+    if (seconds_count > 0)
+      std::snprintf(time, sizeof time, "%.4f", seconds / static_cast<double>(seconds_count));
+    std::printf("%-9s %-10s %-6s %-5s %5zu  %-12s %-27s %9s  %s\n", r.info().name,
+                format_number(r.complexity).c_str(), std::string(sbptt::label(r.method)).c_str(),
+                sbptt::to_string(r.clip).c_str(), j - i, loss, spread, time,
+                stopped ? std::to_string(stopped).c_str() : "");
+    i = j;
+  }
+}
+
+}  // namespace reproduce

@@ -2,8 +2,12 @@
 # Installs the Debian packages sbptt needs, only those that are missing, and any package named
 # on the command line (the check scripts add clang, its sanitizer runtimes and clang-tidy).
 # Run as root, or as a user with sudo.
+# libqhull-dev: Debian's CMake package of MuJoCo names /usr/include/libqhull_r/ as an include
+# directory of mujoco::mujoco without depending on the package that creates it, and CMake
+# refuses a downstream target that links it while the directory is missing.
 set -euo pipefail
-packages=(cmake make g++ libeigen3-dev catch2 python3 python3-matplotlib "$@")
+packages=(cmake make g++ libeigen3-dev catch2 libmujoco-dev libqhull-dev python3 python3-matplotlib
+          "$@")
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -1,0 +1,328 @@
+#pragma once
+/// \file A `Simulator` over any smooth MuJoCo model (`mjModel`, MuJoCo 2.2): the physics is
+/// MuJoCo's, the derivatives are its finite differences.
+///
+/// Opt-in: this is the only header that includes `<mujoco/mujoco.h>`; `sbptt/sbptt.hpp` does
+/// not include it, and a consumer links the CMake target `sbptt::mujoco` (which brings
+/// `mujoco::mujoco`) to use it.
+///
+/// State layout (size 2 nv + na): qpos (nq = nv entries), qvel (nv), act (na). Control: ctrl
+/// (nu). Step: one `mj_step` with the model's own integrator and `opt.timestep` (MuJoCo's
+/// `Euler` is semi-implicit: v' = v + h a(q, v, u), q' = q + h v').
+///
+/// Jacobians: `mjd_transitionFD` with centered differences of step `fd_step`,
+///
+///     A = ∂x'/∂x ≈ (P(x + ε e_j, u) − P(x − ε e_j, u)) / 2ε   (state_dim × state_dim)
+///     B = ∂x'/∂u ≈ (P(x, u + ε e_j) − P(x, u − ε e_j)) / 2ε   (state_dim × nu)
+///
+/// so one call costs 2 (2 nv + na + nu) + 1 steps and is accurate to O(ε²) + O(δ/ε), δ the
+/// rounding error of one step. The VJP forms A and B and returns Aᵀλ, Bᵀλ: the same cost.
+///
+/// Refused: models whose qpos and qvel differ in size (free and ball joints hold a quaternion
+/// in qpos and an angular velocity in qvel). `mjd_transitionFD` differentiates in the tangent
+/// space (nv position coordinates), so A would not be ∂x'/∂x of the (qpos, qvel) state the
+/// engine stores; mapping the tangent space correctly is not done here. Also refused: models
+/// without an actuator (nothing for a controller to drive).
+///
+/// Threads: the `mjModel` is read-only after construction; every call leases an `mjData`
+/// from a pool for its whole duration, so no `mjData` is ever used by two threads at once and
+/// the pool holds at most one per concurrent caller. Every call first writes the whole input
+/// state (qpos, qvel, act, ctrl, time 0, warm start 0), so the result does not depend on which
+/// `mjData` served it or what it computed before: 1 and N threads give bitwise equal results.
+///
+/// Failures: a step MuJoCo cannot take (a NaN or |value| > 1e10 in the state, control or
+/// acceleration, or a full contact/constraint buffer, after which MuJoCo silently resets its
+/// state) yields NaN in every output instead, as a diverging analytic simulator would, so the
+/// engine's non-finite report names the step. The adapter keeps MuJoCo from printing these
+/// warnings or writing MUJOCO_LOG.TXT (see `arm_mujoco_warnings`).
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+#include <mujoco/mujoco.h>
+
+#include "sbptt/core/error.hpp"
+#include "sbptt/core/types.hpp"
+
+namespace sbptt {
+
+/// Deletes an `mjModel` (for `std::unique_ptr` / `std::shared_ptr`).
+struct MujocoModelDeleter {
+  void operator()(mjModel* model) const { mj_deleteModel(model); }
+};
+
+/// An owned `mjModel`.
+using MujocoModelPtr = std::unique_ptr<mjModel, MujocoModelDeleter>;
+
+/// Parses and compiles the MJCF (or URDF) file `path`. Throws InvalidArgument naming the file
+/// and quoting MuJoCo's own message when it does not load.
+[[nodiscard]] inline MujocoModelPtr load_mujoco_model(const std::string& path) {
+  std::vector<char> message(1000, '\0');
+  MujocoModelPtr model(
+      mj_loadXML(path.c_str(), nullptr, message.data(), static_cast<int>(message.size())));
+  detail::require(model != nullptr, "load_mujoco_model: cannot load the model file '", path,
+                  "': ", message.data());
+  return model;
+}
+
+/// Settings of `MujocoSimulator`.
+struct MujocoOptions {
+  /// ε of the centered differences of `mjd_transitionFD` (absolute, in state and control
+  /// units; > 0). MuJoCo's own suggestion is 1e-6.
+  double fd_step = 1e-6;
+};
+
+namespace detail {
+
+/// The warnings after which MuJoCo has reset or truncated the step it was asked to take.
+constexpr int mujoco_failures[] = {mjWARN_CONTACTFULL, mjWARN_CNSTRFULL, mjWARN_BADQPOS,
+                                   mjWARN_BADQVEL, mjWARN_BADQACC, mjWARN_BADCTRL};
+
+/// Marks every warning as raised once already, with no info. MuJoCo's `mj_warning` prints
+/// (and appends to MUJOCO_LOG.TXT in the working directory) only a warning's first
+/// occurrence in an mjData, so this keeps a library call silent; any warning then changes
+/// `lastinfo`, and `mj_resetData` zeroes the record, so `mujoco_step_failed` still sees it.
+inline void arm_mujoco_warnings(mjData& data) {
+  for (auto& warning : data.warning) {
+    warning.number = 1;
+    warning.lastinfo = -1;
+  }
+}
+
+/// Whether MuJoCo raised one of `mujoco_failures` since `arm_mujoco_warnings`.
+inline bool mujoco_step_failed(const mjData& data) {
+  for (const int kind : mujoco_failures) {
+    const mjWarningStat& warning = data.warning[kind];
+    if (warning.number != 1 || warning.lastinfo != -1) return true;
+  }
+  return false;
+}
+
+/// One `mjData` with the row-major Jacobian buffers of `mjd_transitionFD`.
+struct MujocoSlot {
+  struct DataDeleter {
+    void operator()(mjData* data) const { mj_deleteData(data); }
+  };
+  std::unique_ptr<mjData, DataDeleter> data;
+  std::vector<mjtNum> state_jacobian, control_jacobian;  ///< n × n and n × nu, row-major
+};
+
+/// A pool of `MujocoSlot`s: `lease()` hands out a slot no other caller holds, and takes it
+/// back when the lease ends. Grows to the largest number of concurrent callers.
+class MujocoDataPool {
+public:
+  explicit MujocoDataPool(std::shared_ptr<const mjModel> model) : model_(std::move(model)) {}
+
+  class Lease {
+  public:
+    Lease(MujocoDataPool& pool, std::unique_ptr<MujocoSlot> slot)
+        : pool_(&pool), slot_(std::move(slot)) {}
+    Lease(const Lease&) = delete;
+    Lease& operator=(const Lease&) = delete;
+    Lease(Lease&&) = delete;
+    Lease& operator=(Lease&&) = delete;
+    ~Lease() { pool_->give_back(std::move(slot_)); }
+    MujocoSlot& operator*() const { return *slot_; }
+    MujocoSlot* operator->() const { return slot_.get(); }
+
+  private:
+    MujocoDataPool* pool_;
+    std::unique_ptr<MujocoSlot> slot_;
+  };
+
+  [[nodiscard]] Lease lease() {
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      if (!free_.empty()) {
+        auto slot = std::move(free_.back());
+        free_.pop_back();
+        return {*this, std::move(slot)};
+      }
+    }
+    auto slot = std::make_unique<MujocoSlot>();
+    slot->data.reset(mj_makeData(model_.get()));
+    require(slot->data != nullptr, "MujocoSimulator: mj_makeData could not allocate an mjData");
+    const std::size_t n =
+        2 * static_cast<std::size_t>(model_->nv) + static_cast<std::size_t>(model_->na);
+    slot->state_jacobian.resize(n * n);
+    slot->control_jacobian.resize(n * static_cast<std::size_t>(model_->nu));
+    return {*this, std::move(slot)};
+  }
+
+private:
+  void give_back(std::unique_ptr<MujocoSlot> slot) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    free_.push_back(std::move(slot));
+  }
+
+  std::shared_ptr<const mjModel> model_;
+  std::mutex mutex_;
+  std::vector<std::unique_ptr<MujocoSlot>> free_;
+};
+
+}  // namespace detail
+
+/// A MuJoCo model as an sbptt `Simulator` (see the file comment for the state layout, the
+/// derivatives and the threading). Copies share the model and the data pool; both are safe
+/// to use from any number of threads.
+template <class ScalarT = double>
+class MujocoSimulator {
+public:
+  using Scalar = ScalarT;
+  using State = Vector<Scalar>;            ///< (qpos, qvel, act): 2 nv + na
+  using Control = Vector<Scalar>;          ///< ctrl: nu
+  using StateJacobian = Matrix<Scalar>;    ///< (2 nv + na) × (2 nv + na)
+  using ControlJacobian = Matrix<Scalar>;  ///< (2 nv + na) × nu
+
+  /// Copies `model` (later changes to it do not reach the simulator). Throws InvalidArgument
+  /// for a model with nq ≠ nv, without actuators, or a bad option.
+  explicit MujocoSimulator(const mjModel& model, const MujocoOptions& options = {})
+      : options_(options) {
+    detail::require(model.nq == model.nv, "MujocoSimulator: the model has nq = ", model.nq,
+                    " position coordinates but nv = ", model.nv,
+                    " velocity coordinates (a free or ball joint: its orientation is a "
+                    "quaternion in qpos and an angular velocity in qvel); the state (qpos, qvel, "
+                    "act) and the tangent-space Jacobians of mjd_transitionFD would not match, "
+                    "so only models of hinge and slide joints are supported");
+    detail::require(model.nu >= 1, "MujocoSimulator: the model has no actuator (nu = 0), "
+                                   "so a controller has nothing to drive; expected nu >= 1");
+    detail::require(std::isfinite(options.fd_step) && options.fd_step > 0,
+                    "MujocoSimulator: fd_step = ", options.fd_step, ", expected a finite ε > 0");
+    detail::require(model.opt.timestep > 0, "MujocoSimulator: the model's timestep = ",
+                    model.opt.timestep, ", expected > 0");
+    mjModel* copy = mj_copyModel(nullptr, &model);
+    detail::require(copy != nullptr, "MujocoSimulator: mj_copyModel could not copy the model");
+    model_ = std::shared_ptr<const mjModel>(copy, MujocoModelDeleter{});
+    pool_ = std::make_shared<detail::MujocoDataPool>(model_);
+    nv_ = model.nv;
+    na_ = model.na;
+    nu_ = model.nu;
+  }
+
+  /// The simulator's own copy of the model (read-only).
+  [[nodiscard]] const mjModel& model() const { return *model_; }
+  [[nodiscard]] const MujocoOptions& options() const { return options_; }
+  [[nodiscard]] Index state_dim() const { return 2 * nv_ + na_; }
+  [[nodiscard]] Index control_dim() const { return nu_; }
+  [[nodiscard]] Scalar dt() const { return static_cast<Scalar>(model_->opt.timestep); }
+
+  /// The model's rest state: (qpos0, 0, 0) (state_dim).
+  [[nodiscard]] State initial_state() const {
+    State x = State::Zero(state_dim());
+    for (Index i = 0; i < nv_; ++i) x(i) = static_cast<Scalar>(model_->qpos0[i]);
+    return x;
+  }
+
+  /// x_next = one mj_step from (x, u). x, x_next: state_dim; u: control_dim.
+  void step(const State& x, const Control& u, State& x_next) const {
+    check_sizes(x, u);
+    auto slot = pool_->lease();
+    x_next.resize(state_dim());
+    mjData& d = *slot->data;
+    if (!load(x, u, d)) {
+      x_next.setConstant(nan());
+      return;
+    }
+    mj_step(model_.get(), &d);
+    if (detail::mujoco_step_failed(d)) {
+      x_next.setConstant(nan());
+      return;
+    }
+    for (Index i = 0; i < nv_; ++i) {
+      x_next(i) = static_cast<Scalar>(d.qpos[i]);
+      x_next(nv_ + i) = static_cast<Scalar>(d.qvel[i]);
+    }
+    for (Index i = 0; i < na_; ++i) x_next(2 * nv_ + i) = static_cast<Scalar>(d.act[i]);
+  }
+
+  /// A = ∂x_next/∂x (state_dim × state_dim), B = ∂x_next/∂u (state_dim × control_dim), by
+  /// centered finite differences of mj_step (mjd_transitionFD, step `options().fd_step`).
+  void jacobians(const State& x, const Control& u, StateJacobian& a, ControlJacobian& b) const {
+    check_sizes(x, u);
+    auto slot = pool_->lease();
+    const auto [a_row_major, b_row_major] = transition_jacobians(x, u, *slot);
+    a = a_row_major.template cast<Scalar>();
+    b = b_row_major.template cast<Scalar>();
+  }
+
+  /// *lambda_x = Aᵀ λ (state_dim), *lambda_u = Bᵀ λ (control_dim), from the finite-difference
+  /// A and B (one `jacobians` call). Either pointer may be null to skip that product.
+  void vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
+           Control* lambda_u) const {
+    check_sizes(x, u);
+    detail::require(lambda.size() == state_dim(), "MujocoSimulator: lambda has size ",
+                    lambda.size(), ", expected state_dim() = ", state_dim());
+    if (lambda_x == nullptr && lambda_u == nullptr) return;
+    auto slot = pool_->lease();
+    const auto [a, b] = transition_jacobians(x, u, *slot);
+    const Vector<mjtNum> adjoint = lambda.template cast<mjtNum>();
+    if (lambda_x != nullptr) *lambda_x = (a.transpose() * adjoint).template cast<Scalar>();
+    if (lambda_u != nullptr) *lambda_u = (b.transpose() * adjoint).template cast<Scalar>();
+  }
+
+private:
+  using RowMajorMap = Eigen::Map<const RowMajorMatrix<mjtNum>>;
+  struct TransitionJacobians {
+    RowMajorMap a, b;
+  };
+
+  [[nodiscard]] static Scalar nan() { return std::numeric_limits<Scalar>::quiet_NaN(); }
+
+  void check_sizes(const State& x, const Control& u) const {
+    detail::require(x.size() == state_dim(), "MujocoSimulator: x has size ", x.size(),
+                    ", expected state_dim() = 2 nv + na = ", state_dim());
+    detail::require(u.size() == control_dim(), "MujocoSimulator: u has size ", u.size(),
+                    ", expected control_dim() = nu = ", control_dim());
+  }
+
+  /// Writes the whole input of a step into `d`; false (and `d` untouched) if MuJoCo would
+  /// reject a value (NaN, ±Inf or beyond mjMAXVAL).
+  bool load(const State& x, const Control& u, mjData& d) const {
+    for (Index i = 0; i < x.size(); ++i)
+      if (mju_isBad(static_cast<mjtNum>(x(i)))) return false;
+    for (Index i = 0; i < u.size(); ++i)
+      if (mju_isBad(static_cast<mjtNum>(u(i)))) return false;
+    for (Index i = 0; i < nv_; ++i) {
+      d.qpos[i] = static_cast<mjtNum>(x(i));
+      d.qvel[i] = static_cast<mjtNum>(x(nv_ + i));
+      d.qacc_warmstart[i] = 0;
+    }
+    for (Index i = 0; i < na_; ++i) d.act[i] = static_cast<mjtNum>(x(2 * nv_ + i));
+    for (Index i = 0; i < nu_; ++i) d.ctrl[i] = static_cast<mjtNum>(u(i));
+    d.time = 0;
+    detail::arm_mujoco_warnings(d);
+    return true;
+  }
+
+  /// Fills the slot's row-major A and B (NaN if MuJoCo rejected any probe) and maps them.
+  TransitionJacobians transition_jacobians(const State& x, const Control& u,
+                                           detail::MujocoSlot& slot) const {
+    const Index n = state_dim();
+    TransitionJacobians out{RowMajorMap(slot.state_jacobian.data(), n, n),
+                            RowMajorMap(slot.control_jacobian.data(), n, nu_)};
+    const bool loaded = load(x, u, *slot.data);
+    if (loaded) {
+      mjd_transitionFD(model_.get(), slot.data.get(), options_.fd_step, 1,
+                       slot.state_jacobian.data(), slot.control_jacobian.data(), nullptr, nullptr);
+    }
+    if (!loaded || detail::mujoco_step_failed(*slot.data)) {
+      constexpr mjtNum not_a_number = std::numeric_limits<mjtNum>::quiet_NaN();
+      std::fill(slot.state_jacobian.begin(), slot.state_jacobian.end(), not_a_number);
+      std::fill(slot.control_jacobian.begin(), slot.control_jacobian.end(), not_a_number);
+    }
+    return out;
+  }
+
+  std::shared_ptr<const mjModel> model_;
+  std::shared_ptr<detail::MujocoDataPool> pool_;
+  MujocoOptions options_;
+  Index nv_ = 0, na_ = 0, nu_ = 0;
+};
+
+}  // namespace sbptt

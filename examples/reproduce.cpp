@@ -40,6 +40,9 @@ int main(int argc, char** argv) {
                   accepted_flags);
       return 0;
     }
+    if (!options.python.empty() && !can_execute(options.python))
+      throw InvalidArgument(concat("--python '", options.python, "' is no executable program; "
+                                   "expected a path or a name on PATH"));
     plan = make_plan(options);
     if (plan.empty())
       throw InvalidArgument(concat("the selection leaves no run of profile ", options.profile));
@@ -64,7 +67,7 @@ int main(int argc, char** argv) {
     Sweep sweep(options, plan, bin_dir);
     const int code = sweep.execute();
     if (code == 130) return code;
-    if (options.plot) plot(options, own_dir);
+    if (options.plot && plot(options, own_dir) == 130) return 130;
     return code;
   } catch (const std::exception& e) {
     std::cerr << "reproduce: " << e.what() << "\n";

@@ -23,96 +23,15 @@ foreach(var REPRODUCE WORK_DIR)
   endif()
 endforeach()
 
+include("${CMAKE_CURRENT_LIST_DIR}/reproduce_common.cmake")
 file(REMOVE_RECURSE "${WORK_DIR}")
-file(MAKE_DIRECTORY "${WORK_DIR}/fake")
-
-# --- the fake task program ------------------------------------------------------------------
-# Deterministic losses from the flags; the seconds column depends on the process id, so the
-# timing columns differ between sweeps (and must be left out of the comparison). Method R with
-# seed 43 "diverges": two epochs, exit 3. It notes every start and its pid in the out dir.
-set(fake [=[#!/bin/sh
-task=$(basename "$0")
-csv= epochs=1 seed=0 method= clip= complexity= threads=1
-while [ $# -gt 0 ]; do
-  case "$1" in
-    --csv) csv=$2; shift 2 ;;
-    --threads) threads=$2; shift 2 ;;
-    --epochs) epochs=$2; shift 2 ;;
-    --seed) seed=$2; shift 2 ;;
-    --method) method=$2; shift 2 ;;
-    --clip) clip=$2; shift 2 ;;
-    --poles|--rc|--target|--samples) [ "$1" = --samples ] || complexity=$2; shift 2 ;;
-    *) echo "$task: unknown flag '$1'" >&2; exit 2 ;;
-  esac
-done
-[ -n "$csv" ] || { echo "$task: no --csv" >&2; exit 2; }
-out=$(dirname "$(dirname "$csv")")
-name=$(basename "$csv" .partial.csv)
-echo "$$" >> "$out/fake_pids"
-echo "$name" >> "$out/fake_invocations"
-echo "$name $threads" >> "$out/fake_threads"
-stop=$epochs
-[ "$method" = R ] && [ "$seed" = 43 ] && stop=2
-echo "epoch,batch_loss,train_loss,test_loss,update_norm2,cos_m_r,agree_fraction,seconds" > "$csv.rows"
-e=1
-while [ "$e" -le "$stop" ]; do
-  awk -v e="$e" -v s="$seed" -v m="$method" -v c="$complexity" -v p="$$" 'BEGIN {
-    f = (m == "R") ? 1.0 : (m == "M") ? 0.8 : (m == "C") ? 0.5 : 1.5
-    loss = f * (1 + c) / (e + s - 41)
-    cosine = (m == "C") ? "0.25" : ""
-    agree = (m == "C") ? "0.75" : ""
-    printf "%d,%.17g,%.17g,%.17g,%.9g,%s,%s,%.6f\n", e, 1.1 * loss, 1.05 * loss, loss,
-           loss * loss, cosine, agree, 0.01 + (p % 97) / 1000.0 }' >> "$csv.rows"
-  cp "$csv.rows" "$csv.tmp.$$" && mv "$csv.tmp.$$" "$csv"
-  echo "$task: epoch $e"
-  sleep 0.12
-  e=$((e + 1))
-done
-rm -f "$csv.rows"
-[ "$stop" -lt "$epochs" ] && exit 3
-exit 0
-]=])
-foreach(task cartpole guidance quantum)
-  file(WRITE "${WORK_DIR}/fake/${task}" "${fake}")
-  file(CHMOD "${WORK_DIR}/fake/${task}" PERMISSIONS OWNER_READ OWNER_WRITE OWNER_EXECUTE
-       GROUP_READ GROUP_EXECUTE WORLD_READ WORLD_EXECUTE)
-endforeach()
+install_fake_task_programs("${WORK_DIR}/fake")
 
 # cart pole 4 poles, guidance rc 0.001, quantum target 4; R and C; seeds 42 and 43: 12 runs.
 set(grid --profile quick --complexities 4,0.001 --methods R,C --clips norm --seeds 2 --epochs 6
          --jobs 3 --bin-dir "${WORK_DIR}/fake")
 set(A "${WORK_DIR}/a")
 set(B "${WORK_DIR}/b")
-
-function(check condition_text)
-  if(NOT (${ARGN}))
-    message(FATAL_ERROR "FAILED: ${condition_text}")
-  endif()
-  message(STATUS "ok: ${condition_text}")
-endfunction()
-
-function(count_lines file out_var)
-  if(EXISTS "${file}")
-    file(STRINGS "${file}" lines)
-    list(LENGTH lines n)
-  else()
-    set(n 0)
-  endif()
-  set(${out_var} ${n} PARENT_SCOPE)
-endfunction()
-
-# The summary without the timing columns (mean_seconds_per_epoch, total_seconds).
-function(untimed_summary file out_var)
-  file(STRINGS "${file}" lines)
-  set(result "")
-  foreach(line IN LISTS lines)
-    string(REPLACE "," ";" fields "${line}")
-    list(REMOVE_AT fields 9 10)
-    string(REPLACE ";" "," kept "${fields}")
-    string(APPEND result "${kept}\n")
-  endforeach()
-  set(${out_var} "${result}" PARENT_SCOPE)
-endfunction()
 
 string(TIMESTAMP started "%s")
 

@@ -28,6 +28,7 @@ import argparse
 import csv
 import math
 import os
+import signal
 import sys
 import tempfile
 import textwrap
@@ -311,7 +312,15 @@ def speed_figure(runs, tasks):
     return fig
 
 
+def stop(signal_number, _frame):
+    # SIGTERM and SIGHUP end Python without unwinding; as an exception they run save()'s
+    # cleanup, so an interrupted plot leaves no temporary figure behind.
+    raise SystemExit(128 + signal_number)
+
+
 def main():
+    for signal_number in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signal_number, stop)
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("out", help="the sweep's output directory (holds summary.csv and runs/)")
     parser.add_argument("--window", type=int, default=30,

@@ -24,8 +24,10 @@
 #include <thread>
 #include <vector>
 
-#include <sbptt/core/atomic_file.hpp>
+#include <sbptt/train/training_log.hpp>
 
+#include "durable_files.hpp"
+#include "finished_run.hpp"
 #include "options.hpp"
 #include "processes.hpp"
 #include "run_files.hpp"
@@ -47,13 +49,25 @@ public:
     std::vector<const Run*> todo;
     std::vector<std::string> mismatched;
     for (const Run& run : plan_) {
-      const fs::path csv = runs_ / (run.name() + ".csv");
-      if (!fs::exists(csv)) {
+      if (!fs::exists(run_file(runs_, run, ".csv"))) {
         todo.push_back(&run);
         continue;
       }
-      if (read_text(runs_ / (run.name() + ".run")) != run.description())
+      const auto described = parse_description(read_text(run_file(runs_, run, ".run")));
+      if (described && described->name() == run.name() &&
+          described->description() != run.description()) {
         mismatched.push_back(run.name());
+        continue;
+      }
+      const FinishedRun finished = check_finished(run, runs_);
+      if (finished.summary) {
+        summaries_[run.order_key()] = *finished.summary;
+        continue;
+      }
+      std::printf("reproduce: %s: %s; the run is redone\n", run.name().c_str(),
+                  finished.damage.c_str());
+      forget_finished(runs_, run.name());
+      todo.push_back(&run);
     }
     if (!mismatched.empty()) {
       std::cerr << "reproduce: " << mismatched.size() << " finished run(s) in " << runs_
@@ -62,7 +76,7 @@ public:
                    "or remove runs/<name>.* to redo them\n";
       return 1;
     }
-    load_finished();
+    load_unplanned_finished();
     double estimate = 0;
     for (const Run* run : todo) estimate += run->estimated_seconds();
     std::printf("reproduce: profile %s, %zu runs planned (%zu finished, %zu to do), --jobs %ld, "
@@ -147,42 +161,41 @@ private:
                   discarded.size());
   }
 
-  /// Every finished run in the out dir (also of earlier sweeps with other filters).
-  void load_finished() {
+  /// The finished runs of earlier sweeps with other filters, which summary.csv lists too. A
+  /// damaged one is left out and removed, for a sweep that plans it to redo.
+  void load_unplanned_finished() {
+    std::set<std::string> planned;
+    for (const Run& run : plan_) planned.insert(run.name());
     for (const auto& entry : fs::directory_iterator(runs_)) {
       const fs::path path = entry.path();
-      if (path.extension() != ".run") continue;
-      const fs::path csv = fs::path(path).replace_extension(".csv");
-      if (!fs::exists(csv)) continue;
-      const auto run = parse_description(read_text(path));
-      if (!run || run->name() != path.stem().string()) {
-        std::cerr << "reproduce: warning: ignoring " << path << " (not a run description)\n";
+      const std::string name = path.stem().string();
+      if (path.extension() != ".csv" || name.ends_with(".partial") || planned.contains(name))
+        continue;
+      const auto run = parse_description(read_text(fs::path(path).replace_extension(".run")));
+      const FinishedRun finished = run && run->name() == name
+                                       ? check_finished(*run, runs_)
+                                       : FinishedRun{{}, "its .run file is missing or damaged"};
+      if (finished.summary) {
+        summaries_[run->order_key()] = *finished.summary;
         continue;
       }
-      add_summary(*run, csv);
-    }
-  }
-
-  bool add_summary(const Run& run, const fs::path& csv) {
-    try {
-      summaries_[run.order_key()] = summarize(run, csv);
-      return true;
-    } catch (const sbptt::Error& e) {
-      failures_.push_back(concat("  ", run.name(), ": ", e.what(), "\n"));
-      return false;
+      std::cerr << "reproduce: warning: " << name << " (of an earlier sweep, not planned now): "
+                << finished.damage << "; left out of summary.csv and removed, so that a sweep "
+                << "that plans it redoes it\n";
+      forget_finished(runs_, name);
     }
   }
 
   void write_summary() {
     std::vector<Summary> rows;
     for (const auto& [key, s] : summaries_) rows.push_back(s);
-    sbptt::write_file_atomically((out_ / "summary.csv").string(), summary_csv(rows));
+    write_durably(out_ / "summary.csv", summary_csv(rows));
   }
 
   bool start(const Run& run) {
     const std::string name = run.name();
     fs::remove(run_file(runs_, run, ".partial.csv"));
-    sbptt::write_file_atomically(run_file(runs_, run, ".run").string(), run.description());
+    write_durably(run_file(runs_, run, ".run"), run.description());
     const auto argv = command_line(run, bin_dir_, runs_, options_.threads);
     // Like the CSV, the log gets its final name only when the run has finished.
     const fs::path log = run_file(runs_, run, ".partial.log");
@@ -217,29 +230,28 @@ private:
     }
     std::string failure;
     if (WIFEXITED(status) && (WEXITSTATUS(status) == 0 || WEXITSTATUS(status) == 3)) {
-      const bool logged = fs::exists(partial);
-      if (logged || WEXITSTATUS(status) == 3) {
-        // The log first: a crash between the two renames leaves a run to redo, never a
-        // finished run whose log the next sweep would discard as partial.
-        fs::rename(partial_log, run_file(runs_, run, ".log"));
-        if (logged) {
-          fs::rename(partial, csv);  // atomic: the run is finished exactly when this happens
-        } else {
-          // Stopped in the first epoch: no row was logged, which is the result.
-          sbptt::write_file_atomically(csv.string(),
-                                       std::string(sbptt::TrainingLog::header) + "\n");
-        }
-      } else {
-        failure = concat("exited 0 but wrote no training log ", partial.string());
-      }
-      if (failure.empty()) {
-        if (add_summary(run, csv)) {
+      const int code = WEXITSTATUS(status);
+      // Stopped in the first epoch: no row was logged, which is the result.
+      if (code == 3 && !fs::exists(partial))
+        write_durably(partial, std::string(sbptt::TrainingLog::header) + "\n");
+      try {
+        if (!fs::exists(partial))
+          throw sbptt::ParseError(concat("exited 0 but wrote no training log ", partial.string()));
+        Summary summary = summarize(run, partial);
+        failure = contradiction(summary, code);
+        if (failure.empty()) {
+          // The log first: a crash between the two renames leaves a run to redo, never a
+          // finished run whose log the next sweep would discard as partial. The run is
+          // finished exactly when its CSV has its name, on disk.
+          rename_durably(partial_log, run_file(runs_, run, ".log"));
+          rename_durably(partial, csv);
+          summaries_[run.order_key()] = std::move(summary);
           ++done_;
           write_summary();
-        } else {
-          fs::remove(csv);  // not a valid log: redo it next time
+          return;
         }
-        return;
+      } catch (const sbptt::ParseError& e) {
+        failure = e.what();
       }
     } else if (WIFEXITED(status)) {
       const int code = WEXITSTATUS(status);

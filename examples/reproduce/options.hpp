@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include <sbptt/train/task_options.hpp>
+
 #include "grid.hpp"
 
 namespace reproduce {
@@ -40,9 +42,10 @@ inline std::string non_empty(const std::string& flag, std::string value) {
 }
 
 inline Options parse_options(int argc, const char* const* argv) {
+  // The task programs' limit: a value they would refuse is refused here, before any run starts.
+  constexpr long count_limit = sbptt::max_count;
   Options o;
   sbptt::ArgumentCursor args(argc, argv);
-  constexpr long many = 1'000'000'000;
   while (args.next()) {
     const std::string& f = args.flag();
     if (f == "--profile") {
@@ -88,8 +91,8 @@ inline Options parse_options(int argc, const char* const* argv) {
         list.push_back(sbptt::parse_number(f, item, 0, 1e9));
       o.complexities = list;
     } else if (f == "--seeds") o.seeds = sbptt::parse_integer(f, args.value(), 1, 1000);
-    else if (f == "--epochs") o.epochs = sbptt::parse_integer(f, args.value(), 1, many);
-    else if (f == "--samples") o.samples = sbptt::parse_integer(f, args.value(), 1, many);
+    else if (f == "--epochs") o.epochs = sbptt::parse_integer(f, args.value(), 1, count_limit);
+    else if (f == "--samples") o.samples = sbptt::parse_integer(f, args.value(), 1, count_limit);
     else if (f == "--jobs") o.jobs = sbptt::parse_integer(f, args.value(), 1, 256);
     else if (f == "--threads") o.threads = sbptt::parse_integer(f, args.value(), 1, 256);
     else if (f == "--out") o.out = non_empty(f, args.value());

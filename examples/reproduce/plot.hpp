@@ -18,7 +18,9 @@
 
 namespace reproduce {
 
-inline void plot(const Options& o, const fs::path& own_dir) {
+/// Draws the figures into <out>/plots. Returns 130 when a signal interrupted the plotting (the
+/// figures drawn so far are kept), else 0: a missing script or python is only a warning.
+inline int plot(const Options& o, const fs::path& own_dir) {
   std::vector<fs::path> scripts;
   if (!o.plot_script.empty()) scripts.push_back(o.plot_script);
   else
@@ -31,7 +33,7 @@ inline void plot(const Options& o, const fs::path& own_dir) {
   if (script == scripts.end()) {
     std::cerr << "reproduce: warning: tools/plot_results.py not found (tried "
               << scripts.front() << "); no plots; pass --plot-script FILE\n";
-    return;
+    return 0;
   }
   std::vector<std::string> pythons;
   if (!o.python.empty()) pythons.push_back(o.python);
@@ -42,18 +44,30 @@ inline void plot(const Options& o, const fs::path& own_dir) {
       python = p;
       break;
     }
+  if (interrupted) return 130;
   if (python.empty()) {
     std::cerr << "reproduce: warning: no python3 with matplotlib (apt-get install "
                  "python3-matplotlib); no plots\n";
-    return;
+    return 0;
   }
   std::fflush(stdout);
+  const fs::path plots = fs::path(o.out) / "plots";
   const int code = run_command({python, script->string(), o.out}, false);
+  // A script stopped by a signal cannot clean up after itself: its temporary figures go here.
+  std::error_code error;
+  for (const auto& entry : fs::directory_iterator(plots, error))
+    if (entry.path().filename().string().starts_with(".tmp.")) fs::remove(entry.path(), error);
+  if (interrupted) {
+    std::cerr << "reproduce: interrupted while plotting; the figures drawn so far are in "
+              << plots.string() << "\n";
+    return 130;
+  }
   if (code != 0)
     std::cerr << "reproduce: warning: " << script->string() << " failed (exit code " << code
               << "); no plots\n";
   else
-    std::printf("plots: %s\n", (fs::path(o.out) / "plots").c_str());
+    std::printf("plots: %s\n", plots.c_str());
+  return 0;
 }
 
 inline void print_plan(const Options& o, const std::vector<Run>& plan, const fs::path& bin_dir) {

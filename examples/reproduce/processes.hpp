@@ -13,6 +13,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -90,6 +91,15 @@ inline std::string describe_status(int status) {
 
 inline bool is_executable(const fs::path& path) {
   return ::access(path.c_str(), X_OK) == 0 && fs::is_regular_file(path);
+}
+
+/// `program` as execvp finds it: a path when it has a '/', else a name on PATH.
+inline bool can_execute(const std::string& program) {
+  if (program.find('/') != std::string::npos) return is_executable(program);
+  const char* path = std::getenv("PATH");
+  for (const auto& dir : split(path ? path : "/usr/bin:/bin", ':'))
+    if (is_executable(fs::path(dir.empty() ? "." : dir) / program)) return true;
+  return false;
 }
 
 inline fs::path own_directory(const char* argv0) {

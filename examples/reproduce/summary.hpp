@@ -31,17 +31,21 @@ inline constexpr const char* summary_header =
     "task,complexity,method,clip,seed,epochs,final_test_loss,min_test_loss,final_train_loss,"
     "mean_seconds_per_epoch,total_seconds,status,run";
 
-/// Reads a finished training log (DESIGN §4). Throws ParseError naming the file and line.
+/// Reads a finished training log (docs/programs.md): the header, then one row per epoch
+/// numbered 1, 2, ..., every line ended by a newline. Throws ParseError naming the file, the
+/// line and what is wrong (empty, cut off, a row that is not one).
 inline Summary summarize(const Run& run, const fs::path& csv) {
   const std::string text = read_text(csv);
-  const auto lines = split(text, '\n');
-  if (lines.empty() || lines[0] != sbptt::TrainingLog::header)
+  if (text.empty()) throw sbptt::ParseError(concat("'", csv.string(), "' is empty"));
+  if (text.back() != '\n')
+    throw sbptt::ParseError(concat("'", csv.string(), "' is cut off (its last line has no end)"));
+  const auto lines = split(text.substr(0, text.size() - 1), '\n');
+  if (lines[0] != sbptt::TrainingLog::header)
     throw sbptt::ParseError(concat("'", csv.string(), "': the first line is not the training-log "
                                                       "header '",
                                    sbptt::TrainingLog::header, "'"));
   Summary s{run};
   for (std::size_t i = 1; i < lines.size(); ++i) {
-    if (lines[i].empty()) continue;
     const auto fields = split(lines[i], ',');
     const std::string where = concat("'", csv.string(), "', line ", i + 1);
     if (fields.size() != 8)
@@ -54,6 +58,8 @@ inline Summary summarize(const Run& run, const fs::path& csv) {
                                        "' is not a number"));
       return v;
     };
+    if (number(0) != static_cast<double>(i))
+      throw sbptt::ParseError(concat(where, ": epoch ", fields[0], ", expected ", i));
     const double train = number(2), test = number(3), seconds = number(7);
     s.final_train = train;
     s.final_test = test;

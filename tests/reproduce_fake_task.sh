@@ -1,0 +1,46 @@
+#!/bin/sh
+# A fake task program for the runner's tests (reproduce_*.cmake): it keeps the task-program
+# contract (the flags, the training log rewritten atomically after every epoch, exit 0 or 3).
+# Deterministic losses from the flags; the seconds column depends on the process id, so the
+# timing columns differ between sweeps (and must be left out of comparisons). Method R with
+# seed 43 "diverges": two epochs, exit 3. It notes every start and its pid in the out dir.
+task=$(basename "$0")
+csv= epochs=1 seed=0 method= clip= complexity= threads=1
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --csv) csv=$2; shift 2 ;;
+    --threads) threads=$2; shift 2 ;;
+    --epochs) epochs=$2; shift 2 ;;
+    --seed) seed=$2; shift 2 ;;
+    --method) method=$2; shift 2 ;;
+    --clip) clip=$2; shift 2 ;;
+    --poles|--rc|--target|--samples) [ "$1" = --samples ] || complexity=$2; shift 2 ;;
+    *) echo "$task: unknown flag '$1'" >&2; exit 2 ;;
+  esac
+done
+[ -n "$csv" ] || { echo "$task: no --csv" >&2; exit 2; }
+out=$(dirname "$(dirname "$csv")")
+name=$(basename "$csv" .partial.csv)
+echo "$$" >> "$out/fake_pids"
+echo "$name" >> "$out/fake_invocations"
+echo "$name $threads" >> "$out/fake_threads"
+stop=$epochs
+[ "$method" = R ] && [ "$seed" = 43 ] && stop=2
+echo "epoch,batch_loss,train_loss,test_loss,update_norm2,cos_m_r,agree_fraction,seconds" > "$csv.rows"
+e=1
+while [ "$e" -le "$stop" ]; do
+  awk -v e="$e" -v s="$seed" -v m="$method" -v c="$complexity" -v p="$$" 'BEGIN {
+    f = (m == "R") ? 1.0 : (m == "M") ? 0.8 : (m == "C") ? 0.5 : 1.5
+    loss = f * (1 + c) / (e + s - 41)
+    cosine = (m == "C") ? "0.25" : ""
+    agree = (m == "C") ? "0.75" : ""
+    printf "%d,%.17g,%.17g,%.17g,%.9g,%s,%s,%.6f\n", e, 1.1 * loss, 1.05 * loss, loss,
+           loss * loss, cosine, agree, 0.01 + (p % 97) / 1000.0 }' >> "$csv.rows"
+  cp "$csv.rows" "$csv.tmp.$$" && mv "$csv.tmp.$$" "$csv"
+  echo "$task: epoch $e"
+  sleep 0.12
+  e=$((e + 1))
+done
+rm -f "$csv.rows"
+[ "$stop" -lt "$epochs" ] && exit 3
+exit 0

@@ -1,0 +1,137 @@
+# The runner never trusts a finished run's files blindly, and stops and refuses the way its
+# docs say (issue 13: defects 1, 9, 11, point 2 and two minor ones).
+#
+#   cmake -DREPRODUCE=<path of examples/reproduce> -DWORK_DIR=<scratch dir> -P reproduce_faults.cmake
+#
+# With the fake task programs of reproduce_fake_task.sh it
+#   1. damages the finished runs of a sweep in every way a crash or a user can (CSV emptied, cut
+#      mid-line, cut at a line boundary, .run removed, .log removed, CSV inconsistent with the
+#      exit code in the log), also a run of an earlier sweep that the next one does not plan,
+#      and checks that the next sweep exits 0, names each damaged run, redoes exactly the
+#      planned ones, and that its summary.csv equals the undamaged sweep's (timing aside);
+#   2. checks that --epochs and --samples above the task programs' limit, and a --python that
+#      does not exist, are refused with exit 2 before any work;
+#   3. interrupts the runner while it plots (a fake python and plot script that leave a
+#      temporary PNG behind): exit 130, no "no plots" message, no plots/.tmp.* left.
+cmake_minimum_required(VERSION 3.20)
+foreach(var REPRODUCE WORK_DIR)
+  if(NOT DEFINED ${var})
+    message(FATAL_ERROR "reproduce_faults.cmake: pass -D${var}=...")
+  endif()
+endforeach()
+include("${CMAKE_CURRENT_LIST_DIR}/reproduce_common.cmake")
+file(REMOVE_RECURSE "${WORK_DIR}")
+install_fake_task_programs("${WORK_DIR}/fake")
+
+# cart pole 4 poles; R and C; seeds 42, 43, 44: 6 runs (R s43 stops after 2 epochs, exit 3).
+set(grid --tasks cartpole --complexities 4 --methods R,C --clips norm --seeds 3 --epochs 4
+         --jobs 2 --no-plot --bin-dir "${WORK_DIR}/fake")
+set(out "${WORK_DIR}/sweep")
+
+# --- 1. damaged finished runs ----------------------------------------------------------------
+# An earlier sweep with another filter leaves guidance runs in the same folder.
+execute_process(COMMAND "${REPRODUCE}" --tasks guidance --complexities 0.001 --methods C
+                --clips norm --seeds 1 --epochs 3 --no-plot --bin-dir "${WORK_DIR}/fake"
+                --out "${out}" RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
+check("the earlier, other sweep exits 0" rc EQUAL 0)
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${out}" RESULT_VARIABLE rc
+                OUTPUT_VARIABLE first_out ERROR_VARIABLE first_err)
+check("the undamaged sweep exits 0" rc EQUAL 0)
+untimed_summary("${out}/summary.csv" undamaged)
+file(REMOVE "${out}/fake_invocations")
+
+set(runs "${out}/runs")
+file(WRITE "${runs}/cartpole_p4_R_norm_s42.csv" "")  # emptied
+file(READ "${runs}/cartpole_p4_C_norm_s42.csv" text)  # cut mid-line
+string(LENGTH "${text}" length)
+math(EXPR cut "${length} - 7")
+string(SUBSTRING "${text}" 0 ${cut} text)
+file(WRITE "${runs}/cartpole_p4_C_norm_s42.csv" "${text}")
+file(STRINGS "${runs}/cartpole_p4_C_norm_s43.csv" rows)  # cut at a line boundary
+list(REMOVE_AT rows -1)
+list(JOIN rows "\n" text)
+file(WRITE "${runs}/cartpole_p4_C_norm_s43.csv" "${text}\n")
+file(REMOVE "${runs}/cartpole_p4_R_norm_s44.run")
+file(REMOVE "${runs}/cartpole_p4_C_norm_s44.log")
+# R s43 stopped (exit 3) after 2 epochs; its log is made to say exit 0, which 2 rows contradict.
+file(READ "${runs}/cartpole_p4_R_norm_s43.log" text)
+string(REPLACE "# reproduce: exit code 3" "# reproduce: exit code 0" text "${text}")
+file(WRITE "${runs}/cartpole_p4_R_norm_s43.log" "${text}")
+file(WRITE "${runs}/guidance_rc0.001_C_norm_s42.csv" "epoch,batch_loss")  # not planned now
+set(damaged cartpole_p4_R_norm_s42 cartpole_p4_C_norm_s42 cartpole_p4_C_norm_s43
+            cartpole_p4_R_norm_s44 cartpole_p4_C_norm_s44 cartpole_p4_R_norm_s43)
+
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${out}" RESULT_VARIABLE rc
+                OUTPUT_VARIABLE again_out ERROR_VARIABLE again_err)
+message(STATUS "the sweep over damaged runs:\n${again_out}${again_err}")
+check("the sweep over damaged runs exits 0" rc EQUAL 0)
+check("no damaged run is taken for other settings" NOT again_err MATCHES "other settings")
+file(STRINGS "${out}/fake_invocations" redone)
+list(SORT redone)
+set(expected ${damaged})
+list(SORT expected)
+check("exactly the 6 damaged runs were redone, once each (${redone})" redone STREQUAL expected)
+set(again "${again_out}${again_err}")
+foreach(name IN LISTS damaged guidance_rc0.001_C_norm_s42)
+  check("${name}: the runner says it is damaged and why"
+        again MATCHES "${name}[^\n]*(damaged|missing|empty|cut|contradict)")
+endforeach()
+check("the damaged run of the earlier sweep is named as left to a sweep that plans it"
+      again_err MATCHES "guidance_rc0.001_C_norm_s42[^\n]*not planned")
+untimed_summary("${out}/summary.csv" repaired)
+string(REGEX REPLACE "[^\n]*guidance[^\n]*\n" "" undamaged_cartpole "${undamaged}")
+check("summary.csv after the repair equals the undamaged one (timing aside, no guidance row)"
+      repaired STREQUAL undamaged_cartpole)
+
+# --- 2. limits shared with the task programs; a missing python ------------------------------
+foreach(flag epochs samples)
+  execute_process(COMMAND "${REPRODUCE}" ${grid} --${flag} 2000000 --out "${WORK_DIR}/limits"
+                  TIMEOUT 20 RESULT_VARIABLE rc OUTPUT_QUIET ERROR_VARIABLE err)
+  check("--${flag} 2000000: exit 2 naming the flag and the value (${err})"
+        rc EQUAL 2 AND err MATCHES "--${flag} 2000000")
+  check("--${flag} 2000000: nothing was started" NOT EXISTS "${WORK_DIR}/limits")
+endforeach()
+execute_process(COMMAND "${REPRODUCE}" ${grid} --python "${WORK_DIR}/nonexistent"
+                --out "${WORK_DIR}/python" TIMEOUT 20 RESULT_VARIABLE rc OUTPUT_QUIET
+                ERROR_VARIABLE err)
+check("--python <missing>: exit 2 naming the flag, no matplotlib advice (${err})"
+      rc EQUAL 2 AND err MATCHES "--python" AND NOT err MATCHES "matplotlib")
+check("--python <missing>: nothing was started" NOT EXISTS "${WORK_DIR}/python")
+
+# --- 3. an interrupt while plotting ----------------------------------------------------------
+# The fake python imports anything and runs the script with sh; the fake plot script writes a
+# figure and a temporary one, then waits to be interrupted.
+file(WRITE "${WORK_DIR}/fake_python" "#!/bin/sh\n[ \"$1\" = -c ] && exit 0\nexec sh \"$@\"\n")
+file(WRITE "${WORK_DIR}/plot.sh" [=[
+mkdir -p "$1/plots"
+echo figure > "$1/plots/a.png"
+: > "$1/plots/.tmp.x7.png"
+echo started > "$1/plotting"
+exec sleep 30
+]=])
+file(CHMOD "${WORK_DIR}/fake_python" PERMISSIONS OWNER_READ OWNER_WRITE OWNER_EXECUTE)
+file(WRITE "${WORK_DIR}/interrupt.sh" [=[
+runner=$1; out=$2; shift 2
+"$runner" "$@" --out "$out" > "$out.log" 2>&1 &
+pid=$!
+i=0
+until [ -f "$out/plotting" ]; do
+  i=$((i + 1)); [ $i -gt 400 ] && { kill -9 $pid; echo "never plotted"; exit 1; }
+  sleep 0.05
+done
+kill -INT $pid
+wait $pid
+echo "exit code $?"
+cat "$out.log"
+ls -A "$out/plots"
+]=])
+string(REPLACE "--no-plot" "" plotting_grid "${grid}")
+execute_process(COMMAND sh "${WORK_DIR}/interrupt.sh" "${REPRODUCE}" "${WORK_DIR}/plotted"
+                ${plotting_grid} --python "${WORK_DIR}/fake_python"
+                --plot-script "${WORK_DIR}/plot.sh"
+                OUTPUT_VARIABLE interrupted ERROR_VARIABLE interrupted_err)
+message(STATUS "interrupted while plotting:\n${interrupted}${interrupted_err}")
+check("interrupted while plotting: exit code 130" interrupted MATCHES "exit code 130\n")
+check("interrupted while plotting: no false 'no plots'" NOT interrupted MATCHES "no plots")
+check("interrupted while plotting: the figure is kept" interrupted MATCHES "\na.png")
+check("interrupted while plotting: no temporary figure is left" NOT interrupted MATCHES "\\.tmp\\.")

@@ -23,7 +23,9 @@
 #include <exception>
 #include <iostream>
 
+#include "reproduce/emit.hpp"
 #include "reproduce/local_executor.hpp"
+#include "reproduce/merge.hpp"
 #include "reproduce/options.hpp"
 #include "reproduce/plot.hpp"
 
@@ -46,17 +48,28 @@ int main(int argc, char** argv) {
     plan = make_plan(options);
     if (plan.empty())
       throw InvalidArgument(concat("the selection leaves no run of profile ", options.profile));
+    // --merge accounts for the whole plan; everything else works on this process's share.
+    if (!options.merge) plan = select_share(options, plan);
   } catch (const InvalidArgument& e) {
     std::cerr << "reproduce: " << e.what() << "\n";
     return 2;
   }
-  const fs::path own_dir = own_directory(argv[0]);
+  const fs::path self = own_executable(argv[0]);
+  const fs::path own_dir = self.parent_path();
   const fs::path bin_dir = options.bin_dir.empty() ? own_dir : fs::path(options.bin_dir);
   if (options.dry_run) {
     print_plan(options, plan, bin_dir);
     return 0;
   }
   try {
+    if (options.emit == "parallel") return emit_parallel(options, plan, self, bin_dir);
+    if (options.emit == "slurm") return emit_slurm(options, plan, self, bin_dir);
+    if (options.merge) {
+      install_signal_handlers();
+      const int code = merge(options, plan);
+      if (options.plot && plot(options, own_dir) == 130) return 130;
+      return code;
+    }
     for (const auto& run : plan) {
       const fs::path program = bin_dir / run.info().name;
       if (!is_executable(program))

@@ -5,31 +5,44 @@
 // else (a file missing, emptied or cut by a crash or a user) is damage: the run is redone.
 #pragma once
 
+#include <algorithm>
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
+#include <tuple>
+#include <vector>
 
 #include <sbptt/core/error.hpp>
 
+#include "durable_files.hpp"
 #include "grid.hpp"
+#include "locks.hpp"
 #include "run_files.hpp"
 #include "summary.hpp"
 
 namespace reproduce {
 
-/// The last line the runner writes into a run's log; `exit_code` follows it.
+/// The last line the runner writes into a run's log: "# reproduce: exit code N after S s wall
+/// time".
 inline constexpr const char* exit_line_prefix = "# reproduce: exit code ";
 
-/// The exit code in the runner's last line of `log`, or nullopt when there is none.
-inline std::optional<int> logged_exit_code(const fs::path& log) {
+struct ExitLine {
+  int code = 0;
+  double wall_seconds = 0;  ///< the whole run: start-up, training and evaluation
+};
+
+/// The runner's last line of `log`, or nullopt when there is none.
+inline std::optional<ExitLine> logged_exit(const fs::path& log) {
   const auto lines = split(read_text(log), '\n');
   for (auto it = lines.rbegin(); it != lines.rend(); ++it) {
     if (it->empty()) continue;
     if (!it->starts_with(exit_line_prefix)) return std::nullopt;
-    const std::string rest = it->substr(std::string(exit_line_prefix).size());
-    const auto end = rest.find(' ');
+    const auto words = split(it->substr(std::string(exit_line_prefix).size()), ' ');
     try {
-      return static_cast<int>(sbptt::parse_integer("exit code", rest.substr(0, end), 0, 255));
+      if (words.size() < 3 || words[1] != "after") return std::nullopt;
+      return ExitLine{static_cast<int>(sbptt::parse_integer("exit code", words[0], 0, 255)),
+                      sbptt::parse_number("wall time", words[2], 0, 1e12)};
     } catch (const sbptt::Error&) {
       return std::nullopt;
     }
@@ -56,6 +69,7 @@ inline std::string contradiction(const Summary& summary, int exit_code) {
 struct FinishedRun {
   std::optional<Summary> summary;
   std::string damage;  ///< empty when `summary` holds
+  double wall_seconds = 0;
 };
 
 /// Checks the files of `run` in `runs` (its .csv exists) against each other.
@@ -66,21 +80,87 @@ inline FinishedRun check_finished(const Run& run, const fs::path& runs) {
   if (read_text(description) != run.description())
     return {{}, "its .run file does not describe it (damaged)"};
   if (!fs::exists(log)) return {{}, concat("its log ", log.string(), " is missing")};
-  const auto code = logged_exit_code(log);
-  if (!code) return {{}, concat("its log ", log.string(), " has no exit code line (cut)")};
+  const auto exit = logged_exit(log);
+  if (!exit) return {{}, concat("its log ", log.string(), " has no exit code line (cut)")};
   try {
     Summary summary = summarize(run, run_file(runs, run, ".csv"));
-    std::string why = contradiction(summary, *code);
+    std::string why = contradiction(summary, exit->code);
     if (!why.empty()) return {{}, concat(why, " (the log contradicts it)")};
-    return {std::move(summary), {}};
+    return {std::move(summary), {}, exit->wall_seconds};
   } catch (const sbptt::ParseError& e) {
     return {{}, concat(e.what(), " (damaged)")};
   }
 }
 
+/// What the runs folder holds: the finished runs (of any sweep), the damaged ones, and the
+/// measured cost of the runs, for the time estimates.
+struct FinishedRuns {
+  std::map<decltype(Run{}.order_key()), Summary> summaries;
+  std::map<std::string, std::string> damaged;  ///< run name -> why it cannot be trusted
+  /// Wall seconds per (epoch · train sample) of the complete runs, by task, method, precision.
+  std::map<std::tuple<int, Method, bool>, std::vector<double>> cost;
+
+  /// The expected wall time of `run`: the median measured cost of its task, method and
+  /// precision when a complete run of them is finished, else the built-in estimate.
+  [[nodiscard]] double expected_seconds(const Run& run) const {
+    const auto found = cost.find({run.task, run.method, run.use_float});
+    if (found == cost.end()) return run.estimated_seconds();
+    std::vector<double> rates = found->second;
+    std::nth_element(rates.begin(), rates.begin() + static_cast<long>(rates.size() / 2),
+                     rates.end());
+    return rates[rates.size() / 2] * static_cast<double>(run.epochs) *
+           static_cast<double>(run.samples);
+  }
+};
+
+/// Checks every runs/<name>.csv (not the partial ones).
+inline FinishedRuns scan_finished(const fs::path& runs) {
+  FinishedRuns found;
+  std::error_code error;
+  for (const auto& entry : fs::directory_iterator(runs, error)) {
+    const fs::path path = entry.path();
+    const std::string name = path.stem().string();
+    if (path.extension() != ".csv" || name.ends_with(".partial")) continue;
+    const auto run = parse_description(read_text(fs::path(path).replace_extension(".run")));
+    FinishedRun finished = run && run->name() == name
+                               ? check_finished(*run, runs)
+                               : FinishedRun{{}, "its .run file is missing or damaged", 0};
+    if (!finished.summary) {
+      found.damaged[name] = finished.damage;
+      continue;
+    }
+    const Summary& s = *finished.summary;
+    if (s.status() == "ok")
+      found.cost[{run->task, run->method, run->use_float}].push_back(
+          finished.wall_seconds / static_cast<double>(run->epochs * run->samples));
+    found.summaries[run->order_key()] = std::move(*finished.summary);
+  }
+  return found;
+}
+
 /// Removes the finished-run files of the run `name` so that a sweep that plans it redoes it.
 inline void forget_finished(const fs::path& runs, const std::string& name) {
   for (const char* suffix : {".csv", ".log", ".run"}) fs::remove(runs / (name + suffix));
+}
+
+/// Rewrites <out>/summary.csv from every finished run on disk, under <out>/.lock, so that
+/// executors sharing the folder add their runs one after the other; returns what it found.
+inline FinishedRuns rebuild_summary(const fs::path& out) {
+  const FileLock lock = lock_summary(out);
+  FinishedRuns finished = scan_finished(out / "runs");
+  for (const auto& entry : fs::directory_iterator(out))
+    if (entry.path().filename().string().starts_with("summary.csv.tmp."))
+      fs::remove(entry.path());  // of a writer killed while it held the lock
+  std::vector<Summary> rows;
+  for (const auto& [key, s] : finished.summaries) rows.push_back(s);
+  write_durably(out / "summary.csv", summary_csv(rows));
+  return finished;
+}
+
+/// Whether `run` is among the finished runs (its name, not only its grid position).
+inline bool is_finished(const FinishedRuns& finished, const Run& run) {
+  const auto found = finished.summaries.find(run.order_key());
+  return found != finished.summaries.end() && found->second.run.name() == run.name();
 }
 
 }  // namespace reproduce

@@ -28,6 +28,7 @@
 
 #include "durable_files.hpp"
 #include "finished_run.hpp"
+#include "locks.hpp"
 #include "options.hpp"
 #include "processes.hpp"
 #include "run_files.hpp"
@@ -44,30 +45,14 @@ public:
   /// Returns the exit code of the runner.
   int execute() {
     fs::create_directories(runs_);
-    lock();
     discard_partial_runs();
-    std::vector<const Run*> todo;
     std::vector<std::string> mismatched;
     for (const Run& run : plan_) {
-      if (!fs::exists(run_file(runs_, run, ".csv"))) {
-        todo.push_back(&run);
-        continue;
-      }
+      if (!fs::exists(run_file(runs_, run, ".csv"))) continue;
       const auto described = parse_description(read_text(run_file(runs_, run, ".run")));
       if (described && described->name() == run.name() &&
-          described->description() != run.description()) {
+          described->description() != run.description())
         mismatched.push_back(run.name());
-        continue;
-      }
-      const FinishedRun finished = check_finished(run, runs_);
-      if (finished.summary) {
-        summaries_[run.order_key()] = *finished.summary;
-        continue;
-      }
-      std::printf("reproduce: %s: %s; the run is redone\n", run.name().c_str(),
-                  finished.damage.c_str());
-      forget_finished(runs_, run.name());
-      todo.push_back(&run);
     }
     if (!mismatched.empty()) {
       std::cerr << "reproduce: " << mismatched.size() << " finished run(s) in " << runs_
@@ -76,9 +61,13 @@ public:
                    "or remove runs/<name>.* to redo them\n";
       return 1;
     }
-    load_unplanned_finished();
+    forget_damaged();
+    write_summary();
+    std::vector<const Run*> todo;
+    for (const Run& run : plan_)
+      if (!is_finished(finished_, run)) todo.push_back(&run);
     double estimate = 0;
-    for (const Run* run : todo) estimate += run->estimated_seconds();
+    for (const Run* run : todo) estimate += finished_.expected_seconds(*run);
     std::printf("reproduce: profile %s, %zu runs planned (%zu finished, %zu to do), --jobs %ld, "
                 "--threads %ld, estimated %s of compute, about %s wall time\n",
                 options_.profile.c_str(), plan_.size(), plan_.size() - todo.size(), todo.size(),
@@ -98,23 +87,26 @@ public:
                 << " threads on " << cores
                 << " cores; the timing columns will include the contention\n";
     // Longest first: the best simple schedule for parallel jobs of unequal length.
-    std::stable_sort(todo.begin(), todo.end(), [](const Run* a, const Run* b) {
-      return a->estimated_seconds() > b->estimated_seconds();
+    std::stable_sort(todo.begin(), todo.end(), [&](const Run* a, const Run* b) {
+      return finished_.expected_seconds(*a) > finished_.expected_seconds(*b);
     });
-    write_summary();
     const int code = loop(todo);
     write_summary();
     if (code == 130) {
       finish_progress();
-      std::cerr << "reproduce: interrupted; " << summaries_.size()
+      std::cerr << "reproduce: interrupted; " << finished_.summaries.size()
                 << " runs are finished and kept; run the same command again to continue\n";
       return code;
     }
     finish_progress();
     std::vector<Summary> rows;
-    for (const auto& [key, s] : summaries_) rows.push_back(s);
+    for (const auto& [key, s] : finished_.summaries) rows.push_back(s);
     print_table(rows);
     std::printf("\nsummary: %s\n", (out_ / "summary.csv").c_str());
+    if (!elsewhere_.empty())
+      std::printf("reproduce: %zu run(s) were left to the executor that holds their lock (e.g. "
+                  "%s); run reproduce with --merge once they have finished\n",
+                  elsewhere_.size(), elsewhere_.front().c_str());
     if (!failures_.empty()) {
       std::cerr << "reproduce: " << failures_.size() << " run(s) failed and will be redone by the "
                 << "next sweep:\n";
@@ -128,72 +120,59 @@ private:
     const Run* run;
     pid_t pid;
     std::chrono::steady_clock::time_point started;
+    FileLock lock;  ///< runs/<name>.lock, held until the run's files are final
   };
 
-  void lock() {
-    const fs::path path = out_ / ".lock";
-    lock_fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-    if (lock_fd_ < 0) throw sbptt::IoError(concat("cannot open '", path.string(), "'"));
-    if (::flock(lock_fd_, LOCK_EX | LOCK_NB) != 0)
-      throw sbptt::IoError(concat("another reproduce is running in '", out_.string(),
-                                  "' (it holds ", path.string(), ")"));
-  }
-
   /// Partial training logs and outputs of runs a killed sweep left behind (or of failed runs),
-  /// and temporaries of interrupted atomic writes: their runs are redone.
+  /// and temporaries of interrupted writes: their runs are redone. A run whose lock another
+  /// executor holds is under way there, and its files are left alone.
   void discard_partial_runs() {
-    std::set<std::string> discarded;  // a run killed before its first epoch has no .partial.csv
+    std::map<std::string, std::vector<fs::path>> by_run;
     for (const auto& entry : fs::directory_iterator(runs_)) {
       const std::string file = entry.path().filename().string();
-      const auto partial = file.find(".partial.");
-      if (partial == std::string::npos && file.find(".tmp.") == std::string::npos) continue;
-      if (partial != std::string::npos && (file.ends_with(".partial.csv") ||
-                                           file.ends_with(".partial.log")))
-        discarded.insert(file.substr(0, partial));
-      fs::remove(entry.path());
+      const auto end = std::min(file.find(".partial."), file.find(".run.tmp."));
+      if (end != std::string::npos) by_run[file.substr(0, end)].push_back(entry.path());
     }
-    for (const auto& entry : fs::directory_iterator(out_))
-      if (entry.path().filename().string().rfind("summary.csv.tmp.", 0) == 0)
-        fs::remove(entry.path());
-    if (!discarded.empty())
+    std::size_t discarded = 0;
+    for (const auto& [name, files] : by_run) {
+      const FileLock lock = try_lock_run(runs_, name);
+      if (!lock.held()) continue;
+      for (const auto& file : files) fs::remove(file);
+      ++discarded;
+    }
+    if (discarded > 0)
       std::printf("reproduce: discarded %zu unfinished run(s) of an interrupted sweep; they are "
                   "redone\n",
-                  discarded.size());
+                  discarded);
   }
 
-  /// The finished runs of earlier sweeps with other filters, which summary.csv lists too. A
-  /// damaged one is left out and removed, for a sweep that plans it to redo.
-  void load_unplanned_finished() {
+  /// Finished runs whose files do not hold together (finished_run.hpp): named, removed, and,
+  /// when planned, redone.
+  void forget_damaged() {
     std::set<std::string> planned;
     for (const Run& run : plan_) planned.insert(run.name());
-    for (const auto& entry : fs::directory_iterator(runs_)) {
-      const fs::path path = entry.path();
-      const std::string name = path.stem().string();
-      if (path.extension() != ".csv" || name.ends_with(".partial") || planned.contains(name))
-        continue;
-      const auto run = parse_description(read_text(fs::path(path).replace_extension(".run")));
-      const FinishedRun finished = run && run->name() == name
-                                       ? check_finished(*run, runs_)
-                                       : FinishedRun{{}, "its .run file is missing or damaged"};
-      if (finished.summary) {
-        summaries_[run->order_key()] = *finished.summary;
-        continue;
-      }
-      std::cerr << "reproduce: warning: " << name << " (of an earlier sweep, not planned now): "
-                << finished.damage << "; left out of summary.csv and removed, so that a sweep "
-                << "that plans it redoes it\n";
+    for (const auto& [name, why] : scan_finished(runs_).damaged) {
+      if (planned.contains(name))
+        std::printf("reproduce: %s: %s; the run is redone\n", name.c_str(), why.c_str());
+      else
+        std::cerr << "reproduce: warning: " << name << " (of an earlier sweep, not planned now): "
+                  << why << "; left out of summary.csv and removed, so that a sweep that plans "
+                  << "it redoes it\n";
       forget_finished(runs_, name);
     }
   }
 
-  void write_summary() {
-    std::vector<Summary> rows;
-    for (const auto& [key, s] : summaries_) rows.push_back(s);
-    write_durably(out_ / "summary.csv", summary_csv(rows));
-  }
+  void write_summary() { finished_ = rebuild_summary(out_); }
 
+  /// Starts the run unless another executor holds its lock or finished it meanwhile.
   bool start(const Run& run) {
     const std::string name = run.name();
+    FileLock lock = try_lock_run(runs_, name);
+    if (!lock.held() || fs::exists(run_file(runs_, run, ".csv"))) {
+      elsewhere_.push_back(name);
+      --total_;
+      return false;
+    }
     fs::remove(run_file(runs_, run, ".partial.csv"));
     write_durably(run_file(runs_, run, ".run"), run.description());
     const auto argv = command_line(run, bin_dir_, runs_, options_.threads);
@@ -211,7 +190,7 @@ private:
       failures_.push_back(concat("  ", name, ": fork failed: ", std::strerror(errno), "\n"));
       return false;
     }
-    running_.push_back({&run, pid, std::chrono::steady_clock::now()});
+    running_.push_back({&run, pid, std::chrono::steady_clock::now(), std::move(lock)});
     return true;
   }
 
@@ -222,9 +201,10 @@ private:
     const fs::path partial = run_file(runs_, run, ".partial.csv");
     const fs::path csv = run_file(runs_, run, ".csv");
     const fs::path partial_log = run_file(runs_, run, ".partial.log");
-    {  // for retuning the profiles: the whole run, start-up and evaluation included
-      const double wall =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - child.started).count();
+    // for retuning the profiles and the estimates: the whole run, start-up and evaluation
+    const double wall =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - child.started).count();
+    {
       std::ofstream(partial_log, std::ios::app) << "# reproduce: " << describe_status(status)
                                                 << " after " << wall << " s wall time\n";
     }
@@ -245,8 +225,9 @@ private:
           // finished exactly when its CSV has its name, on disk.
           rename_durably(partial_log, run_file(runs_, run, ".log"));
           rename_durably(partial, csv);
-          summaries_[run.order_key()] = std::move(summary);
           ++done_;
+          measured_seconds_ += wall;
+          measured_estimate_ += finished_.expected_seconds(run);
           write_summary();
           return;
         }
@@ -273,7 +254,8 @@ private:
     total_ = plan_.size();
     done_ = plan_.size() - todo.size();
     started_ = std::chrono::steady_clock::now();
-    std::size_t next = 0;
+    queued_ = &todo;
+    std::size_t& next = next_;
     auto last_progress = std::chrono::steady_clock::time_point{};
     while (true) {
       if (interrupted) {
@@ -311,7 +293,7 @@ private:
       int status = 0;
       const pid_t pid = ::waitpid(it->pid, &status, WNOHANG);
       if (pid == it->pid) {
-        const Child child = *it;
+        const Child child = std::move(*it);
         it = running_.erase(it);
         finished(child, status);
         any = true;
@@ -322,23 +304,37 @@ private:
     return any;
   }
 
+  /// Seconds of wall time left: the expected time of the queued runs and the rest of the
+  /// running ones, scaled by how long the runs finished so far took against their expectation,
+  /// spread over --jobs.
+  [[nodiscard]] double seconds_left() const {
+    const double scale = measured_estimate_ > 0 ? measured_seconds_ / measured_estimate_ : 1.0;
+    const auto now = std::chrono::steady_clock::now();
+    double left = 0;
+    for (std::size_t k = next_; queued_ && k < queued_->size(); ++k)
+      left += scale * finished_.expected_seconds(*(*queued_)[k]);
+    for (const auto& c : running_)
+      left += std::max(0.0, scale * finished_.expected_seconds(*c.run) -
+                                std::chrono::duration<double>(now - c.started).count());
+    return left / static_cast<double>(options_.jobs);
+  }
+
+  /// "[done/total] elapsed, time left; running: names": one updating line on a terminal,
+  /// plain lines in a log.
   void progress() {
     const double elapsed =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
     std::string names;
     for (const auto& c : running_) names += (names.empty() ? "" : ", ") + c.run->name();
-    std::string line = concat("[", done_, "/", total_, "] ",
-                              names.empty() ? "done" : "running: " + names, "  ",
-                              format_duration(elapsed));
-    if (!failures_.empty()) line += concat("  (", failures_.size(), " failed)");
+    std::string line = concat("[", done_, "/", total_, "] ", format_duration(elapsed),
+                              " elapsed, about ", format_duration(seconds_left()), " left");
+    if (!failures_.empty()) line += concat(", ", failures_.size(), " failed");
+    if (!names.empty()) line += "; running: " + names;
     if (tty_) {
       winsize size{};
       std::size_t width = 100;
       if (::ioctl(2, TIOCGWINSZ, &size) == 0 && size.ws_col > 10) width = size.ws_col;
-      if (line.size() >= width) {  // shorten the names, keep the counts and the time
-        const std::string time = "... " + format_duration(elapsed);
-        line = line.substr(0, width - 1 - time.size()) + time;
-      }
+      if (line.size() >= width) line = line.substr(0, width - 4) + "...";  // the names shortened
       std::fprintf(stderr, "\r%s\033[K", line.c_str());
       progress_shown_ = true;
     } else {
@@ -358,11 +354,14 @@ private:
   const Options& options_;
   std::vector<Run> plan_;
   fs::path bin_dir_, out_, runs_;
-  int lock_fd_ = -1;
-  std::map<decltype(Run{}.order_key()), Summary> summaries_;
+  FinishedRuns finished_;              ///< on disk, as of the last summary.csv
   std::vector<std::string> failures_;
+  std::vector<std::string> elsewhere_;  ///< planned runs another executor had locked
+  double measured_seconds_ = 0, measured_estimate_ = 0;  ///< of the runs finished here
   std::vector<Child> running_;
   std::size_t done_ = 0, total_ = 0;
+  const std::vector<const Run*>* queued_ = nullptr;  ///< the runs to do, in order
+  std::size_t next_ = 0;                              ///< the next of them to start
   bool tty_ = false, progress_shown_ = false;
   std::chrono::steady_clock::time_point started_;
 };

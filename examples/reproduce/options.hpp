@@ -20,8 +20,8 @@ namespace reproduce {
 inline constexpr const char* accepted_flags =
     "--profile quick|paper, --tasks cartpole,guidance,quantum, --methods R,M,C,S,N, "
     "--clips none,value,norm, --complexities LIST, --seeds N, --epochs N, --samples N, "
-    "--float, --jobs N, --threads N, --out DIR, --bin-dir DIR, --dry-run, --no-plot, --python EXE, "
-    "--plot-script FILE, --help";
+    "--float, --jobs N, --threads N, --out DIR, --bin-dir DIR, --dry-run, --emit parallel|slurm, "
+    "--shard K/N, --run NAME, --merge, --no-plot, --python EXE, --plot-script FILE, --help";
 
 struct Options {
   std::string profile = "quick";
@@ -34,6 +34,11 @@ struct Options {
   long threads = 1;  ///< per task program; not part of a run's identity (see command_line)
   std::string out, bin_dir, python, plot_script;
   bool dry_run = false, plot = true, help = false, use_float = false;
+  // What to do with the plan (at most one; running it with --jobs when none is given):
+  std::string emit;     ///< "parallel" or "slurm": print or write it for another executor
+  bool merge = false;   ///< summary, table and figures from the finished runs; list the rest
+  std::string run;      ///< run only the run of this name (what emitted commands do)
+  long shard_index = 0, shard_count = 1;  ///< --shard K/N: the runs k with k % N == K - 1
 };
 
 inline std::string non_empty(const std::string& flag, std::string value) {
@@ -100,12 +105,39 @@ inline Options parse_options(int argc, const char* const* argv) {
     else if (f == "--python") o.python = non_empty(f, args.value());
     else if (f == "--plot-script") o.plot_script = non_empty(f, args.value());
     else if (f == "--dry-run") args.no_value(), o.dry_run = true;
+    else if (f == "--merge") args.no_value(), o.merge = true;
+    else if (f == "--run") o.run = non_empty(f, args.value());
+    else if (f == "--emit") {
+      o.emit = args.value();
+      if (o.emit != "parallel" && o.emit != "slurm")
+        throw InvalidArgument(concat("--emit '", o.emit, "' is unknown; expected parallel or "
+                                                         "slurm"));
+    } else if (f == "--shard") {
+      const std::string text = args.value();
+      const auto slash = text.find('/');
+      if (slash == std::string::npos)
+        throw InvalidArgument(concat("--shard '", text, "' is not K/N; expected e.g. 2/3"));
+      o.shard_count = sbptt::parse_integer("--shard N", text.substr(slash + 1), 1, count_limit);
+      o.shard_index =
+          sbptt::parse_integer("--shard K", text.substr(0, slash), 1, o.shard_count) - 1;
+    }
     else if (f == "--float") args.no_value(), o.use_float = true;
     else if (f == "--no-plot") args.no_value(), o.plot = false;
     else if (f == "--help") args.no_value(), o.help = true;
     else args.unknown(accepted_flags);
   }
   if (o.out.empty()) o.out = "out/" + o.profile;
+  const std::vector<std::pair<bool, const char*>> modes{
+      {o.dry_run, "--dry-run"}, {!o.emit.empty(), "--emit"}, {o.merge, "--merge"},
+      {!o.run.empty(), "--run"}};
+  std::string chosen;
+  for (const auto& [on, flag] : modes)
+    if (on) chosen += concat(chosen.empty() ? "" : " and ", flag);
+  if (chosen.find(" and ") != std::string::npos)
+    throw InvalidArgument(concat(chosen, " exclude each other; expected at most one"));
+  if (!o.run.empty() && o.shard_count > 1)
+    throw InvalidArgument("--run and --shard exclude each other; --run names one run");
+  if (!o.run.empty()) o.plot = false;  // one run of many: --merge draws the figures
   return o;
 }
 
@@ -159,6 +191,20 @@ inline std::vector<Run> make_plan(const Options& o) {
                          [](const Run& a, const Run& b) { return a.name() == b.name(); }),
              plan.end());
   return plan;
+}
+
+/// The share of the plan this process takes: one shard (--shard K/N: every N-th run from the
+/// K-th, in grid order, so the shards are disjoint and cover the plan) or one run (--run).
+inline std::vector<Run> select_share(const Options& o, const std::vector<Run>& plan) {
+  std::vector<Run> share;
+  for (std::size_t k = 0; k < plan.size(); ++k)
+    if (static_cast<long>(k % static_cast<std::size_t>(o.shard_count)) == o.shard_index &&
+        (o.run.empty() || plan[k].name() == o.run))
+      share.push_back(plan[k]);
+  if (!o.run.empty() && share.empty())
+    throw InvalidArgument(concat("--run '", o.run, "' is no run of the plan; --dry-run lists "
+                                                   "them"));
+  return share;
 }
 
 }  // namespace reproduce

@@ -102,11 +102,12 @@ inline bool can_execute(const std::string& program) {
   return false;
 }
 
-inline fs::path own_directory(const char* argv0) {
+/// This program's own file, absolute.
+inline fs::path own_executable(const char* argv0) {
   std::error_code error;
   const fs::path self = fs::read_symlink("/proc/self/exe", error);
-  if (!error) return self.parent_path();
-  return fs::absolute(argv0).parent_path();
+  if (!error) return self;
+  return fs::absolute(argv0);
 }
 
 inline std::string tail_of(const fs::path& log, std::size_t count) {

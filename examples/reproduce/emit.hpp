@@ -1,0 +1,153 @@
+// reproduce: the plan handed to other executors. Each unfinished run becomes one command,
+// `reproduce <the same selection> --run NAME`, which runs that run under its lock and finishes
+// its files exactly as the local executor does; so GNU parallel (--emit parallel), a Slurm job
+// array (--emit slurm) or any scheduler running the lines fill the same output folder, and
+// `reproduce <the same selection> --merge` collects it.
+#pragma once
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "durable_files.hpp"
+#include "finished_run.hpp"
+#include "options.hpp"
+
+namespace reproduce {
+
+using sbptt::label;
+using sbptt::to_string;
+
+/// `word` quoted for a POSIX shell (unchanged when it needs no quotes).
+inline std::string shell_quote(const std::string& word) {
+  const bool plain = !word.empty() && std::all_of(word.begin(), word.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) != 0 ||
+           std::string_view("-_./=,:+@%").find(c) != std::string_view::npos;
+  });
+  if (plain) return word;
+  std::string quoted = "'";
+  for (char c : word) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return quoted + "'";
+}
+
+inline std::string shell_line(const std::vector<std::string>& words) {
+  std::string line;
+  for (const auto& w : words) {
+    if (!line.empty()) line += ' ';
+    line += shell_quote(w);
+  }
+  return line;
+}
+
+/// The flags that select the plan, with absolute folders: the same plan from any directory.
+inline std::vector<std::string> selection_flags(const Options& o, const fs::path& bin_dir) {
+  auto joined = [](const auto& items, auto text) {
+    std::string list;
+    for (const auto& item : items) {
+      if (!list.empty()) list += ',';
+      list += text(item);
+    }
+    return list;
+  };
+  std::vector<std::string> f{"--profile", o.profile};
+  if (o.tasks)
+    f.insert(f.end(), {"--tasks", joined(*o.tasks, [](int t) { return tasks[t].name; })});
+  if (o.methods)
+    f.insert(f.end(), {"--methods", joined(*o.methods, [](Method m) { return label(m); })});
+  if (o.clips)
+    f.insert(f.end(), {"--clips", joined(*o.clips, [](ClipMode c) { return to_string(c); })});
+  if (o.complexities)
+    f.insert(f.end(), {"--complexities", joined(*o.complexities, format_exact)});
+  if (o.seeds) f.insert(f.end(), {"--seeds", std::to_string(*o.seeds)});
+  if (o.epochs) f.insert(f.end(), {"--epochs", std::to_string(*o.epochs)});
+  if (o.samples) f.insert(f.end(), {"--samples", std::to_string(*o.samples)});
+  if (o.use_float) f.emplace_back("--float");
+  f.insert(f.end(), {"--threads", std::to_string(o.threads), "--out",
+                     fs::absolute(o.out).lexically_normal().string(), "--bin-dir",
+                     fs::absolute(bin_dir).lexically_normal().string()});
+  return f;
+}
+
+/// The runs of `plan` that are not finished in the output folder, in plan order.
+inline std::vector<Run> unfinished(const Options& o, const std::vector<Run>& plan,
+                                   FinishedRuns& finished) {
+  finished = scan_finished(fs::path(o.out) / "runs");
+  std::vector<Run> left;
+  for (const auto& run : plan)
+    if (!is_finished(finished, run)) left.push_back(run);
+  return left;
+}
+
+/// --emit parallel: one command per unfinished run on stdout, for `| parallel --jobs N`.
+inline int emit_parallel(const Options& o, const std::vector<Run>& plan, const fs::path& self,
+                         const fs::path& bin_dir) {
+  FinishedRuns finished;
+  std::vector<std::string> command{self.string()};
+  const auto selection = selection_flags(o, bin_dir);
+  command.insert(command.end(), selection.begin(), selection.end());
+  for (const auto& run : unfinished(o, plan, finished)) {
+    auto line = command;
+    line.insert(line.end(), {"--run", run.name()});
+    std::printf("%s\n", shell_line(line).c_str());
+  }
+  return 0;
+}
+
+/// --emit slurm: <out>/slurm/{runs.txt, array.sh, merge.sh}, and the sbatch commands. Array
+/// task i runs line i + 1 of runs.txt; --jobs K of them at once. The time limit is the longest
+/// run's expected wall time (measured on finished runs when there are any) twice over, plus 5
+/// minutes for start-up and a slow node; the CPUs are --threads.
+inline int emit_slurm(const Options& o, const std::vector<Run>& plan, const fs::path& self,
+                      const fs::path& bin_dir) {
+  FinishedRuns finished;
+  const std::vector<Run> left = unfinished(o, plan, finished);
+  if (left.empty()) {
+    std::printf("reproduce: all %zu planned runs are finished; nothing to submit\n", plan.size());
+    return 0;
+  }
+  const fs::path dir = fs::absolute(fs::path(o.out) / "slurm").lexically_normal();
+  fs::create_directories(dir / "logs");
+  std::string names;
+  double longest = 0;
+  for (const auto& run : left) {
+    names += run.name() + "\n";
+    longest = std::max(longest, finished.expected_seconds(run));
+  }
+  write_durably(dir / "runs.txt", names);
+  const long minutes = std::lround(std::ceil((2 * longest + 300) / 60));
+  std::vector<std::string> command{self.string()};
+  const auto selection = selection_flags(o, bin_dir);
+  command.insert(command.end(), selection.begin(), selection.end());
+  const std::string job = concat("sbptt-", o.profile);
+  const std::string array = concat(
+      "#!/bin/bash\n# One array task per unfinished run of the plan (", dir.string(),
+      "/runs.txt);\n# written by reproduce --emit slurm. Resubmitting it is harmless: a "
+      "finished run is skipped.\n#SBATCH --job-name=", job, "\n#SBATCH --array=0-",
+      left.size() - 1, "%", o.jobs, "\n#SBATCH --ntasks=1\n#SBATCH --cpus-per-task=", o.threads,
+      "\n#SBATCH --time=", minutes, "\n#SBATCH --output=", dir.string(),
+      "/logs/run_%a.log\nset -euo pipefail\nrun=$(sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" ",
+      shell_quote((dir / "runs.txt").string()), ")\nexec ", shell_line(command),
+      " --run \"$run\"\n");
+  const std::string merge = concat(
+      "#!/bin/bash\n# Collects the array's runs into summary.csv, the table and the figures.\n"
+      "#SBATCH --job-name=", job, "-merge\n#SBATCH --ntasks=1\n#SBATCH --cpus-per-task=1\n"
+      "#SBATCH --time=30\n#SBATCH --output=", dir.string(), "/logs/merge.log\nexec ",
+      shell_line(command), o.plot ? "" : " --no-plot", " --merge\n");
+  write_durably(dir / "array.sh", array);
+  write_durably(dir / "merge.sh", merge);
+  std::printf("reproduce: %zu of %zu planned runs to do; wrote %s/array.sh (--array=0-%zu%%%ld, "
+              "%ld CPU(s) and %ld min per task) and %s/merge.sh. Submit with:\n",
+              left.size(), plan.size(), dir.c_str(), left.size() - 1, o.jobs, o.threads,
+              minutes, dir.c_str());
+  std::printf("job=$(sbatch --parsable %s) && sbatch --dependency=afterany:${job%%%%;*} %s\n",
+              shell_quote((dir / "array.sh").string()).c_str(),
+              shell_quote((dir / "merge.sh").string()).c_str());
+  return 0;
+}
+
+}  // namespace reproduce

@@ -1,0 +1,164 @@
+# One plan, any executor (issue 16, point 1), with the fake task programs of
+# reproduce_fake_task.sh:
+#
+#   cmake -DREPRODUCE=<path of examples/reproduce> -DWORK_DIR=<scratch dir> -P reproduce_executors.cmake
+#
+#   1. the local executor (--jobs 2) gives the reference summary.csv;
+#   2. --emit parallel prints one command per run; run by sh one after the other, then --merge:
+#      the same summary (timing aside); a second --emit parallel prints nothing;
+#   3. three --shard K/3 at once in one folder: disjoint and covering (every run started once),
+#      the same summary;
+#   4. two full executors at once in one folder: every run started exactly once (the per-run
+#      lock), the same summary;
+#   5. --merge counts done, running (a lock held by another process) and missing runs;
+#   6. --emit slurm writes a job array of the unfinished runs (--array=0-(n-1)%K, the CPUs,
+#      a time limit, a log per task) and a merge job, and prints the sbatch commands;
+#   7. --run, --shard, --emit refuse bad values and each other with exit 2.
+cmake_minimum_required(VERSION 3.20)
+foreach(var REPRODUCE WORK_DIR)
+  if(NOT DEFINED ${var})
+    message(FATAL_ERROR "reproduce_executors.cmake: pass -D${var}=...")
+  endif()
+endforeach()
+include("${CMAKE_CURRENT_LIST_DIR}/reproduce_common.cmake")
+file(REMOVE_RECURSE "${WORK_DIR}")
+install_fake_task_programs("${WORK_DIR}/fake")
+
+# cart pole 4 poles and guidance rc 0.001; R and C; seeds 42, 43: 8 runs.
+set(grid --tasks cartpole,guidance --complexities 4,0.001 --methods R,C --clips norm --seeds 2
+         --epochs 3 --no-plot --bin-dir "${WORK_DIR}/fake")
+
+function(started_runs dir out_var)
+  file(STRINGS "${dir}/fake_invocations" started)
+  list(LENGTH started n)
+  list(REMOVE_DUPLICATES started)
+  list(LENGTH started distinct)
+  set(${out_var} "${n} ${distinct}" PARENT_SCOPE)
+endfunction()
+
+# --- 1. local ----------------------------------------------------------------------------------
+execute_process(COMMAND "${REPRODUCE}" ${grid} --jobs 2 --out "${WORK_DIR}/local"
+                RESULT_VARIABLE rc OUTPUT_QUIET ERROR_VARIABLE err)
+check("the local sweep exits 0" rc EQUAL 0)
+check("its progress lines count, time and estimate the time left (${err})"
+      err MATCHES "\\[[0-9]/8\\] [0-9]+s elapsed, about [0-9]+s left")
+untimed_summary("${WORK_DIR}/local/summary.csv" reference)
+count_lines("${WORK_DIR}/local/summary.csv" rows)
+check("the local summary has 8 rows" rows EQUAL 9)
+
+# --- 2. --emit parallel ------------------------------------------------------------------------
+set(P "${WORK_DIR}/parallel")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${P}" --emit parallel
+                RESULT_VARIABLE rc OUTPUT_VARIABLE commands ERROR_VARIABLE err)
+check("--emit parallel exits 0 (${err})" rc EQUAL 0)
+string(REGEX MATCHALL "[^\n]+\n" lines "${commands}")
+list(LENGTH lines n)
+check("--emit parallel prints 8 commands" n EQUAL 8)
+check("each is the runner with --run NAME" commands MATCHES "reproduce [^\n]* --run cartpole_p4_R_norm_s42\n")
+check("--emit parallel ran nothing" NOT EXISTS "${P}/runs")
+file(WRITE "${WORK_DIR}/commands.sh" "${commands}")
+execute_process(COMMAND sh "${WORK_DIR}/commands.sh" RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
+check("the emitted commands exit 0" rc EQUAL 0)
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${P}" --merge RESULT_VARIABLE rc
+                OUTPUT_VARIABLE merged ERROR_VARIABLE err)
+check("--merge after the emitted commands exits 0 (${err})" rc EQUAL 0)
+check("--merge counts 8 done, 0 running, 0 missing"
+      merged MATCHES "8 of 8 planned runs done, 0 running \\(lock held\\), 0 missing")
+untimed_summary("${P}/summary.csv" summary)
+check("the emitted commands give the local summary (timing aside)" summary STREQUAL reference)
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${P}" --emit parallel
+                RESULT_VARIABLE rc OUTPUT_VARIABLE again)
+check("--emit parallel over a finished sweep prints nothing" rc EQUAL 0 AND NOT again)
+
+# --- 3. three shards at once -------------------------------------------------------------------
+set(S "${WORK_DIR}/shards")
+file(WRITE "${WORK_DIR}/concurrent.sh" [=[
+# Starts every argument-separated command (separated by ::) at once; fails if any fails.
+pids=
+cmd=
+for a in "$@"; do
+  if [ "$a" = "::" ]; then eval "$cmd" & pids="$pids $!"; cmd=; else cmd="$cmd '$a'"; fi
+done
+eval "$cmd" & pids="$pids $!"
+status=0
+for p in $pids; do wait $p || status=1; done
+exit $status
+]=])
+set(shard_commands "")
+foreach(k 1 2 3)
+  list(APPEND shard_commands "${REPRODUCE}" ${grid} --jobs 2 --shard ${k}/3 --out "${S}")
+  if(NOT k EQUAL 3)
+    list(APPEND shard_commands ::)
+  endif()
+endforeach()
+execute_process(COMMAND sh "${WORK_DIR}/concurrent.sh" ${shard_commands} RESULT_VARIABLE rc
+                OUTPUT_QUIET ERROR_QUIET)
+check("three shards at once exit 0" rc EQUAL 0)
+started_runs("${S}" starts)
+check("the shards started every run once (starts, distinct: ${starts})" starts STREQUAL "8 8")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${S}" --merge OUTPUT_QUIET RESULT_VARIABLE rc)
+untimed_summary("${S}/summary.csv" summary)
+check("the shards give the local summary" rc EQUAL 0 AND summary STREQUAL reference)
+
+# --- 4. two full executors at once in one folder -------------------------------------------------
+set(T "${WORK_DIR}/twice")
+execute_process(COMMAND sh "${WORK_DIR}/concurrent.sh" "${REPRODUCE}" ${grid} --jobs 2 --out "${T}"
+                :: "${REPRODUCE}" ${grid} --jobs 3 --out "${T}" RESULT_VARIABLE rc
+                OUTPUT_QUIET ERROR_QUIET)
+check("two executors at once in one folder exit 0" rc EQUAL 0)
+started_runs("${T}" starts)
+check("between them every run was started exactly once (${starts})" starts STREQUAL "8 8")
+untimed_summary("${T}/summary.csv" summary)
+check("their summary is the local one" summary STREQUAL reference)
+
+# --- 5. --merge counts running and missing runs ----------------------------------------------
+file(REMOVE "${P}/runs/guidance_rc0.001_C_norm_s43.csv")
+# Another process holds a run's lock (as an executor running it would) while --merge looks.
+file(WRITE "${WORK_DIR}/hold.sh" [=[
+flock "$1" sleep 3 &
+sleep 0.5
+shift
+"$@"
+]=])
+file(REMOVE "${P}/runs/cartpole_p4_C_norm_s42.csv")
+execute_process(COMMAND sh "${WORK_DIR}/hold.sh" "${P}/runs/cartpole_p4_C_norm_s42.lock"
+                "${REPRODUCE}" ${grid} --out "${P}" --merge RESULT_VARIABLE rc
+                OUTPUT_VARIABLE merged)
+check("--merge with a run missing and one running exits 1" rc EQUAL 1)
+check("--merge: 6 done, 1 running, 1 missing, named (${merged})"
+      merged MATCHES "6 of 8 planned runs done, 1 running \\(lock held\\), 1 missing"
+      AND merged MATCHES "running: cartpole_p4_C_norm_s42"
+      AND merged MATCHES "missing: guidance_rc0.001_C_norm_s43")
+
+# --- 6. --emit slurm -----------------------------------------------------------------------------
+execute_process(COMMAND "${REPRODUCE}" ${grid} --jobs 3 --threads 2 --out "${P}" --emit slurm
+                RESULT_VARIABLE rc OUTPUT_VARIABLE printed)
+check("--emit slurm exits 0" rc EQUAL 0)
+file(READ "${P}/slurm/array.sh" array)
+file(READ "${P}/slurm/runs.txt" listed)
+check("the array lists the 2 unfinished runs (${listed})"
+      listed STREQUAL "cartpole_p4_C_norm_s42\nguidance_rc0.001_C_norm_s43\n")
+check("the array: 2 tasks, 3 at once, 2 CPUs, a time limit, a log per task"
+      array MATCHES "#SBATCH --array=0-1%3\n" AND array MATCHES "#SBATCH --cpus-per-task=2\n"
+      AND array MATCHES "#SBATCH --time=[1-9][0-9]*\n"
+      AND array MATCHES "#SBATCH --output=[^\n]*/slurm/logs/run_%a.log\n"
+      AND array MATCHES "--run \"\\$run\"")
+file(READ "${P}/slurm/merge.sh" merge)
+check("the merge job runs --merge" merge MATCHES "reproduce [^\n]* --merge\n")
+check("the printed sbatch commands chain the merge job after the array"
+      printed MATCHES "sbatch --parsable [^\n]*array.sh[^\n]*--dependency=afterany:[^\n]*merge.sh")
+# The array's script runs its task's run as Slurm would (task 1: the second listed run).
+execute_process(COMMAND env SLURM_ARRAY_TASK_ID=1 bash "${P}/slurm/array.sh"
+                RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
+check("array task 1 runs guidance_rc0.001_C_norm_s43"
+      rc EQUAL 0 AND EXISTS "${P}/runs/guidance_rc0.001_C_norm_s43.csv")
+
+# --- 7. bad values ---------------------------------------------------------------------------------
+foreach(bad "--shard;0/3" "--shard;4/3" "--shard;2" "--emit;pbs" "--run;nosuchrun"
+            "--merge;--dry-run" "--run;cartpole_p4_R_norm_s42;--shard;1/2")
+  execute_process(COMMAND "${REPRODUCE}" ${grid} ${bad} --out "${WORK_DIR}/bad"
+                  RESULT_VARIABLE rc OUTPUT_QUIET ERROR_VARIABLE err)
+  list(GET bad 0 flag)
+  check("${bad}: exit 2 naming ${flag} (${err})" rc EQUAL 2 AND err MATCHES "${flag}")
+endforeach()
+check("no bad value created the folder" NOT EXISTS "${WORK_DIR}/bad")

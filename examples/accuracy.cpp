@@ -37,6 +37,9 @@
 
 #include <sbptt/sbptt.hpp>
 
+#include "command_line.hpp"
+#include "output_path.hpp"
+
 namespace {
 
 using sbptt::Index;
@@ -350,17 +353,20 @@ void write_csv(const std::string& path) {
 int main(int argc, char** argv) {
   std::string csv;
   try {
-    sbptt::ArgumentCursor cursor(argc, argv);
-    while (cursor.next()) {
-      if (cursor.flag() == "--csv") {
-        csv = cursor.value();
-      } else {
-        cursor.unknown("--csv");
-      }
-    }
-  } catch (const std::exception& e) {
+    sbptt::examples::CommandLine cli(
+        "accuracy", "Discretisation and float error of each simulator and of its gradient g_R "
+                    "(docs/benchmarks.md). Exit codes: 0 success, 1 error, 2 bad flag.");
+    cli.path("--csv", csv, "also write every point as CSV here (plot: tools/plot_accuracy.py)");
+    if (!cli.parse(argc, argv)) return 0;
+  } catch (const sbptt::InvalidArgument& e) {
     std::fprintf(stderr, "accuracy: %s\n", e.what());
     return 2;
+  }
+  try {
+    sbptt::examples::require_writable(csv, "--csv");  // now, not after the minutes of sweeps
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "accuracy: %s\n", e.what());
+    return 1;
   }
   try {
     std::printf("%-9s %-9s %-6s %6s %5s %10s %9s %11s %11s %11s\n", "sim", "sweep", "scalar",

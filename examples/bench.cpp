@@ -48,6 +48,9 @@
 
 #include <sbptt/sbptt.hpp>
 
+#include "command_line.hpp"
+#include "output_path.hpp"
+
 namespace {
 
 using sbptt::Index;
@@ -337,46 +340,46 @@ std::vector<std::string> split(const std::string& text) {
   return parts;
 }
 
-Settings parse(int argc, char** argv) {
-  Settings s;
-  sbptt::ArgumentCursor cursor(argc, argv);
-  const char* accepted = "--csv, --repeats, --threads, --tasks, --scalars, --methods";
-  const auto check_list = [](const std::string& flag, const std::vector<std::string>& values,
-                             const std::vector<std::string>& allowed) {
-    if (values.empty())
-      throw sbptt::InvalidArgument(flag + " needs at least one value");
-    for (const auto& v : values) {
-      if (std::find(allowed.begin(), allowed.end(), v) == allowed.end()) {
-        std::string list;
-        for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
-        throw sbptt::InvalidArgument(flag + " value '" + v + "' is unknown; expected " + list);
-      }
-    }
-  };
-  while (cursor.next()) {
-    const std::string flag = cursor.flag();
-    if (flag == "--csv") {
-      s.csv = cursor.value();
-    } else if (flag == "--repeats") {
-      s.repeats = static_cast<int>(sbptt::parse_integer(flag, cursor.value(), 1, 100));
-    } else if (flag == "--threads") {
-      s.threads = sbptt::parse_integer(flag, cursor.value(), 1, 64);
-    } else if (flag == "--tasks") {
-      s.tasks = split(cursor.value());
-      check_list(flag, s.tasks, {"cartpole1", "cartpole4", "guidance", "quantum", "quantum-nx"});
-    } else if (flag == "--scalars") {
-      s.scalars = split(cursor.value());
-      check_list(flag, s.scalars, {"float", "double"});
-    } else if (flag == "--methods") {
-      s.methods = cursor.value();
-      if (s.methods.empty() || s.methods.find_first_not_of("RMCS") != std::string::npos)
-        throw sbptt::InvalidArgument("--methods '" + s.methods +
-                                     "' is not valid; expected letters out of RMCS");
-    } else {
-      cursor.unknown(accepted);
+/// A comma list of `allowed` words; throws naming `flag` and the unknown word.
+std::vector<std::string> parse_list(const std::string& flag, const std::string& text,
+                                    const std::vector<std::string>& allowed) {
+  std::vector<std::string> values = split(text);
+  if (values.empty()) throw sbptt::InvalidArgument(flag + " needs at least one value");
+  for (const auto& v : values) {
+    if (std::find(allowed.begin(), allowed.end(), v) == allowed.end()) {
+      std::string list;
+      for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+      throw sbptt::InvalidArgument(flag + " value '" + v + "' is unknown; expected " + list);
     }
   }
-  return s;
+  return values;
+}
+
+/// Returns false after --help; throws InvalidArgument on a bad flag, IoError on an unwritable
+/// --csv (checked now, not after the minutes of measuring).
+bool parse(int argc, char** argv, Settings& s) {
+  sbptt::examples::CommandLine cli(
+      "bench", "Speed of one training epoch at the paper's settings against the machine's own "
+               "peak (docs/benchmarks.md). Exit codes: 0 success, 1 error, 2 bad flag.");
+  cli.path("--csv", s.csv, "also write the rows as CSV here");
+  cli.integer("--repeats", s.repeats, 1, 100, "timed epochs per row (the best is kept)");
+  cli.integer("--threads", s.threads, 1, 64, "threads of the threaded column");
+  cli.value("--tasks", "LIST", "comma list of cartpole1, cartpole4, guidance, quantum, quantum-nx",
+            "all", [&s](const std::string& text) {
+              s.tasks = parse_list("--tasks", text,
+                                   {"cartpole1", "cartpole4", "guidance", "quantum", "quantum-nx"});
+            });
+  cli.value("--scalars", "LIST", "comma list of float, double", "float,double",
+            [&s](const std::string& text) {
+              s.scalars = parse_list("--scalars", text, {"float", "double"});
+            });
+  cli.value("--methods", "LETTERS", "letters out of RMCS", "RMCS", [&s](const std::string& text) {
+    if (text.empty() || text.find_first_not_of("RMCS") != std::string::npos)
+      throw sbptt::InvalidArgument("--methods '" + text +
+                                   "' is not valid; expected letters out of RMCS");
+    s.methods = text;
+  });
+  return cli.parse(argc, argv);
 }
 
 std::string cpu_model() {
@@ -457,10 +460,16 @@ void write_csv(const Settings& settings, const std::vector<Row>& rows, const dou
 int main(int argc, char** argv) {
   Settings settings;
   try {
-    settings = parse(argc, argv);
-  } catch (const std::exception& e) {
+    if (!parse(argc, argv, settings)) return 0;
+  } catch (const sbptt::InvalidArgument& e) {
     std::fprintf(stderr, "bench: %s\n", e.what());
     return 2;
+  }
+  try {
+    sbptt::examples::require_writable(settings.csv, "--csv");
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench: %s\n", e.what());
+    return 1;
   }
   try {
     std::printf("sbptt bench: %s, %u hardware threads; epoch = Trainer::train_epoch "

@@ -5,13 +5,14 @@
 #include "task_program.hpp"
 
 using namespace sbptt;
+using sbptt::examples::Task;
+using sbptt::examples::TaskOptions;
 
 template <class Scalar, int Poles>
 int run(const TaskOptions& o) {
-  const auto horizon = examples::resolve_horizon(o, 100, 0.01);
   CartPoleOptions options;
-  options.horizon = horizon.horizon();
-  options.steps = horizon.steps;
+  options.horizon = o.time.horizon();
+  options.steps = o.time.steps;
   if (o.physical) options.model = CartPoleModel::Physical;
   const CartPole<Scalar, Poles> sim(options);
   Rng data_rng(o.seed);
@@ -19,7 +20,7 @@ int run(const TaskOptions& o) {
   auto network = Network<Scalar>::mlp(sim.state_dim(), {100, 100}, 1);
   Rng init_rng(o.seed + 1);
   glorot_uniform(network, init_rng, {.zero_last_kernel = true});
-  return examples::train(o, sim, network, cartpole_objective<Scalar, Poles>(), horizon.steps,
+  return examples::train(o, sim, network, cartpole_objective<Scalar, Poles>(), o.time.steps,
                          std::move(data));
 }
 

@@ -6,13 +6,14 @@
 #include "task_program.hpp"
 
 using namespace sbptt;
+using sbptt::examples::Task;
+using sbptt::examples::TaskOptions;
 
 template <class Scalar, int Drivers, int Evaders>
 int run(const TaskOptions& o) {
-  const auto horizon = examples::resolve_horizon(o, 60, 4.0 / 60.0);
   GuidanceOptions options;
-  options.horizon = horizon.horizon();
-  options.steps = horizon.steps;
+  options.horizon = o.time.horizon();
+  options.steps = o.time.steps;
   if (o.physical) options.physical = {GuidanceCenter::Centroid, FlockingSign::AsIntended};
   const GuidanceByRepulsion<Scalar, Drivers, Evaders> sim(o.drivers, o.evaders, options);
   Rng data_rng(o.seed);
@@ -20,7 +21,7 @@ int run(const TaskOptions& o) {
   auto network = Network<Scalar>::mlp(sim.state_dim(), {100, 100}, sim.control_dim());
   Rng init_rng(o.seed + 1);
   glorot_uniform(network, init_rng, {.zero_last_kernel = true});
-  return examples::train(o, sim, network, guidance_objective(sim, o.rc), horizon.steps,
+  return examples::train(o, sim, network, guidance_objective(sim, o.rc), o.time.steps,
                          std::move(data));
 }
 

@@ -6,13 +6,14 @@
 #include "task_program.hpp"
 
 using namespace sbptt;
+using sbptt::examples::Task;
+using sbptt::examples::TaskOptions;
 
 template <class Scalar, int Nx>
 int run(const TaskOptions& o) {
-  const auto horizon = examples::resolve_horizon(o, 128, 0.0625);
   SchrodingerOptions<Scalar> options;
-  options.dt = static_cast<Scalar>(horizon.dt);
-  options.steps = horizon.steps;
+  options.dt = static_cast<Scalar>(o.time.dt);
+  options.steps = o.time.steps;
   const Schrodinger1D<Scalar, Nx> sim(o.nx, options);
   Rng data_rng(o.seed);
   auto data = examples::split_half<Scalar>(sim.initial_states(data_rng, 2 * o.samples));
@@ -23,7 +24,7 @@ int run(const TaskOptions& o) {
   // same function, but Glorot fans (6, 360) instead of our conv1d's (6, 180).
   Rng init_rng(o.seed + 1);
   glorot_uniform(network, init_rng, {.fan_overrides = {std::pair<Index, Index>{6, 360}}});
-  return examples::train(o, sim, network, quantum_objective(sim, o.target + 1), horizon.steps,
+  return examples::train(o, sim, network, quantum_objective(sim, o.target + 1), o.time.steps,
                          std::move(data));
 }
 

@@ -27,7 +27,8 @@
 #include "sbptt/optim/adam.hpp"
 #include "sbptt/optim/combined_update.hpp"
 #include "sbptt/core/atomic_file.hpp"
-#include "sbptt/train/arguments.hpp"
+
+#include "command_line.hpp"
 
 namespace {
 
@@ -89,28 +90,17 @@ std::vector<Point> run_combined(const Settings& s) {
   return path;
 }
 
-void usage(std::ostream& out) {
-  out << "usage: rotation [--k K] [--lr LR] [--iterations N] [--csv FILE]\n"
-         "  --k K           rotation strength, finite (default 2)\n"
-         "  --lr LR         Adam learning rate, finite and > 0 (default 0.1)\n"
-         "  --iterations N  Adam steps per method, integer in [1, 1e6] (default 200)\n"
-         "  --csv FILE      write the iteration,method,theta1,theta2,loss rows to FILE\n"
-         "                  (default rotation.csv)\n";
-}
-
-// Throws sbptt::InvalidArgument naming the flag and what was expected.
-Settings parse_arguments(int argc, const char* const* argv) {
-  Settings s;
-  sbptt::ArgumentCursor args(argc, argv);
-  while (args.next()) {
-    const std::string& flag = args.flag();
-    if (flag == "--k") s.k = sbptt::parse_number(flag, args.value(), -1e6, 1e6);
-    else if (flag == "--lr") s.lr = sbptt::parse_number(flag, args.value(), 1e-300, 1e6);
-    else if (flag == "--iterations") s.iterations = sbptt::parse_integer(flag, args.value(), 1, 1000000);
-    else if (flag == "--csv") s.csv = args.value();
-    else args.unknown("--k, --lr, --iterations, --csv");
-  }
-  return s;
+// Returns false after --help; throws sbptt::InvalidArgument naming the flag and what was
+// expected.
+bool parse_arguments(int argc, const char* const* argv, Settings& s) {
+  sbptt::examples::CommandLine cli(
+      "rotation", "Adam on a rotational update field and what the combined update does about "
+                  "it (docs/rotation.md). Exit codes: 0 success, 1 error, 2 bad flag.");
+  cli.number("--k", s.k, -1e6, 1e6, "rotation strength of the curl added to the gradient");
+  cli.number("--lr", s.lr, 1e-300, 1e6, "Adam learning rate");
+  cli.integer("--iterations", s.iterations, 1, 1000000, "Adam steps per method");
+  cli.path("--csv", s.csv, "write the iteration,method,theta1,theta2,loss rows here", s.csv);
+  return cli.parse(argc, argv);
 }
 
 using Runs = std::vector<std::pair<const char*, const std::vector<Point>*>>;
@@ -133,10 +123,9 @@ std::string csv_text(const Runs& runs) {
 int main(int argc, char** argv) {
   Settings s;
   try {
-    s = parse_arguments(argc, argv);
+    if (!parse_arguments(argc, argv, s)) return 0;
   } catch (const sbptt::InvalidArgument& e) {
     std::cerr << "rotation: " << e.what() << "\n";
-    usage(std::cerr);
     return 2;
   }
   try {

@@ -6,18 +6,19 @@
 #include "task_program.hpp"
 
 using namespace sbptt;
+using sbptt::examples::Task;
+using sbptt::examples::TaskOptions;
 
 template <class Scalar>
 int run(const TaskOptions& o) {
   using Sim = LinearSystem<Scalar, 1, 1>;
   using Loss = SquaredDistanceLoss<typename Sim::State>;
-  const auto horizon = examples::resolve_horizon(o, 4, 1.0);
   const Sim sim = Sim::scalar(Scalar(1), Scalar(1));
   testing::PolynomialPolicy<Scalar> policy({2, 1});
   typename Sim::State target;
   target(0) = Scalar(2);
   const Matrix<Scalar> starts = Matrix<Scalar>::Constant(1, o.samples, Scalar(-0.3));
-  return examples::train(o, sim, policy, Objective<Loss>{Loss{target}}, horizon.steps,
+  return examples::train(o, sim, policy, Objective<Loss>{Loss{target}}, o.time.steps,
                          examples::DataSplit<Scalar>{starts, starts});
 }
 

@@ -6,8 +6,8 @@
 # directory of mujoco::mujoco without depending on the package that creates it, and CMake
 # refuses a downstream target that links it while the directory is missing.
 set -euo pipefail
-packages=(cmake make g++ libeigen3-dev catch2 libmujoco-dev libqhull-dev python3 python3-matplotlib
-          "$@")
+packages=(cmake make g++ libeigen3-dev catch2 libcli11-dev libmujoco-dev libqhull-dev python3
+          python3-matplotlib "$@")
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -17,52 +17,15 @@
 
 #include <sbptt/sbptt.hpp>
 
+#include "output_path.hpp"
+#include "task_options.hpp"
+
 namespace sbptt::examples {
 
-/// Time stepping of a task after --steps / --dt / --T. Given only --steps, dt is kept (the
-/// horizon changes); given only --dt or only --T, the other one of steps and dt is adapted.
-struct Horizon {
-  Index steps;
-  double dt;
-  [[nodiscard]] double horizon() const { return static_cast<double>(steps) * dt; }
-};
-
-inline Horizon resolve_horizon(const TaskOptions& o, Index default_steps, double default_dt) {
-  Horizon h{default_steps, default_dt};
-  if (o.steps) h.steps = *o.steps;
-  if (o.dt) h.dt = *o.dt;
-  if (o.horizon && o.steps) h.dt = *o.horizon / static_cast<double>(*o.steps);
-  if (o.horizon && !o.steps) {
-    const double steps = std::round(*o.horizon / h.dt);
-    detail::require(steps >= 1 && std::abs(steps * h.dt - *o.horizon) < 1e-9 * *o.horizon,
-                    "--T ", *o.horizon, " is not a whole number of steps of dt = ", h.dt,
-                    "; give --steps too, or a --dt that divides T");
-    detail::require(steps <= static_cast<double>(max_count), "--T ", *o.horizon, " is ", steps,
-                    " steps of dt = ", h.dt, "; expected at most ", max_count, " steps");
-    h.steps = static_cast<Index>(steps);
-  }
-  return h;
-}
-
-/// Fails before any work when an output file could not be written: its directory must exist
-/// and be writable, and the path itself must be a regular file or new (an hours-long run must
-/// not die at its first save, nor lose its work when the final rename fails).
-inline void require_writable(const std::string& path, const char* flag) {
-  if (path.empty()) return;
-  std::error_code error;
-  const auto status = std::filesystem::status(path, error);
-  detail::require<IoError>(!std::filesystem::exists(status) ||
-                               std::filesystem::is_regular_file(status),
-                           flag, " '", path, "' exists and is not a regular file (",
-                           std::filesystem::is_directory(status) ? "a directory" : "a special file",
-                           "); expected a file path to write");
-  const std::filesystem::path parent = std::filesystem::absolute(path).parent_path();
-  detail::require<IoError>(std::filesystem::exists(parent, error), flag, " '", path,
-                           "': directory '", parent.string(), "' does not exist");
-  detail::require<IoError>(std::filesystem::is_directory(parent, error), flag, " '", path,
-                           "': '", parent.string(), "' is not a directory");
-  detail::require<IoError>(::access(parent.c_str(), W_OK) == 0, flag, " '", path,
-                           "': directory '", parent.string(), "' is not writable");
+/// "100 steps of dt 0.01, T 1" for the header line (the toy is a map: steps only).
+inline std::string describe(Task task, const Horizon& time) {
+  if (task == Task::Toy) return detail::concat(time.steps, " steps (a map, no dt)");
+  return detail::concat(time.steps, " steps of dt ", shown(time.dt), ", T ", shown(time.horizon()));
 }
 
 /// Splits 2N generated samples into the first N (train) and last N (test), as the reference.
@@ -76,8 +39,16 @@ DataSplit<Scalar> split_half(const Matrix<Scalar>& states) {
   return {states.leftCols(n), states.rightCols(n)};
 }
 
+/// ", step 9, sample 0", or ", parameter 3" for a gradient.
+inline std::string location(const NonFinite& where) {
+  return where.quantity == Quantity::Gradient
+             ? detail::concat(", parameter ", where.sample)
+             : detail::concat(", step ", where.step, ", sample ", where.sample);
+}
+
 /// --dump-gradients: one batch (all of `states`), no update; prints loss=… and writes
-/// `param,R,M,C,S,N`, one row per parameter.
+/// `param,R,M,C,S,N`, one row per parameter. A non-finite loss, state, control or gradient is
+/// reported on stderr and returns 3; nothing is written then.
 template <class Sim, class Ctrl, class Loss>
 int dump_gradients(const TaskOptions& o, const Sim& sim, Ctrl& controller,
                    const Objective<Loss>& objective, Index steps,
@@ -85,18 +56,30 @@ int dump_gradients(const TaskOptions& o, const Sim& sim, Ctrl& controller,
   using Scalar = typename Sim::Scalar;
   Engine engine(sim, controller, objective, steps);
   const Scalar loss = engine.forward(states);
+  const auto refuse = [&](const std::string& what, const char* when, const NonFinite& where) {
+    std::cerr << to_string(o.task) << ": --dump-gradients: non-finite " << what << " ("
+              << where.value << ") " << when << location(where) << "; no gradients written\n";
+    return 3;
+  };
+  if (const auto& where = engine.forward_non_finite())
+    return refuse(std::string(to_string(where->quantity)), "in the forward pass", *where);
   Vector<Scalar> regular, modified, stopped, network, combined;
   engine.reverse(FlowMode::Full, regular, o.truncation);
   engine.reverse(FlowMode::PhysicsOnly, modified, o.truncation);
   engine.reverse(FlowMode::Stopped, stopped, o.truncation);
   engine.reverse(FlowMode::NetworkOnly, network, o.truncation);
   combine(modified, regular, combined);
+  const std::pair<const char*, const Vector<Scalar>*> columns[] = {
+      {"R", &regular}, {"M", &modified}, {"C", &combined}, {"S", &stopped}, {"N", &network}};
+  for (const auto& [column, values] : columns)
+    if (const auto where = detail::first_non_finite_component(*values))
+      return refuse(detail::concat(column, " gradient"), "in the reverse sweep", *where);
   std::string text = "param,R,M,C,S,N\n";
   for (Index p = 0; p < regular.size(); ++p) {
     text += std::to_string(p);
-    for (const auto* column : {&regular, &modified, &combined, &stopped, &network}) {
+    for (const auto& column : columns) {
       text += ',';
-      detail::append_number(text, (*column)(p));
+      detail::append_number(text, (*column.second)(p));
     }
     text += '\n';
   }
@@ -113,10 +96,7 @@ inline std::string describe(const NonFiniteEvent& event) {
   text += event.phase == Phase::Update
               ? detail::concat("epoch ", event.epoch, ", batch ", event.batch)
               : detail::concat("the ", to_string(event.phase), " of epoch ", event.epoch);
-  text += where.quantity == Quantity::Gradient
-              ? detail::concat(", parameter ", where.sample)
-              : detail::concat(", step ", where.step, ", sample ", where.sample);
-  return text;
+  return text + location(where);
 }
 
 /// Trains `controller` for o.epochs epochs (or dumps gradients), writing the log and params.
@@ -149,10 +129,10 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
 
   std::fprintf(stderr,
                "%s: method %s, clip %s, %ld epochs, %ld train / %ld test samples, batch %ld, "
-               "%ld steps, %ld parameters, %s\n",
+               "%s, %ld parameters, %s\n",
                name, std::string(label(o.method)).c_str(), to_string(o.clip).c_str(), o.epochs,
                static_cast<long>(data.train.cols()), static_cast<long>(data.test.cols()), o.batch,
-               static_cast<long>(steps), static_cast<long>(controller.num_params()),
+               describe(o.task, o.time).c_str(), static_cast<long>(controller.num_params()),
                o.use_float ? "float" : "double");
   TrainingLog log;
   const double initial = static_cast<double>(trainer.engine().evaluate(data.test));
@@ -208,15 +188,9 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
 template <class Body>
 int task_main(Task task, int argc, char** argv, Body&& body) {
   const char* name = to_string(task);
-  for (int i = 1; i < argc; ++i) {
-    if (std::string(argv[i]) == "--help") {
-      std::printf("usage: %s [flags]\nflags: %s\n", name, task_flags(task).c_str());
-      return 0;
-    }
-  }
   TaskOptions options;
   try {
-    options = parse_task_options(task, argc, argv);
+    if (!parse_task_options(task, argc, argv, options)) return 0;  // --help
   } catch (const InvalidArgument& e) {
     std::cerr << name << ": " << e.what() << "\n";
     return 2;
@@ -231,8 +205,7 @@ int task_main(Task task, int argc, char** argv, Body&& body) {
     const std::string nx = task == Task::Quantum ? ", --nx " + std::to_string(options.nx) : "";
     std::cerr << name << ": out of memory for --samples " << options.samples
               << " (and as many test samples), --batch " << options.batch << ", --steps "
-              << (options.steps ? std::to_string(*options.steps) : "default") << nx
-              << ", --threads " << options.threads
+              << options.time.steps << nx << ", --threads " << options.threads
               << "; expected sizes whose data and trajectories fit in memory\n";
     return 1;
   } catch (const std::exception& e) {

@@ -11,7 +11,12 @@
 #include <string>
 #include <vector>
 
-#include <sbptt/train/task_options.hpp>
+#include <sbptt/optim/clip.hpp>
+#include <sbptt/train/method.hpp>
+
+#include "argument_cursor.hpp"
+#include "flag_values.hpp"
+#include "limits.hpp"
 
 #include "grid.hpp"
 
@@ -48,9 +53,9 @@ inline std::string non_empty(const std::string& flag, std::string value) {
 
 inline Options parse_options(int argc, const char* const* argv) {
   // The task programs' limit: a value they would refuse is refused here, before any run starts.
-  constexpr long count_limit = sbptt::max_count;
+  constexpr long count_limit = sbptt::examples::limits::max_count;
   Options o;
-  sbptt::ArgumentCursor args(argc, argv);
+  sbptt::examples::ArgumentCursor args(argc, argv);
   while (args.next()) {
     const std::string& f = args.flag();
     if (f == "--profile") {
@@ -93,13 +98,13 @@ inline Options parse_options(int argc, const char* const* argv) {
     } else if (f == "--complexities") {
       std::vector<double> list;
       for (const auto& item : parse_list(f, args.value()))
-        list.push_back(sbptt::parse_number(f, item, 0, 1e9));
+        list.push_back(sbptt::examples::parse_number(f, item, 0, 1e9));
       o.complexities = list;
-    } else if (f == "--seeds") o.seeds = sbptt::parse_integer(f, args.value(), 1, 1000);
-    else if (f == "--epochs") o.epochs = sbptt::parse_integer(f, args.value(), 1, count_limit);
-    else if (f == "--samples") o.samples = sbptt::parse_integer(f, args.value(), 1, count_limit);
-    else if (f == "--jobs") o.jobs = sbptt::parse_integer(f, args.value(), 1, 256);
-    else if (f == "--threads") o.threads = sbptt::parse_integer(f, args.value(), 1, 256);
+    } else if (f == "--seeds") o.seeds = sbptt::examples::parse_integer(f, args.value(), 1, 1000);
+    else if (f == "--epochs") o.epochs = sbptt::examples::parse_integer(f, args.value(), 1, count_limit);
+    else if (f == "--samples") o.samples = sbptt::examples::parse_integer(f, args.value(), 1, count_limit);
+    else if (f == "--jobs") o.jobs = sbptt::examples::parse_integer(f, args.value(), 1, 256);
+    else if (f == "--threads") o.threads = sbptt::examples::parse_integer(f, args.value(), 1, 256);
     else if (f == "--out") o.out = non_empty(f, args.value());
     else if (f == "--bin-dir") o.bin_dir = non_empty(f, args.value());
     else if (f == "--python") o.python = non_empty(f, args.value());
@@ -117,9 +122,9 @@ inline Options parse_options(int argc, const char* const* argv) {
       const auto slash = text.find('/');
       if (slash == std::string::npos)
         throw InvalidArgument(concat("--shard '", text, "' is not K/N; expected e.g. 2/3"));
-      o.shard_count = sbptt::parse_integer("--shard N", text.substr(slash + 1), 1, count_limit);
+      o.shard_count = sbptt::examples::parse_integer("--shard N", text.substr(slash + 1), 1, count_limit);
       o.shard_index =
-          sbptt::parse_integer("--shard K", text.substr(0, slash), 1, o.shard_count) - 1;
+          sbptt::examples::parse_integer("--shard K", text.substr(0, slash), 1, o.shard_count) - 1;
     }
     else if (f == "--float") args.no_value(), o.use_float = true;
     else if (f == "--no-plot") args.no_value(), o.plot = false;

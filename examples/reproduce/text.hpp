@@ -12,7 +12,8 @@
 #include <vector>
 
 #include <sbptt/core/error.hpp>
-#include <sbptt/train/arguments.hpp>
+
+#include "flag_values.hpp"
 
 namespace fs = std::filesystem;
 

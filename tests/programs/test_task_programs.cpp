@@ -12,49 +12,18 @@
 #include <utility>
 #include <vector>
 
+#include "programs/program_runner.hpp"
 #include "sbptt/nn/parameters_io.hpp"
 #include "support/address_sanitizer.hpp"
 
 namespace fs = std::filesystem;
+using sbptt::testing::file_text;
+using sbptt::testing::printed_loss;
+using sbptt::testing::Result;
+using sbptt::testing::run;
+using sbptt::testing::scratch;
 
 namespace {
-
-struct Result {
-  int status = -1;
-  std::string output;  // stdout and stderr
-};
-
-/// Runs `program` through the shell; `shell_prefix` (e.g. a ulimit) goes before it.
-Result run(const std::string& program, const std::string& arguments,
-           const std::string& shell_prefix = "") {
-  const std::string command = shell_prefix + std::string(SBPTT_EXAMPLES_DIR) + "/" + program +
-                              " " + arguments + " 2>&1";
-  Result result;
-  FILE* pipe = popen(command.c_str(), "r");
-  REQUIRE(pipe != nullptr);
-  char buffer[4096];
-  while (std::fgets(buffer, sizeof buffer, pipe)) result.output += buffer;
-  const int status = pclose(pipe);
-  result.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
-}
-
-fs::path scratch(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("sbptt_programs_" + std::to_string(getpid()));
-  fs::create_directories(dir);
-  return dir / name;
-}
-
-std::string file_text(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), {}};
-}
-
-double printed_loss(const std::string& output) {
-  const auto at = output.find("loss=");
-  REQUIRE(at != std::string::npos);
-  return std::stod(output.substr(at + 5));
-}
 
 /// Column `column` (1 = R) of a --dump-gradients CSV, one entry per parameter.
 std::vector<double> gradient_column(const fs::path& csv, int column) {

@@ -1,0 +1,132 @@
+#pragma once
+// The command line of every example program, on CLI11: `--help` lists each flag with its
+// meaning, default and range, and every bad flag or value becomes an sbptt::InvalidArgument
+// that names the flag, the value and what was expected (the programs exit 2 on it).
+//
+// CLI11 reads the tokens; the values are converted by parse_integer / parse_number
+// (flag_values.hpp), so that "--epochs ten" and "--poles 9" are refused in the same words by
+// every program, and unknown flags and missing values are reported in those words too.
+#include <cstdio>
+#include <functional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "flag_values.hpp"
+
+namespace sbptt::examples {
+
+class CommandLine {
+public:
+  CommandLine(std::string program, std::string description)
+      : app_(std::move(description), std::move(program)) {
+    app_.allow_extras();  // unknown flags are reported by parse(), in the words of the others
+    app_.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
+    app_.set_help_flag("--help", "print every flag with its meaning, default and range; exit");
+    app_.get_formatter()->column_width(40);
+  }
+
+  /// A flag taking a value that `set` converts (and throws InvalidArgument on).
+  CLI::Option* value(const std::string& flag, const std::string& type_name,
+                     const std::string& meaning, const std::string& default_shown,
+                     std::function<void(const std::string&)> set) {
+    CLI::Option* option = app_.add_option_function<std::string>(flag, std::move(set), meaning);
+    option->type_name(type_name);
+    if (!default_shown.empty()) option->default_str(default_shown);
+    return option;
+  }
+
+  /// An integer flag in [low, high]; `target` holds the default.
+  template <class Integer>
+  CLI::Option* integer(const std::string& flag, Integer& target, long low, long high,
+                       const std::string& meaning) {
+    return value(flag, "N", detail::concat(meaning, "; an integer in [", low, ", ", high, "]"),
+                 std::to_string(target), [&target, flag, low, high](const std::string& text) {
+                   target = static_cast<Integer>(parse_integer(flag, text, low, high));
+                 });
+  }
+
+  /// A finite number flag in [low, high]; `target` holds the default.
+  CLI::Option* number(const std::string& flag, double& target, double low, double high,
+                      const std::string& meaning) {
+    return value(flag, "X",
+                 detail::concat(meaning, "; a number in [", shown(low), ", ", shown(high), "]"),
+                 shown(target), [&target, flag, low, high](const std::string& text) {
+                   target = parse_number(flag, text, low, high);
+                 });
+  }
+
+  /// A file path (empty = the default shown).
+  CLI::Option* path(const std::string& flag, std::string& target, const std::string& meaning,
+                    const std::string& default_shown = "none") {
+    return value(flag, "FILE", meaning, default_shown,
+                 [&target](const std::string& text) { target = text; });
+  }
+
+  /// A switch without value; `set` runs when it is given.
+  CLI::Option* flag(const std::string& flag, const std::string& meaning, std::function<void()> set) {
+    return app_.add_flag_callback(flag, std::move(set), meaning);
+  }
+
+  /// A flag this program refuses with `reason` (not listed by --help).
+  void refuse(const std::string& flag, const std::string& reason) {
+    refused_.emplace_back(flag, reason);
+  }
+
+  /// Reads argv. Returns false after printing the help on stdout (the program exits 0);
+  /// throws InvalidArgument for an unknown flag, a missing value or a bad value.
+  bool parse(int argc, const char* const* argv) {
+    for (int i = 1; i < argc; ++i) {
+      const std::string token = argv[i];
+      for (const auto& [flag, reason] : refused_)
+        if (token == flag || token.rfind(flag + "=", 0) == 0)
+          throw InvalidArgument(detail::concat(flag, ": ", reason));
+    }
+    try {
+      app_.parse(argc, argv);
+    } catch (const CLI::CallForHelp&) {
+      std::fputs(app_.help().c_str(), stdout);
+      return false;
+    } catch (const CLI::ArgumentMismatch& e) {
+      // "--rc: 1 required X missing": the flag came last, or another flag followed it.
+      const std::string what = e.what();
+      if (what.find(" required ") != std::string::npos && what.find(" missing") != std::string::npos)
+        throw InvalidArgument(detail::concat(what.substr(0, what.find(':')),
+                                             " needs a value; none was given"));
+      throw InvalidArgument(what);
+    } catch (const CLI::ParseError& e) {
+      throw InvalidArgument(e.what());
+    }
+    const std::vector<std::string> extras = app_.remaining();
+    if (!extras.empty()) {
+      const std::string& first = extras.front();
+      if (first.rfind('-', 0) != 0)
+        throw InvalidArgument(detail::concat("unexpected argument '", first,
+                                             "'; expected a flag starting with --"));
+      throw InvalidArgument(detail::concat("unknown flag '", first.substr(0, first.find('=')),
+                                           "'; accepted flags: ", accepted(), " (--help explains each)"));
+    }
+    return true;
+  }
+
+  /// Whether `flag` was given on the command line (after parse).
+  [[nodiscard]] bool given(const std::string& flag) const { return app_.count(flag) > 0; }
+
+  /// The flags this program accepts, comma-separated.
+  [[nodiscard]] std::string accepted() const {
+    std::string list;
+    for (const CLI::Option* option : app_.get_options()) {
+      if (option->get_group().empty() || option->get_name() == "--help") continue;
+      list += (list.empty() ? "" : ", ") + option->get_name();
+    }
+    return list;
+  }
+
+private:
+  CLI::App app_;
+  std::vector<std::pair<std::string, std::string>> refused_;
+};
+
+}  // namespace sbptt::examples

@@ -1,0 +1,240 @@
+#pragma once
+// The command line shared by the task programs (toy, cartpole, guidance, quantum). Defaults are
+// the paper's settings (docs/programs.md); parse_task_options throws InvalidArgument naming the
+// flag, the value and what was expected, before any work.
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <string>
+
+#include <sbptt/optim/clip.hpp>
+#include <sbptt/train/method.hpp>
+#include <sbptt/train/trainer.hpp>
+
+#include "command_line.hpp"
+#include "limits.hpp"
+
+namespace sbptt::examples {
+
+enum class Task { Toy, CartPole, Guidance, Quantum };
+
+[[nodiscard]] constexpr const char* to_string(Task task) {
+  switch (task) {
+    case Task::Toy: return "toy";
+    case Task::CartPole: return "cartpole";
+    case Task::Guidance: return "guidance";
+    case Task::Quantum: return "quantum";
+  }
+  return "?";
+}
+
+/// The paper's time stepping of each task: steps and dt (T = steps · dt).
+struct Horizon {
+  long steps;
+  double dt;
+  [[nodiscard]] double horizon() const { return static_cast<double>(steps) * dt; }
+};
+
+[[nodiscard]] constexpr Horizon paper_horizon(Task task) {
+  switch (task) {
+    case Task::Toy: return {4, 1.0};  // a map: "dt" 1 only so that T counts the steps
+    case Task::CartPole: return {100, 0.01};
+    case Task::Guidance: return {60, 4.0 / 60.0};
+    case Task::Quantum: return {128, 0.0625};
+  }
+  return {1, 1.0};
+}
+
+/// The smallest quantum grid the reference CNN (two conv k3 s2) accepts: the first conv's
+/// output, (nx − 3) / 2 + 1, must still hold one kernel of 3.
+inline constexpr long min_quantum_nx = 7;
+
+/// Every setting of a task program, after parsing (the horizon resolved).
+struct TaskOptions {
+  Task task = Task::CartPole;
+  Method method = Method::Combined;
+  ClipMode clip = ClipMode::None;
+  double clip_threshold = 1.0;
+  long epochs = 1000;
+  long batch = 8;
+  long samples = 256;  ///< train samples; the test set has as many
+  double lr = 1e-3;
+  std::uint64_t seed = 42;
+  bool shuffle = false;
+  long truncation = 0;
+  NonFinitePolicy on_non_finite = NonFinitePolicy::Stop;
+  // task sizes
+  long poles = 1;
+  bool physical = false;  ///< cart pole and guidance: the physical variants, not the reference quirks
+  long drivers = 2;
+  long evaders = 4;
+  double rc = 0.1;
+  long target = 2;  ///< quantum target, numbered as in the paper's plots (0 = ground state)
+  long nx = 32;
+  Horizon time{100, 0.01};  ///< steps and dt after --steps / --dt / --T
+  bool use_float = false;
+  long threads = 1;
+  // files
+  std::string csv, save_params, init_params, init_states, dump_gradients;
+};
+
+namespace detail_task {
+
+/// Steps of dt that make up T exactly; throws naming `flags` when T is not a whole number of
+/// them or they exceed the count limit.
+inline long whole_steps(double horizon, double dt, const std::string& flags) {
+  const double steps = std::round(horizon / dt);
+  detail::require(steps >= 1 && std::abs(steps * dt - horizon) < 1e-9 * horizon, flags,
+                  ": T = ", shown(horizon), " is not a whole number of steps of dt = ", shown(dt),
+                  " (", shown(horizon / dt), "); expected a dt that divides T, or --steps too");
+  detail::require(steps <= static_cast<double>(limits::max_count), flags, ": T = ",
+                  shown(horizon), " is ", shown(steps), " steps of dt = ", shown(dt),
+                  "; expected at most ", limits::max_count, " steps");
+  return static_cast<long>(steps);
+}
+
+/// The time-stepping rules of docs/programs.md: --steps alone keeps dt (T changes); --dt alone
+/// keeps T and --T alone keeps dt (steps adapt, T must be a whole number of steps); two of
+/// them fix the third; all three is an error.
+inline Horizon resolve(Horizon paper, std::optional<long> steps, std::optional<double> dt,
+                       std::optional<double> horizon) {
+  detail::require(!(steps && dt && horizon), "--steps, --dt and --T all given; expected at "
+                                             "most two of them (T = steps · dt)");
+  if (steps && horizon) return {*steps, *horizon / static_cast<double>(*steps)};
+  if (steps) return {*steps, dt.value_or(paper.dt)};
+  if (dt && horizon) return {whole_steps(*horizon, *dt, "--dt with --T"), *dt};
+  if (dt) return {whole_steps(paper.horizon(), *dt, "--dt " + shown(*dt)), *dt};
+  if (horizon) return {whole_steps(*horizon, paper.dt, "--T " + shown(*horizon)), paper.dt};
+  return paper;
+}
+
+/// With --float a rate must be a normal float: 1e300 would become inf, 1e-300 zero.
+inline void require_float_range(const char* flag, double value) {
+  constexpr double low = std::numeric_limits<float>::min();
+  constexpr double high = std::numeric_limits<float>::max();
+  detail::require(value >= low && value <= high, flag, " ", shown(value),
+                  " does not fit --float; expected a number in [", shown(low), ", ", shown(high),
+                  "] with --float");
+}
+
+}  // namespace detail_task
+
+/// Parses argv for `task` into `o`. Returns false when --help printed the help (exit 0);
+/// throws InvalidArgument on any unknown flag or bad value.
+[[nodiscard]] inline bool parse_task_options(Task task, int argc, const char* const* argv,
+                                             TaskOptions& o) {
+  o = TaskOptions{};
+  o.task = task;
+  if (task == Task::Toy) {  // the paper's toy has one start and two parameters
+    o.samples = 1;
+    o.batch = 1;
+    o.epochs = 200;
+    o.lr = 0.01;
+  }
+  const Horizon paper = paper_horizon(task);
+  std::optional<long> steps;
+  std::optional<double> dt, horizon;
+  const long many = limits::max_count;
+
+  CommandLine cli(to_string(task), detail::concat(
+      "sbptt task program '", to_string(task), "': trains a controller on the paper's task with "
+      "the chosen gradient (docs/programs.md). Exit codes: 0 success, 1 error, 2 bad flag, 3 a "
+      "non-finite value stopped training."));
+  cli.value("--method", "R|M|C|S|N",
+            "gradient: regular, modified, combined, stopped, network-only (long names and "
+            "full/physics/stop work too)", "C",
+            [&](const std::string& text) { o.method = parse_method(text); });
+  cli.value("--clip", "none|value|norm", "clipping of the vector fed to Adam (after combining)",
+            "none", [&](const std::string& text) { o.clip = parse_clip_mode(text); });
+  cli.number("--clip-threshold", o.clip_threshold, limits::min_positive, limits::max_positive,
+             "threshold of --clip");
+  cli.integer("--epochs", o.epochs, 0, many, "epochs to train (0 = only load and save)");
+  cli.integer("--batch", o.batch, 1, many, "mini-batch size");
+  cli.integer("--samples", o.samples, 1, many, "train samples; the test set has as many");
+  cli.number("--lr", o.lr, limits::min_positive, limits::max_positive, "Adam learning rate");
+  cli.integer("--seed", o.seed, 0, limits::max_seed,
+              "seed of the data (and, plus 1, of the initial weights)");
+  cli.flag("--shuffle", "reshuffle the train set every epoch (the reference never does); default off",
+           [&] { o.shuffle = true; });
+  cli.integer("--truncation", o.truncation, 0, many, "cut the adjoint every K steps (0 = never)");
+  cli.value("--on-nonfinite", "stop|skip-batch",
+            "what a NaN/Inf in a batch's update does: stop training, or skip that batch", "stop",
+            [&](const std::string& text) {
+              if (text == "stop") o.on_non_finite = NonFinitePolicy::Stop;
+              else if (text == "skip-batch") o.on_non_finite = NonFinitePolicy::SkipBatch;
+              else throw InvalidArgument(detail::concat("--on-nonfinite '", text,
+                                                        "' is unknown; expected stop or skip-batch"));
+            });
+  cli.value("--steps", "N",
+            detail::concat("time steps; alone it keeps dt and changes T; an integer in [1, ", many,
+                           "]"),
+            std::to_string(paper.steps),
+            [&](const std::string& text) { steps = parse_integer("--steps", text, 1, many); });
+  if (task == Task::Toy) {
+    const char* reason = "the toy system x' = x + c is a map with no time step; expected --steps "
+                         "alone to set the horizon";
+    cli.refuse("--dt", reason);
+    cli.refuse("--T", reason);
+  } else {
+    cli.value("--dt", "X",
+              "time step; alone it keeps T, which must then be a whole number of steps; a number "
+              "in [1e-12, 1e6]",
+              shown(paper.dt),
+              [&](const std::string& text) { dt = parse_number("--dt", text, 1e-12, 1e6); });
+    cli.value("--T", "X",
+              detail::concat("horizon T = steps · dt; alone it keeps dt (a whole number of steps, "
+                             "at most ", many, "); a number in [1e-12, 1e9]"),
+              shown(paper.horizon()),
+              [&](const std::string& text) { horizon = parse_number("--T", text, 1e-12, 1e9); });
+  }
+  cli.flag("--float", "compute in float (default: double)", [&] { o.use_float = true; });
+  cli.flag("--double", "compute in double (the default)", [&] { o.use_float = false; });
+  cli.integer("--threads", o.threads, 1, limits::max_threads,
+              "threads over the samples of a batch");
+  cli.path("--csv", o.csv, "training log, one row per epoch (docs/formats.md)");
+  cli.path("--save-params", o.save_params, "write the trained parameters (docs/formats.md)");
+  cli.path("--init-params", o.init_params, "start from these parameters (docs/formats.md)");
+  cli.path("--init-states", o.init_states,
+           "train on these initial states (docs/formats.md); the test set stays the generated one");
+  cli.path("--dump-gradients", o.dump_gradients,
+           "no training: evaluate the train states as one batch, print loss=<value>, write "
+           "param,R,M,C,S,N; refuses the training flags");
+  if (task == Task::CartPole) {
+    cli.integer("--poles", o.poles, 1, 4, "number of poles");
+  }
+  if (task == Task::CartPole || task == Task::Guidance)
+    cli.flag("--physical",
+             "the physical variant instead of the reference's quirks (docs/simulators.md); "
+             "default off",
+             [&] { o.physical = true; });
+  if (task == Task::Guidance) {
+    cli.integer("--drivers", o.drivers, 1, 16, "drivers (2 and 4 evaders run fixed-size)");
+    cli.integer("--evaders", o.evaders, 1, 64, "evaders");
+    cli.number("--rc", o.rc, 0, 1e9, "weight of the control regulariser");
+  }
+  if (task == Task::Quantum) {
+    cli.integer("--target", o.target, 2, 4,
+                "target state, counted as in the paper's plots (0 = ground state)");
+    cli.integer("--nx", o.nx, min_quantum_nx, 4096,
+                "interior grid points (at least 7: the CNN's two k3 s2 convolutions)");
+  }
+  if (!cli.parse(argc, argv)) return false;
+
+  o.time = detail_task::resolve(paper, steps, dt, horizon);
+  if (o.use_float) {
+    detail_task::require_float_range("--lr", o.lr);
+    if (o.clip != ClipMode::None) detail_task::require_float_range("--clip-threshold", o.clip_threshold);
+  }
+  if (!o.dump_gradients.empty()) {
+    // These only shape training, which --dump-gradients does not do: refused, not ignored.
+    for (const char* flag : {"--epochs", "--csv", "--save-params", "--batch", "--lr", "--shuffle",
+                             "--method", "--clip", "--clip-threshold", "--on-nonfinite"})
+      detail::require(!cli.given(flag), "--dump-gradients evaluates the parameters without "
+                                        "training, so ", flag, " would have no effect; expected "
+                                        "--dump-gradients without ", flag);
+  }
+  return true;
+}
+
+}  // namespace sbptt::examples

@@ -1,0 +1,223 @@
+// The command lines of the example programs as a user meets them: --help of every program, the
+// time-stepping rules of docs/programs.md, the real ranges, and flags that would be ignored.
+#include <catch2/catch.hpp>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "programs/program_runner.hpp"
+
+namespace fs = std::filesystem;
+using sbptt::testing::printed_loss;
+using sbptt::testing::Result;
+using sbptt::testing::run;
+using sbptt::testing::scratch;
+
+namespace {
+
+/// The line of `help` that documents `flag` ("  --flag ..."), or "" if none.
+std::string help_line(const std::string& help, const std::string& flag) {
+  std::istringstream lines(help);
+  std::string line, documented;
+  while (std::getline(lines, line)) {
+    if (line.rfind("  " + flag + " ", 0) == 0 || line.rfind("  " + flag + "=", 0) == 0 ||
+        line == "  " + flag) {
+      documented = line;
+      // A long flag column pushes the meaning onto the next line.
+      if (std::getline(lines, line) && line.rfind("  --", 0) != 0) documented += line;
+      return documented;
+    }
+  }
+  return "";
+}
+
+/// The header line a task program prints first on stderr.
+std::string header(const Result& r) { return r.output.substr(0, r.output.find('\n')); }
+
+}  // namespace
+
+TEST_CASE("--help of every program lists each flag with its meaning, default and range",
+          "[programs]") {
+  struct Flag {
+    std::string name;
+    bool valued;   // takes a value, so --help shows its default
+    bool ranged;   // a number, so --help shows its range
+  };
+  const std::vector<Flag> common = {
+      {"--method", true, false},        {"--clip", true, false},
+      {"--clip-threshold", true, true}, {"--epochs", true, true},
+      {"--batch", true, true},          {"--samples", true, true},
+      {"--lr", true, true},             {"--seed", true, true},
+      {"--shuffle", false, false},      {"--truncation", true, true},
+      {"--on-nonfinite", true, false},  {"--steps", true, true},
+      {"--float", false, false},        {"--double", false, false},
+      {"--threads", true, true},        {"--csv", true, false},
+      {"--save-params", true, false},   {"--init-params", true, false},
+      {"--init-states", true, false},   {"--dump-gradients", true, false}};
+  const std::vector<Flag> timed = {{"--dt", true, true}, {"--T", true, true}};
+  struct Program {
+    std::string name;
+    std::vector<std::vector<Flag>> flags;
+  };
+  const std::vector<Program> programs = {
+      {"toy", {common}},
+      {"cartpole", {common, timed, {{"--poles", true, true}, {"--physical", false, false}}}},
+      {"guidance",
+       {common, timed,
+        {{"--drivers", true, true}, {"--evaders", true, true}, {"--rc", true, true},
+         {"--physical", false, false}}}},
+      {"quantum", {common, timed, {{"--target", true, true}, {"--nx", true, true}}}},
+      {"bench",
+       {{{"--csv", true, false}, {"--repeats", true, true}, {"--threads", true, true},
+         {"--tasks", true, false}, {"--scalars", true, false}, {"--methods", true, false}}}},
+      {"accuracy", {{{"--csv", true, false}}}},
+      {"rotation",
+       {{{"--k", true, true}, {"--lr", true, true}, {"--iterations", true, true},
+         {"--csv", true, false}}}}};
+  for (const Program& program : programs) {
+    const Result r = run(program.name, "--help");
+    INFO(program.name << " --help\n" << r.output);
+    REQUIRE(r.status == 0);
+    for (const auto& group : program.flags) {
+      for (const Flag& flag : group) {
+        const std::string line = help_line(r.output, flag.name);
+        INFO(flag.name << ": " << line);
+        REQUIRE(!line.empty());
+        // A meaning: words after the flag and its value column.
+        CHECK(line.find_first_of("abcdefghijklmnopqrstuvwxyz", line.find("  ", flag.name.size() + 2)) !=
+              std::string::npos);
+        if (flag.valued) CHECK(line.find(flag.name + " ") != std::string::npos);
+        if (flag.valued) CHECK(line.find('=') != std::string::npos);  // "--epochs N=1000"
+        if (flag.ranged) CHECK(line.find(" in [") != std::string::npos);
+      }
+    }
+  }
+}
+
+TEST_CASE("--dt alone keeps T and adapts the steps; the header prints steps, dt and T",
+          "[programs]") {
+  struct Case {
+    std::string program, arguments, expected;
+  };
+  // T = steps · dt: the cart pole's T = 1 s, guidance's 4 s and quantum's 8 are the paper's.
+  for (const Case& c :
+       {Case{"cartpole", "--dt 0.02", "50 steps of dt 0.02, T 1,"},
+        Case{"cartpole", "--dt 0.005", "200 steps of dt 0.005, T 1,"},
+        Case{"cartpole", "--steps 50", "50 steps of dt 0.01, T 0.5,"},
+        Case{"cartpole", "--T 2", "200 steps of dt 0.01, T 2,"},
+        Case{"cartpole", "--steps 50 --T 2", "50 steps of dt 0.04, T 2,"},
+        Case{"cartpole", "", "100 steps of dt 0.01, T 1,"},
+        Case{"guidance", "--dt 0.1", "40 steps of dt 0.1, T 4,"},
+        Case{"guidance", "", "60 steps of dt 0.0666666666666667, T 4,"},
+        Case{"quantum", "--dt 0.125", "64 steps of dt 0.125, T 8,"},
+        Case{"quantum", "--T 4", "64 steps of dt 0.0625, T 4,"},
+        Case{"toy", "--steps 6", "6 steps (a map, no dt)"}}) {
+    const Result r = run(c.program, c.arguments + " --epochs 0 --samples 2");
+    INFO(c.program << " " << c.arguments << "\n" << r.output);
+    CHECK(r.status == 0);
+    CHECK(header(r).find(c.expected) != std::string::npos);
+  }
+  // The run really uses them: --dt 0.02 alone is the same simulation as --steps 50 --T 1.
+  const fs::path dump = scratch("dt_dump.csv");
+  const Result by_dt = run("cartpole", "--dt 0.02 --samples 4 --dump-gradients " + dump.string());
+  const Result by_steps =
+      run("cartpole", "--steps 50 --T 1 --samples 4 --dump-gradients " + dump.string());
+  const Result paper = run("cartpole", "--samples 4 --dump-gradients " + dump.string());
+  INFO(by_dt.output << by_steps.output << paper.output);
+  REQUIRE(by_dt.status == 0);
+  REQUIRE(by_steps.status == 0);
+  CHECK(printed_loss(by_dt.output) == printed_loss(by_steps.output));
+  CHECK(printed_loss(by_dt.output) != printed_loss(paper.output));
+}
+
+TEST_CASE("a dt that does not divide T is a bad flag, for every timed task", "[programs]") {
+  for (const std::string program : {"cartpole", "guidance", "quantum"}) {
+    const Result r = run(program, "--dt 0.03 --epochs 0");
+    INFO(program << "\n" << r.output);
+    CHECK(r.status == 2);
+    CHECK(r.output.find("--dt 0.03: T = ") != std::string::npos);
+    CHECK(r.output.find("is not a whole number of steps of dt = 0.03") != std::string::npos);
+  }
+}
+
+TEST_CASE("quantum --nx: the range --help states is the range that runs", "[programs]") {
+  // The CNN's first conv (k3, s2) gives (nx − 3)/2 + 1 points and the second needs 3 of them,
+  // so nx = 7 is the smallest grid: 6 is refused where the flag is read, 7 trains.
+  const Result six = run("quantum", "--nx 6 --epochs 1 --samples 2 --steps 2");
+  INFO(six.output);
+  CHECK(six.status == 2);
+  CHECK(six.output.find("--nx 6 is out of range; expected an integer in [7, 4096]") !=
+        std::string::npos);
+  const Result seven = run("quantum", "--nx 7 --epochs 1 --samples 2 --steps 2");
+  INFO(seven.output);
+  CHECK(seven.status == 0);
+  CHECK(seven.output.find("final test loss") != std::string::npos);
+}
+
+TEST_CASE("--dump-gradients of a blown-up state reports it, exits 3 and writes nothing",
+          "[programs]") {
+  // θ = (1e200, 0): x₁ = −0.3 + 1e200 · 0.09 and its square overflows in the next control.
+  const fs::path params = scratch("huge.params"), dump = scratch("huge_dump.csv");
+  std::ofstream(params) << "1e200\n0\n";
+  fs::remove(dump);
+  const Result r = run("toy", "--init-params " + params.string() + " --dump-gradients " +
+                                  dump.string());
+  INFO(r.output);
+  CHECK(r.status == 3);
+  CHECK(r.output.find("--dump-gradients: non-finite control (inf) in the forward pass, step 1, "
+                      "sample 0; no gradients written") != std::string::npos);
+  CHECK(r.output.find("loss=") == std::string::npos);
+  CHECK(!fs::exists(dump));
+}
+
+TEST_CASE("--dump-gradients refuses the flags of training instead of ignoring them",
+          "[programs]") {
+  const std::string dump = "--dump-gradients " + scratch("refused.csv").string();
+  for (const std::string& flag : {std::string("--epochs 5"), "--csv " + scratch("refused_log.csv").string(),
+                                 "--save-params " + scratch("refused.params").string(),
+                                 std::string("--lr 0.1"), std::string("--method R")}) {
+    const Result r = run("toy", dump + " " + flag);
+    INFO(flag << "\n" << r.output);
+    CHECK(r.status == 2);
+    CHECK(r.output.find("--dump-gradients evaluates the parameters without training, so " +
+                        flag.substr(0, flag.find(' '))) != std::string::npos);
+  }
+}
+
+TEST_CASE("numbers beyond the type's range are out of range, naming the flag", "[programs]") {
+  struct Case {
+    std::string program, arguments, expected;
+  };
+  for (const Case& c :
+       {Case{"toy", "--epochs 99999999999999999999",
+             "--epochs 99999999999999999999 is out of range; expected an integer in [0, 1000000]"},
+        Case{"toy", "--lr 1e999", "--lr 1e999 is out of range; expected a finite number in "
+                                  "[1e-300, 1e+300]"},
+        // 1e300 is a double, but with --float it would become inf inside Adam.
+        Case{"cartpole", "--float --lr 1e300", "--lr 1e+300 does not fit --float"},
+        Case{"cartpole", "--float --clip norm --clip-threshold 1e-60",
+             "--clip-threshold 1e-60 does not fit --float"},
+        Case{"rotation", "--k", "--k needs a value"},
+        Case{"bench", "--repeats 0", "--repeats 0 is out of range; expected an integer in [1, 100]"},
+        Case{"accuracy", "--frobnicate", "unknown flag '--frobnicate'; accepted flags: --csv"}}) {
+    const Result r = run(c.program, c.arguments);
+    INFO(c.program << " " << c.arguments << "\n" << r.output);
+    CHECK(r.status == 2);
+    CHECK(r.output.find(c.expected) != std::string::npos);
+  }
+}
+
+TEST_CASE("bench and accuracy check --csv before measuring and name the user's path",
+          "[programs]") {
+  for (const std::string program : {"bench", "accuracy"}) {
+    const Result r = run(program, "--csv /nonexistent/sbptt/x.csv");
+    INFO(program << "\n" << r.output);
+    CHECK(r.status == 1);
+    CHECK(r.output.find("--csv '/nonexistent/sbptt/x.csv': directory '/nonexistent/sbptt' does "
+                        "not exist") != std::string::npos);
+    CHECK(r.output.find("cartpole") == std::string::npos);  // no row was measured
+  }
+}

@@ -8,8 +8,9 @@
 #       started by tools/slurm-local.sh (and stopped on any exit, failures included),
 #   (d) as 3 shards at once, then --merge;
 # every summary.csv must have the same loss columns. Then (e) an array task cancelled with
-# scancel while its run is under way, and the array resubmitted: the run is redone and the
-# summary is unchanged.
+# scancel while its run is under way, and the array resubmitted: the run resumes from its
+# checkpoint (when the task programs have --checkpoint; else it is redone) and the losses are
+# those of an uninterrupted run.
 #   bash tests/reproduce_cluster.sh <build/examples> <scratch dir>
 set -euo pipefail
 # One cluster test at a time on a machine: the Slurm daemons listen on fixed ports.
@@ -97,4 +98,11 @@ wait_for_jobs 180
 "$R" "${long[@]}" --out "$work/long" --merge > /dev/null 2>&1 || fail "the resubmitted run did not finish"
 cmp -s <(losses "$work/long") <(losses "$work/long-local") || fail "resubmitted: other losses"
 ok "cancelled and resubmitted: the uninterrupted losses"
+if "$examples/cartpole" --help | grep -q -- "--checkpoint "; then
+  grep -q "resuming after epoch" "$work/long/runs/cartpole_p1_C_norm_s42.log" \
+    || fail "the resubmitted run did not resume from its checkpoint"
+  ok "the resubmitted run resumed from its checkpoint"
+else
+  echo "note: the task programs have no --checkpoint yet; the cancelled run was redone"
+fi
 echo "reproduce_cluster: all checks passed"

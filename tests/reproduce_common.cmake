@@ -1,9 +1,13 @@
 # Shared by the runner's tests (reproduce_*.cmake): the fake task programs and small checks.
 
-# Writes the fake task program (reproduce_fake_task.sh) as <dir>/cartpole, guidance, quantum.
+# Writes the fake task program (reproduce_fake_task.sh) as <dir>/cartpole, guidance, quantum;
+# with a third argument CHECKPOINTS, programs that keep --checkpoint FILE.
 function(install_fake_task_programs dir)
   file(READ "${CMAKE_CURRENT_FUNCTION_LIST_DIR}/reproduce_fake_task.sh" fake)
   file(MAKE_DIRECTORY "${dir}")
+  if(ARGV1 STREQUAL "CHECKPOINTS")
+    file(WRITE "${dir}/checkpoints" "")
+  endif()
   foreach(task cartpole guidance quantum)
     file(WRITE "${dir}/${task}" "${fake}")
     file(CHMOD "${dir}/${task}" PERMISSIONS OWNER_READ OWNER_WRITE OWNER_EXECUTE

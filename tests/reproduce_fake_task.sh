@@ -4,11 +4,22 @@
 # Deterministic losses from the flags; the seconds column depends on the process id, so the
 # timing columns differ between sweeps (and must be left out of comparisons). Method R with
 # seed 43 "diverges": two epochs, exit 3. It notes every start and its pid in the out dir.
+# When a file `checkpoints` sits beside it, its --help lists --checkpoint FILE, which it then
+# keeps like the real programs: the epoch and the log's rows after every epoch, and a restart
+# resumes after that epoch (noted in the out dir's fake_resumes).
 task=$(basename "$0")
-csv= epochs=1 seed=0 method= clip= complexity= threads=1
+csv= epochs=1 seed=0 method= clip= complexity= threads=1 checkpoint=
+if [ "${1:-}" = --help ]; then
+  flags="--csv FILE, --threads N, --epochs N, --seed N, --method M, --clip C, --samples N"
+  [ -f "$(dirname "$0")/checkpoints" ] && flags="$flags, --checkpoint FILE"
+  echo "usage: $task [flags]"
+  echo "flags: $flags"
+  exit 0
+fi
 while [ $# -gt 0 ]; do
   case "$1" in
     --csv) csv=$2; shift 2 ;;
+    --checkpoint) checkpoint=$2; shift 2 ;;
     --threads) threads=$2; shift 2 ;;
     --epochs) epochs=$2; shift 2 ;;
     --seed) seed=$2; shift 2 ;;
@@ -26,8 +37,17 @@ echo "$name" >> "$out/fake_invocations"
 echo "$name $threads" >> "$out/fake_threads"
 stop=$epochs
 [ "$method" = R ] && [ "$seed" = 43 ] && stop=2
-echo "epoch,batch_loss,train_loss,test_loss,update_norm2,cos_m_r,agree_fraction,seconds" > "$csv.rows"
 e=1
+if [ -n "$checkpoint" ] && [ -f "$checkpoint" ]; then
+  resumed=$(head -n 1 "$checkpoint")
+  tail -n +2 "$checkpoint" > "$csv.rows"
+  cp "$csv.rows" "$csv.tmp.$$" && mv "$csv.tmp.$$" "$csv"
+  echo "$task: resuming after epoch $resumed from checkpoint '$checkpoint'"
+  echo "$name $resumed" >> "$out/fake_resumes"
+  e=$((resumed + 1))
+else
+  echo "epoch,batch_loss,train_loss,test_loss,update_norm2,cos_m_r,agree_fraction,seconds" > "$csv.rows"
+fi
 while [ "$e" -le "$stop" ]; do
   awk -v e="$e" -v s="$seed" -v m="$method" -v c="$complexity" -v p="$$" 'BEGIN {
     f = (m == "R") ? 1.0 : (m == "M") ? 0.8 : (m == "C") ? 0.5 : 1.5
@@ -37,6 +57,9 @@ while [ "$e" -le "$stop" ]; do
     printf "%d,%.17g,%.17g,%.17g,%.9g,%s,%s,%.6f\n", e, 1.1 * loss, 1.05 * loss, loss,
            loss * loss, cosine, agree, 0.01 + (p % 97) / 1000.0 }' >> "$csv.rows"
   cp "$csv.rows" "$csv.tmp.$$" && mv "$csv.tmp.$$" "$csv"
+  if [ -n "$checkpoint" ]; then
+    { echo "$e"; cat "$csv.rows"; } > "$checkpoint.tmp.$$" && mv "$checkpoint.tmp.$$" "$checkpoint"
+  fi
   echo "$task: epoch $e"
   sleep 0.12
   e=$((e + 1))

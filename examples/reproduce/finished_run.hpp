@@ -140,7 +140,8 @@ inline FinishedRuns scan_finished(const fs::path& runs) {
 
 /// Removes the finished-run files of the run `name` so that a sweep that plans it redoes it.
 inline void forget_finished(const fs::path& runs, const std::string& name) {
-  for (const char* suffix : {".csv", ".log", ".run"}) fs::remove(runs / (name + suffix));
+  for (const char* suffix : {".csv", ".log", ".run", ".checkpoint"})
+    fs::remove(runs / (name + suffix));
 }
 
 /// Rewrites <out>/summary.csv from every finished run on disk, under <out>/.lock, so that

@@ -130,20 +130,22 @@ private:
     std::map<std::string, std::vector<fs::path>> by_run;
     for (const auto& entry : fs::directory_iterator(runs_)) {
       const std::string file = entry.path().filename().string();
-      const auto end = std::min(file.find(".partial."), file.find(".run.tmp."));
+      const auto end = std::min(
+          {file.find(".partial."), file.find(".run.tmp."), file.find(".checkpoint.tmp.")});
       if (end != std::string::npos) by_run[file.substr(0, end)].push_back(entry.path());
     }
-    std::size_t discarded = 0;
+    std::size_t discarded = 0, resumed = 0;
     for (const auto& [name, files] : by_run) {
       const FileLock lock = try_lock_run(runs_, name);
       if (!lock.held()) continue;
       for (const auto& file : files) fs::remove(file);
       ++discarded;
+      if (fs::exists(runs_ / (name + ".checkpoint"))) ++resumed;
     }
     if (discarded > 0)
-      std::printf("reproduce: discarded %zu unfinished run(s) of an interrupted sweep; they are "
-                  "redone\n",
-                  discarded);
+      std::printf("reproduce: discarded %zu unfinished run(s) of an interrupted sweep (their "
+                  "partial files); they are redone, %zu from their checkpoint\n",
+                  discarded, resumed);
   }
 
   /// Finished runs whose files do not hold together (finished_run.hpp): named, removed, and,
@@ -174,6 +176,10 @@ private:
       return false;
     }
     fs::remove(run_file(runs_, run, ".partial.csv"));
+    // A checkpoint resumes only the run it was written for (--epochs aside, the programs
+    // refuse others): one left by a run of other settings under this name goes.
+    if (read_text(run_file(runs_, run, ".run")) != run.description())
+      fs::remove(run_file(runs_, run, ".checkpoint"));
     write_durably(run_file(runs_, run, ".run"), run.description());
     const auto argv = command_line(run, bin_dir_, runs_, options_.threads);
     // Like the CSV, the log gets its final name only when the run has finished.
@@ -225,6 +231,7 @@ private:
           // finished exactly when its CSV has its name, on disk.
           rename_durably(partial_log, run_file(runs_, run, ".log"));
           rename_durably(partial, csv);
+          fs::remove(run_file(runs_, run, ".checkpoint"));  // served its purpose
           ++done_;
           measured_seconds_ += wall;
           measured_estimate_ += finished_.expected_seconds(run);

@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <map>
 #include <fstream>
 #include <optional>
 #include <sstream>
@@ -38,7 +39,8 @@ inline void install_signal_handlers() {
 /// Forks and execs argv[0] with stdin from /dev/null and stdout + stderr into `log_fd` (or
 /// inherited when -1). The child gets its own process group (a terminal's Ctrl-C reaches
 /// only the runner, which then stops its children) and dies with the runner.
-inline pid_t spawn(const std::vector<std::string>& argv, int log_fd, bool search_path = false) {
+inline pid_t spawn(const std::vector<std::string>& argv, int log_fd, bool search_path = false,
+                   int error_fd = -1) {
   std::vector<char*> pointers;
   for (const auto& a : argv) pointers.push_back(const_cast<char*>(a.c_str()));
   pointers.push_back(nullptr);
@@ -56,7 +58,7 @@ inline pid_t spawn(const std::vector<std::string>& argv, int log_fd, bool search
     if (null_fd >= 0) ::dup2(null_fd, 0);
     if (log_fd >= 0) {
       ::dup2(log_fd, 1);
-      ::dup2(log_fd, 2);
+      ::dup2(error_fd >= 0 ? error_fd : log_fd, 2);
     }
     if (search_path) ::execvp(pointers[0], pointers.data());
     else ::execv(pointers[0], pointers.data());
@@ -91,6 +93,41 @@ inline std::string describe_status(int status) {
 
 inline bool is_executable(const fs::path& path) {
   return ::access(path.c_str(), X_OK) == 0 && fs::is_regular_file(path);
+}
+
+/// The standard output of a command run to completion (stderr discarded), or "" when it
+/// could not run.
+inline std::string output_of(const std::vector<std::string>& argv) {
+  int ends[2];
+  if (::pipe2(ends, O_CLOEXEC) != 0) return {};
+  const int null_fd = ::open("/dev/null", O_WRONLY | O_CLOEXEC);
+  const pid_t pid = spawn(argv, ends[1], false, null_fd);
+  ::close(ends[1]);
+  if (null_fd >= 0) ::close(null_fd);
+  std::string text;
+  char buffer[4096];
+  ssize_t got = 0;
+  while ((got = ::read(ends[0], buffer, sizeof buffer)) != 0) {
+    if (got > 0) text.append(buffer, static_cast<std::size_t>(got));
+    else if (errno != EINTR) break;
+  }
+  ::close(ends[0]);
+  int status = 0;
+  while (pid > 0 && ::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  return text;
+}
+
+/// Whether a task program resumes runs from `--checkpoint FILE` (its --help lists the flag).
+/// Asked once per program.
+inline bool supports_checkpoints(const fs::path& program) {
+  static std::map<fs::path, bool> known;
+  const auto found = known.find(program);
+  if (found != known.end()) return found->second;
+  const bool supported =
+      output_of({program.string(), "--help"}).find("--checkpoint ") != std::string::npos;
+  known[program] = supported;
+  return supported;
 }
 
 /// `program` as execvp finds it: a path when it has a '/', else a name on PATH.

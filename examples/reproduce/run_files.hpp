@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "grid.hpp"
+#include "processes.hpp"
 
 namespace reproduce {
 
@@ -23,12 +24,17 @@ inline fs::path run_file(const fs::path& runs, const Run& run, const char* suffi
 /// The task program's command line. --threads is passed here and kept out of Run::flags(),
 /// which make the run's .run file: results are bitwise identical for any thread count
 /// (docs/benchmarks.md), so a sweep resumed with another --threads keeps its finished runs.
+/// A program that supports it gets --checkpoint runs/<name>.checkpoint: killed, the run
+/// resumes from its last epoch (the checkpoint holds the log's rows too) under any executor.
 inline std::vector<std::string> command_line(const Run& run, const fs::path& bin_dir,
                                              const fs::path& runs, long threads) {
-  std::vector<std::string> argv{(bin_dir / run.info().name).string()};
+  const fs::path program = bin_dir / run.info().name;
+  std::vector<std::string> argv{program.string()};
   for (const auto& f : run.flags()) argv.push_back(f);
   argv.insert(argv.end(), {"--threads", std::to_string(threads), "--csv",
                            run_file(runs, run, ".partial.csv").string()});
+  if (supports_checkpoints(program))
+    argv.insert(argv.end(), {"--checkpoint", run_file(runs, run, ".checkpoint").string()});
   return argv;
 }
 

@@ -1,0 +1,83 @@
+# Resume inside a run (issue 16, point 2), with fake task programs that keep --checkpoint FILE
+# like the real ones (reproduce_fake_task.sh with CHECKPOINTS):
+#
+#   cmake -DREPRODUCE=<path of examples/reproduce> -DWORK_DIR=<scratch dir> -P reproduce_checkpoints.cmake
+#
+#   1. an uninterrupted sweep of 6 runs of 12 epochs gives the reference summary.csv, and no
+#      checkpoint is left once the runs are finished;
+#   2. the same sweep is SIGKILLed at random moments (0.3 to 1.2 s after each start) and started
+#      again, until it finishes on its own; its summary.csv has the reference's loss columns,
+#      the runs killed mid-way resumed from their checkpoints (not from epoch 1), and no
+#      checkpoint or partial file is left;
+#   3. a checkpoint left by a run of other settings under the same name is not resumed.
+# Without the CHECKPOINTS marker the fake programs do not list --checkpoint in --help, and the
+# runner passes no --checkpoint (reproduce_resume.cmake covers that case).
+cmake_minimum_required(VERSION 3.20)
+foreach(var REPRODUCE WORK_DIR)
+  if(NOT DEFINED ${var})
+    message(FATAL_ERROR "reproduce_checkpoints.cmake: pass -D${var}=...")
+  endif()
+endforeach()
+include("${CMAKE_CURRENT_LIST_DIR}/reproduce_common.cmake")
+file(REMOVE_RECURSE "${WORK_DIR}")
+install_fake_task_programs("${WORK_DIR}/fake" CHECKPOINTS)
+
+set(grid --tasks cartpole --complexities 4 --methods R,C --clips norm --seeds 3 --epochs 12
+         --jobs 2 --no-plot --bin-dir "${WORK_DIR}/fake")
+
+# --- 1. uninterrupted --------------------------------------------------------------------------
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${WORK_DIR}/whole" RESULT_VARIABLE rc
+                OUTPUT_QUIET ERROR_QUIET)
+check("the uninterrupted sweep exits 0" rc EQUAL 0)
+untimed_summary("${WORK_DIR}/whole/summary.csv" reference)
+file(GLOB left "${WORK_DIR}/whole/runs/*.checkpoint")
+check("no checkpoint is left once the runs are finished (${left})" NOT left)
+file(READ "${WORK_DIR}/whole/runs/cartpole_p4_C_norm_s42.log" log)
+check("the runner passed --checkpoint runs/<name>.checkpoint"
+      log MATCHES "--checkpoint [^\n]*/runs/cartpole_p4_C_norm_s42.checkpoint\n")
+
+# --- 2. SIGKILL at random moments, then resume ---------------------------------------------------
+file(WRITE "${WORK_DIR}/kill.sh" [=[
+runner=$1; out=$2; shift 2
+attempt=0
+while :; do
+  attempt=$((attempt + 1))
+  "$runner" "$@" --out "$out" >> "$out.log" 2>&1 &
+  pid=$!
+  delay=$(awk -v seed="$attempt$$" 'BEGIN { srand(seed); printf "%.2f", 0.3 + 0.9 * rand() }')
+  sleep "$delay"
+  if kill -9 "$pid" 2>/dev/null; then
+    wait "$pid"
+    echo "attempt $attempt: SIGKILL after $delay s"
+  else
+    wait "$pid"; status=$?
+    echo "attempt $attempt: finished on its own with exit code $status"
+    exit "$status"
+  fi
+  [ "$attempt" -ge 40 ] && { echo "never finished"; exit 1; }
+done
+]=])
+execute_process(COMMAND sh "${WORK_DIR}/kill.sh" "${REPRODUCE}" "${WORK_DIR}/killed" ${grid}
+                RESULT_VARIABLE rc OUTPUT_VARIABLE attempts ERROR_VARIABLE err)
+message(STATUS "kill and resume:\n${attempts}${err}")
+check("the sweep SIGKILLed at random moments finished when resumed" rc EQUAL 0)
+check("it was killed at least twice" attempts MATCHES "attempt 2: SIGKILL")
+untimed_summary("${WORK_DIR}/killed/summary.csv" resumed)
+check("its summary.csv has the uninterrupted loss columns" resumed STREQUAL reference)
+file(STRINGS "${WORK_DIR}/killed/fake_resumes" resumes)
+list(LENGTH resumes resume_count)
+check("runs resumed from their checkpoints (${resume_count}: ${resumes})" resume_count GREATER 0)
+file(GLOB left "${WORK_DIR}/killed/runs/*.checkpoint" "${WORK_DIR}/killed/runs/*.partial.*"
+     "${WORK_DIR}/killed/runs/*.tmp.*")
+check("no checkpoint, partial or temporary file is left (${left})" NOT left)
+
+# --- 3. a stale checkpoint of other settings -----------------------------------------------------
+set(S "${WORK_DIR}/stale")
+file(MAKE_DIRECTORY "${S}/runs")
+file(WRITE "${S}/runs/cartpole_p4_C_norm_s42.run" "task=cartpole\nepochs=999\n")
+file(WRITE "${S}/runs/cartpole_p4_C_norm_s42.checkpoint"
+     "5\nepoch,batch_loss,train_loss,test_loss,update_norm2,cos_m_r,agree_fraction,seconds\n")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --seeds 1 --methods C --out "${S}"
+                RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
+check("a sweep over a stale checkpoint exits 0" rc EQUAL 0)
+check("the stale checkpoint was not resumed" NOT EXISTS "${S}/fake_resumes")

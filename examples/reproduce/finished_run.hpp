@@ -41,8 +41,8 @@ inline std::optional<ExitLine> logged_exit(const fs::path& log) {
     const auto words = split(it->substr(std::string(exit_line_prefix).size()), ' ');
     try {
       if (words.size() < 3 || words[1] != "after") return std::nullopt;
-      return ExitLine{static_cast<int>(sbptt::examples::parse_integer("exit code", words[0], 0, 255)),
-                      sbptt::examples::parse_number("wall time", words[2], 0, 1e12)};
+      return ExitLine{static_cast<int>(parse_integer("exit code", words[0], 0, 255)),
+                      parse_number("wall time", words[2], 0, 1e12)};
     } catch (const sbptt::Error&) {
       return std::nullopt;
     }

@@ -172,12 +172,12 @@ inline std::optional<Run> parse_description(const std::string& text) {
     for (int t = 0; t < task_count; ++t)
       if (fields["task"] == tasks[t].name) run.task = t;
     if (run.task < 0) return std::nullopt;
-    run.complexity = sbptt::examples::parse_number("complexity", fields["complexity"], -1e300, 1e300);
+    run.complexity = parse_number("complexity", fields["complexity"], -1e300, 1e300);
     run.method = sbptt::parse_method(fields["method"]);
     run.clip = sbptt::parse_clip_mode(fields["clip"]);
-    run.seed = sbptt::examples::parse_integer("seed", fields["seed"], 0, std::numeric_limits<long>::max());
-    run.epochs = sbptt::examples::parse_integer("epochs", fields["epochs"], 0, 1'000'000'000);
-    run.samples = sbptt::examples::parse_integer("samples", fields["samples"], 0, 1'000'000'000);
+    run.seed = parse_integer("seed", fields["seed"], 0, std::numeric_limits<long>::max());
+    run.epochs = parse_integer("epochs", fields["epochs"], 0, 1'000'000'000);
+    run.samples = parse_integer("samples", fields["samples"], 0, 1'000'000'000);
     run.use_float = fields["args"].ends_with(" --float");  // the one setting kept only in args
     if (run.description() != text) return std::nullopt;
     return run;

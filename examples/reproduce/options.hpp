@@ -98,13 +98,13 @@ inline Options parse_options(int argc, const char* const* argv) {
     } else if (f == "--complexities") {
       std::vector<double> list;
       for (const auto& item : parse_list(f, args.value()))
-        list.push_back(sbptt::examples::parse_number(f, item, 0, 1e9));
+        list.push_back(parse_number(f, item, 0, 1e9));
       o.complexities = list;
-    } else if (f == "--seeds") o.seeds = sbptt::examples::parse_integer(f, args.value(), 1, 1000);
-    else if (f == "--epochs") o.epochs = sbptt::examples::parse_integer(f, args.value(), 1, count_limit);
-    else if (f == "--samples") o.samples = sbptt::examples::parse_integer(f, args.value(), 1, count_limit);
-    else if (f == "--jobs") o.jobs = sbptt::examples::parse_integer(f, args.value(), 1, 256);
-    else if (f == "--threads") o.threads = sbptt::examples::parse_integer(f, args.value(), 1, 256);
+    } else if (f == "--seeds") o.seeds = parse_integer(f, args.value(), 1, 1000);
+    else if (f == "--epochs") o.epochs = parse_integer(f, args.value(), 1, count_limit);
+    else if (f == "--samples") o.samples = parse_integer(f, args.value(), 1, count_limit);
+    else if (f == "--jobs") o.jobs = parse_integer(f, args.value(), 1, 256);
+    else if (f == "--threads") o.threads = parse_integer(f, args.value(), 1, 256);
     else if (f == "--out") o.out = non_empty(f, args.value());
     else if (f == "--bin-dir") o.bin_dir = non_empty(f, args.value());
     else if (f == "--python") o.python = non_empty(f, args.value());
@@ -122,9 +122,11 @@ inline Options parse_options(int argc, const char* const* argv) {
       const auto slash = text.find('/');
       if (slash == std::string::npos)
         throw InvalidArgument(concat("--shard '", text, "' is not K/N; expected e.g. 2/3"));
-      o.shard_count = sbptt::examples::parse_integer("--shard N", text.substr(slash + 1), 1, count_limit);
+      o.shard_count =
+          parse_integer("--shard N", text.substr(slash + 1), 1, count_limit);
       o.shard_index =
-          sbptt::examples::parse_integer("--shard K", text.substr(0, slash), 1, o.shard_count) - 1;
+          parse_integer("--shard K", text.substr(0, slash), 1, o.shard_count) -
+          1;
     }
     else if (f == "--float") args.no_value(), o.use_float = true;
     else if (f == "--no-plot") args.no_value(), o.plot = false;

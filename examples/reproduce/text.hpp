@@ -15,12 +15,16 @@
 
 #include "flag_values.hpp"
 
+#include "flag_values.hpp"
+
 namespace fs = std::filesystem;
 
 namespace reproduce {
 
 using sbptt::InvalidArgument;
 using sbptt::detail::concat;
+using sbptt::examples::parse_integer;
+using sbptt::examples::parse_number;
 
 inline std::string format_number(double value) {
   char text[64];

@@ -12,7 +12,9 @@
 #   2. checks that --epochs and --samples above the task programs' limit, and a --python that
 #      does not exist, are refused with exit 2 before any work;
 #   3. interrupts the runner while it plots (a fake python and plot script that leave a
-#      temporary PNG behind): exit 130, no "no plots" message, no plots/.tmp.* left.
+#      temporary PNG behind): exit 130, no "no plots" message, no plots/.tmp.* left;
+#   4. (when strace is installed) traces a sweep: every file the runner renames into place was
+#      fsync'ed just before, and its folder just after.
 cmake_minimum_required(VERSION 3.20)
 foreach(var REPRODUCE WORK_DIR)
   if(NOT DEFINED ${var})
@@ -135,3 +137,41 @@ check("interrupted while plotting: exit code 130" interrupted MATCHES "exit code
 check("interrupted while plotting: no false 'no plots'" NOT interrupted MATCHES "no plots")
 check("interrupted while plotting: the figure is kept" interrupted MATCHES "\na.png")
 check("interrupted while plotting: no temporary figure is left" NOT interrupted MATCHES "\\.tmp\\.")
+
+# --- 4. fsync before a file counts ---------------------------------------------------------------
+find_program(STRACE strace)
+if(NOT STRACE)
+  message(STATUS "strace not found; the fsync order is not checked")
+  return()
+endif()
+execute_process(COMMAND "${STRACE}" -f -y -e trace=fsync,rename,renameat,renameat2
+                -o "${WORK_DIR}/trace" "${REPRODUCE}" ${grid} --seeds 1 --out "${WORK_DIR}/traced"
+                RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
+check("the traced sweep exits 0" rc EQUAL 0)
+# The runner is the first process in the trace; the fake programs' own renames are theirs.
+file(WRITE "${WORK_DIR}/fsync_order.awk" [=[
+# Names are compared by their last component: strace -y shows resolved paths.
+function last_part(path) { sub(/\/+$/, "", path); sub(/.*\//, "", path); return path }
+NR == 1 { runner = $1 }
+$1 != runner || /resumed>/ { next }
+/fsync\(/ {
+  match($0, /<[^>]*>/); synced = last_part(substr($0, RSTART + 1, RLENGTH - 2))
+  if (pending != "") {
+    if (synced != pending) { print "no fsync of the folder " pending " after renaming into it"; bad = 1 }
+    pending = ""
+  }
+  last = synced; next
+}
+/rename/ {
+  split($0, quoted, "\"")
+  from = last_part(quoted[2]); to = quoted[4]
+  if (last != from) { print "renamed " from " without an fsync of it first"; bad = 1 }
+  sub(/\/[^\/]*$/, "", to); pending = last_part(to); renames++
+  last = ""
+}
+END { print renames " renames checked"; exit bad }
+]=])
+execute_process(COMMAND awk -f "${WORK_DIR}/fsync_order.awk" "${WORK_DIR}/trace"
+                RESULT_VARIABLE rc OUTPUT_VARIABLE order)
+check("every rename of the runner: the file fsync'ed before, its folder after (${order})"
+      rc EQUAL 0 AND order MATCHES "[1-9][0-9]* renames checked")

@@ -58,7 +58,6 @@ inline void write_durably(const fs::path& path, std::string_view content) {
     if (written < 0 && errno != EINTR) error = errno;
     if (written > 0) done += static_cast<std::size_t>(written);
   }
-  if (error == 0 && ::fsync(fd) != 0) error = errno;
   if (::close(fd) != 0 && error == 0) error = errno;
   if (error != 0) {
     fs::remove(temporary);
@@ -66,7 +65,7 @@ inline void write_durably(const fs::path& path, std::string_view content) {
                                 "') failed: ", std::strerror(error)));
   }
   try {
-    rename_durably(temporary, path);
+    rename_durably(temporary, path);  // fsyncs the temporary, renames, fsyncs the folder
   } catch (const sbptt::IoError&) {
     fs::remove(temporary);
     throw;

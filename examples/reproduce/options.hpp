@@ -51,6 +51,20 @@ inline std::string non_empty(const std::string& flag, std::string value) {
   return value;
 }
 
+/// Each item of a comma-separated flag value, parsed; a bad item's message names the flag.
+template <class Parse>
+auto parse_items(const std::string& flag, const std::string& text, Parse parse) {
+  std::vector<decltype(parse(text))> list;
+  for (const auto& item : parse_list(flag, text)) {
+    try {
+      list.push_back(parse(item));
+    } catch (const InvalidArgument& e) {
+      throw InvalidArgument(concat(flag, ": ", e.what()));
+    }
+  }
+  return list;
+}
+
 inline Options parse_options(int argc, const char* const* argv) {
   // The task programs' limit: a value they would refuse is refused here, before any run starts.
   constexpr long count_limit = sbptt::examples::limits::max_count;
@@ -76,25 +90,13 @@ inline Options parse_options(int argc, const char* const* argv) {
       }
       o.tasks = list;
     } else if (f == "--methods") {
-      std::vector<Method> list;
-      for (const auto& item : parse_list(f, args.value())) {
-        try {
-          list.push_back(sbptt::parse_method(item));
-        } catch (const InvalidArgument& e) {
-          throw InvalidArgument(concat("--methods: ", e.what()));
-        }
-      }
-      o.methods = list;
+      o.methods = parse_items(f, args.value(), [](const std::string& item) {
+        return sbptt::parse_method(item);
+      });
     } else if (f == "--clips") {
-      std::vector<ClipMode> list;
-      for (const auto& item : parse_list(f, args.value())) {
-        try {
-          list.push_back(sbptt::parse_clip_mode(item));
-        } catch (const InvalidArgument& e) {
-          throw InvalidArgument(concat("--clips: ", e.what()));
-        }
-      }
-      o.clips = list;
+      o.clips = parse_items(f, args.value(), [](const std::string& item) {
+        return sbptt::parse_clip_mode(item);
+      });
     } else if (f == "--complexities") {
       std::vector<double> list;
       for (const auto& item : parse_list(f, args.value()))

@@ -130,6 +130,13 @@ private:
     std::map<std::string, std::vector<fs::path>> by_run;
     for (const auto& entry : fs::directory_iterator(runs_)) {
       const std::string file = entry.path().filename().string();
+      // The checkpoint of a finished run: a kill between the run's last rename and the
+      // checkpoint's removal leaves it.
+      if (file.ends_with(".checkpoint") &&
+          fs::exists(runs_ / (file.substr(0, file.size() - 11) + ".csv"))) {
+        fs::remove(entry.path());
+        continue;
+      }
       const auto end = std::min(
           {file.find(".partial."), file.find(".run.tmp."), file.find(".checkpoint.tmp.")});
       if (end != std::string::npos) by_run[file.substr(0, end)].push_back(entry.path());

@@ -9,7 +9,9 @@
 #      again, until it finishes on its own; its summary.csv has the reference's loss columns,
 #      the runs killed mid-way resumed from their checkpoints (not from epoch 1), and no
 #      checkpoint or partial file is left;
-#   3. a checkpoint left by a run of other settings under the same name is not resumed.
+#   3. a checkpoint left by a run of other settings under the same name is not resumed;
+#   4. a checkpoint whose training log is gone (the programs refuse to resume it) fails the run
+#      once, is removed, and the next sweep redoes the run from epoch 1.
 # Without the CHECKPOINTS marker the fake programs do not list --checkpoint in --help, and the
 # runner passes no --checkpoint (reproduce_resume.cmake covers that case).
 cmake_minimum_required(VERSION 3.20)
@@ -75,9 +77,24 @@ check("no checkpoint, partial or temporary file is left (${left})" NOT left)
 set(S "${WORK_DIR}/stale")
 file(MAKE_DIRECTORY "${S}/runs")
 file(WRITE "${S}/runs/cartpole_p4_C_norm_s42.run" "task=cartpole\nepochs=999\n")
-file(WRITE "${S}/runs/cartpole_p4_C_norm_s42.checkpoint"
-     "5\nepoch,batch_loss,train_loss,test_loss,update_norm2,cos_m_r,agree_fraction,seconds\n")
+file(WRITE "${S}/runs/cartpole_p4_C_norm_s42.checkpoint" "5 6\n")
 execute_process(COMMAND "${REPRODUCE}" ${grid} --seeds 1 --methods C --out "${S}"
                 RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
 check("a sweep over a stale checkpoint exits 0" rc EQUAL 0)
 check("the stale checkpoint was not resumed" NOT EXISTS "${S}/fake_resumes")
+
+# --- 4. a checkpoint whose log is gone: the program refuses it, the run is redone from epoch 1 --
+set(G "${WORK_DIR}/gone")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --seeds 1 --methods C --out "${G}"
+                RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
+file(REMOVE "${G}/runs/cartpole_p4_C_norm_s42.csv" "${G}/runs/cartpole_p4_C_norm_s42.log")
+file(WRITE "${G}/runs/cartpole_p4_C_norm_s42.checkpoint" "5 6\n")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --seeds 1 --methods C --out "${G}"
+                RESULT_VARIABLE first OUTPUT_QUIET ERROR_VARIABLE first_err)
+check("a checkpoint without its log fails the run once and is removed (${first_err})"
+      first EQUAL 1 AND first_err MATCHES "checkpoint was removed"
+      AND NOT EXISTS "${G}/runs/cartpole_p4_C_norm_s42.checkpoint")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --seeds 1 --methods C --out "${G}"
+                RESULT_VARIABLE again OUTPUT_QUIET ERROR_QUIET)
+check("the next sweep redoes the run from epoch 1" again EQUAL 0
+      AND EXISTS "${G}/runs/cartpole_p4_C_norm_s42.csv")

@@ -86,8 +86,14 @@ long=(--tasks cartpole --complexities 1 --methods C --clips norm --seeds 1 --epo
 "$R" "${long[@]}" --jobs 1 --out "$work/long" --emit slurm > /dev/null
 job=$(sbatch --parsable "$work/long/slurm/array.sh")
 partial=$work/long/runs/cartpole_p1_C_norm_s42.partial.csv
-for _ in $(seq 400); do [ -s "$partial" ] && break; sleep 0.1; done
-[ -s "$partial" ] || fail "the array task never logged an epoch"
+checkpoint=$work/long/runs/cartpole_p1_C_norm_s42.checkpoint
+logged() { [ -f "$partial" ] && [ "$(wc -l < "$partial")" -ge "$1" ]; }
+# Cancelled after a few epochs: with checkpoints, after the first one is written.
+for _ in $(seq 600); do
+  logged 4 && { [ -f "$checkpoint" ] || ! "$examples/cartpole" --help | grep -q -- "--checkpoint "; } && break
+  sleep 0.1
+done
+logged 4 || fail "the array task never logged 3 epochs"
 scancel "${job%%;*}"
 wait_for_jobs 60
 [ ! -f "$work/long/runs/cartpole_p1_C_norm_s42.csv" ] || fail "the cancelled run counts as finished"

@@ -5,8 +5,9 @@
 # timing columns differ between sweeps (and must be left out of comparisons). Method R with
 # seed 43 "diverges": two epochs, exit 3. It notes every start and its pid in the out dir.
 # When a file `checkpoints` sits beside it, its --help lists --checkpoint FILE, which it then
-# keeps like the real programs: the epoch and the log's rows after every epoch, and a restart
-# resumes after that epoch (noted in the out dir's fake_resumes).
+# keeps like the real programs: after every epoch, the epoch and the log's length; a restart
+# cuts the log (which must still be there, at least that long; else exit 1 like the real
+# programs) back to that length and resumes after that epoch (noted in fake_resumes).
 task=$(basename "$0")
 csv= epochs=1 seed=0 method= clip= complexity= threads=1 checkpoint=
 if [ "${1:-}" = --help ]; then
@@ -39,8 +40,12 @@ stop=$epochs
 [ "$method" = R ] && [ "$seed" = 43 ] && stop=2
 e=1
 if [ -n "$checkpoint" ] && [ -f "$checkpoint" ]; then
-  resumed=$(head -n 1 "$checkpoint")
-  tail -n +2 "$checkpoint" > "$csv.rows"
+  read -r resumed lines < "$checkpoint"
+  if [ ! -f "$csv" ] || [ "$(wc -l < "$csv")" -lt "$lines" ]; then
+    echo "$task: training log '$csv' is shorter than checkpoint '$checkpoint' expects" >&2
+    exit 1
+  fi
+  head -n "$lines" "$csv" > "$csv.rows"
   cp "$csv.rows" "$csv.tmp.$$" && mv "$csv.tmp.$$" "$csv"
   echo "$task: resuming after epoch $resumed from checkpoint '$checkpoint'"
   echo "$name $resumed" >> "$out/fake_resumes"
@@ -58,7 +63,7 @@ while [ "$e" -le "$stop" ]; do
            loss * loss, cosine, agree, 0.01 + (p % 97) / 1000.0 }' >> "$csv.rows"
   cp "$csv.rows" "$csv.tmp.$$" && mv "$csv.tmp.$$" "$csv"
   if [ -n "$checkpoint" ]; then
-    { echo "$e"; cat "$csv.rows"; } > "$checkpoint.tmp.$$" && mv "$checkpoint.tmp.$$" "$checkpoint"
+    echo "$e $((e + 1))" > "$checkpoint.tmp.$$" && mv "$checkpoint.tmp.$$" "$checkpoint"
   fi
   echo "$task: epoch $e"
   sleep 0.12

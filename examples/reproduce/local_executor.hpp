@@ -145,9 +145,14 @@ private:
     for (const auto& [name, files] : by_run) {
       const FileLock lock = try_lock_run(runs_, name);
       if (!lock.held()) continue;
-      for (const auto& file : files) fs::remove(file);
+      // A checkpoint continues the training log it was written with (the program cuts it
+      // back to its size at the checkpoint), so that log stays.
+      const bool resumable = fs::exists(runs_ / (name + ".checkpoint"));
+      const fs::path kept = runs_ / (name + ".partial.csv");
+      for (const auto& file : files)
+        if (!resumable || file != kept) fs::remove(file);
       ++discarded;
-      if (fs::exists(runs_ / (name + ".checkpoint"))) ++resumed;
+      if (resumable) ++resumed;
     }
     if (discarded > 0)
       std::printf("reproduce: discarded %zu unfinished run(s) of an interrupted sweep (their "
@@ -182,11 +187,13 @@ private:
       --total_;
       return false;
     }
-    fs::remove(run_file(runs_, run, ".partial.csv"));
     // A checkpoint resumes only the run it was written for (--epochs aside, the programs
-    // refuse others): one left by a run of other settings under this name goes.
+    // refuse others): one left by a run of other settings under this name goes. Without a
+    // checkpoint the run starts over, and so does its training log.
     if (read_text(run_file(runs_, run, ".run")) != run.description())
       fs::remove(run_file(runs_, run, ".checkpoint"));
+    if (!fs::exists(run_file(runs_, run, ".checkpoint")))
+      fs::remove(run_file(runs_, run, ".partial.csv"));
     write_durably(run_file(runs_, run, ".run"), run.description());
     const auto argv = command_line(run, bin_dir_, runs_, options_.threads);
     // Like the CSV, the log gets its final name only when the run has finished.
@@ -253,6 +260,10 @@ private:
       failure = code == 2   ? "exit code 2 (bad flags)"
                 : code == 127 ? "exit code 127 (could not execute the program)"
                               : concat("exit code ", code);
+      // The program failed, perhaps on its checkpoint (refused, or its log cut): the next
+      // attempt starts over. A run killed by a signal keeps its checkpoint.
+      if (fs::remove(run_file(runs_, run, ".checkpoint")))
+        failure += "; its checkpoint was removed, the next sweep redoes it from epoch 1";
     } else if (WIFSIGNALED(status)) {
       if (interrupted) return;  // we stopped it
       failure = concat("killed by signal ", WTERMSIG(status), " (", strsignal(WTERMSIG(status)),

@@ -1,24 +1,34 @@
-// The reproduction runner (docs/reproduce.md): runs the paper's grid of task × complexity ×
-// method × clip mode × seed as child processes of the task programs, in parallel, resumably,
-// then writes <out>/summary.csv, prints a results table and draws the plots.
+// The reproduction runner (docs/reproduce.md): computes the plan of the paper's grid of task ×
+// complexity × method × clip mode × seed, runs it as child processes of the task programs
+// (--jobs), or hands it to GNU parallel (--emit parallel), Slurm (--emit slurm) or any other
+// scheduler (--shard K/N, --run NAME), and collects the results into <out>/summary.csv, a
+// results table and the plots (at the end, or with --merge).
 //
 //   reproduce --profile quick                       # all three tasks, about 10 min on 2 cores
 //   reproduce --profile paper --seeds 3 --jobs 8    # the published settings
 //   reproduce --profile paper --tasks cartpole --complexities 4 --methods R,C --dry-run
 //
-// Resume contract: a child writes runs/<name>.partial.csv and its output goes to
-// runs/<name>.partial.log; when it exits 0 (or 3: a non-finite value stopped training, a result
-// in itself) the runner renames them to runs/<name>.log and runs/<name>.csv. On start every
-// <name>.csv is kept and skipped, every .partial.* is discarded and its run redone. Children
-// die with the runner (PR_SET_PDEATHSIG), even when it is SIGKILLed.
+// Resume contract: a child writes runs/<name>.partial.csv (and runs/<name>.checkpoint when the
+// program keeps checkpoints) and its output goes to runs/<name>.partial.log; when it exits 0
+// (or 3: a non-finite value stopped training, a result in itself) the runner checks the log,
+// fsyncs and renames the files to runs/<name>.log and runs/<name>.csv. A run is finished only
+// when its files hold together (finished_run.hpp); anything else is redone, from its checkpoint
+// when it has one. runs/<name>.lock is held by whoever runs the run. Children die with the
+// runner (PR_SET_PDEATHSIG), even when it is SIGKILLed.
 //
-// The parts, one concern each, in examples/reproduce/: grid.hpp (tasks, profiles, the identity
-// of a run), options.hpp (command line, plan), run_files.hpp (a run's files and command),
-// processes.hpp (children, signals), local_executor.hpp (the --jobs pool and resume),
-// summary.hpp (summary.csv, results table), plot.hpp (figures, --dry-run plan).
+// The parts, one concern each, in examples/reproduce/:
+//   grid and profiles     grid.hpp (tasks, profiles, the identity of a run), options.hpp
+//                         (command line, plan, shards)
+//   run identity, resume  run_files.hpp (a run's files and command), finished_run.hpp (when a
+//                         run counts as finished), durable_files.hpp (fsync), locks.hpp
+//   executors             local_executor.hpp (the --jobs pool), processes.hpp (children,
+//                         signals), emit.hpp (GNU parallel, Slurm)
+//   summary and merge     summary.hpp (summary.csv, results table), merge.hpp (--merge),
+//                         plot.hpp (figures, --dry-run plan)
 //
-// Exit codes: 0 every planned run finished, 1 a run failed or an error, 2 bad flags,
-// 130 interrupted (SIGINT/SIGTERM/SIGHUP; the finished runs are kept).
+// Exit codes: 0 every planned run finished, 1 a run failed or an error (--merge: runs missing),
+// 2 bad flags, 130 interrupted (SIGINT/SIGTERM/SIGHUP, also while plotting; the finished runs
+// are kept).
 
 #include <exception>
 #include <iostream>

@@ -38,7 +38,6 @@
 #include <sbptt/sbptt.hpp>
 
 #include "command_line.hpp"
-#include "output_path.hpp"
 
 namespace {
 
@@ -363,7 +362,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
-    sbptt::examples::require_writable(csv, "--csv");  // now, not after the minutes of sweeps
+    if (!csv.empty()) sbptt::check_output_path(csv, "--csv");  // now, not after the sweeps
   } catch (const std::exception& e) {
     std::fprintf(stderr, "accuracy: %s\n", e.what());
     return 1;

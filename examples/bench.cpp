@@ -49,7 +49,6 @@
 #include <sbptt/sbptt.hpp>
 
 #include "command_line.hpp"
-#include "output_path.hpp"
 
 namespace {
 
@@ -466,7 +465,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
-    sbptt::examples::require_writable(settings.csv, "--csv");
+    if (!settings.csv.empty()) sbptt::check_output_path(settings.csv, "--csv");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench: %s\n", e.what());
     return 1;

@@ -78,7 +78,7 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
       trainer.engine().set_threads(threads, split);
       for (int epoch = 0; epoch < 2; ++epoch) {
         const EpochRecord record = trainer.train_epoch(train, test);
-        REQUIRE(std::isfinite(record.test_loss));
+        REQUIRE(std::isfinite(record.test_loss.value()));
       }
       (method == Method::Regular ? trained_r : trained_c).push_back(trained.params());
     }

@@ -58,11 +58,15 @@ public:
                  });
   }
 
-  /// A file path (empty = the default shown).
+  /// A file path; an empty value (e.g. an unset shell variable) is refused, not ignored.
   CLI::Option* path(const std::string& flag, std::string& target, const std::string& meaning,
                     const std::string& default_shown = "none") {
-    return value(flag, "FILE", meaning, default_shown,
-                 [&target](const std::string& text) { target = text; });
+    return value(flag, "FILE", meaning, default_shown, [&target, flag](const std::string& text) {
+      if (text.empty())
+        throw InvalidArgument(detail::concat(flag, " '' is an empty path; expected a file path "
+                                                   "(an unset shell variable?)"));
+      target = text;
+    });
   }
 
   /// A switch without value; `set` runs when it is given.

@@ -77,6 +77,10 @@ struct TaskOptions {
   long threads = 1;
   // files
   std::string csv, save_params, init_params, init_states, dump_gradients;
+  std::string checkpoint;
+  long checkpoint_every = 1;  ///< epochs between checkpoints; 0 = only at the end
+  long evaluate_every = 1;    ///< evaluate the train and test sets every k-th epoch and the last
+  long patience = 0;          ///< stop after this many evaluations without a better test loss
 };
 
 namespace detail_task {
@@ -200,6 +204,15 @@ inline void require_float_range(const char* flag, double value) {
   cli.path("--dump-gradients", o.dump_gradients,
            "no training: evaluate the train states as one batch, print loss=<value>, write "
            "param,R,M,C,S,N; refuses the training flags");
+  cli.path("--checkpoint", o.checkpoint,
+           "resume from this checkpoint if it exists, and write it every --checkpoint-every "
+           "epochs and at the end: rerunning a killed command resumes it (docs/training.md)");
+  cli.integer("--checkpoint-every", o.checkpoint_every, 0, many,
+              "epochs between checkpoints (0 = only at the end)");
+  cli.integer("--evaluate-every", o.evaluate_every, 1, many,
+              "evaluate the train and test sets every N-th epoch and the last");
+  cli.integer("--patience", o.patience, 0, many,
+              "stop after N evaluations without a better test loss (0 = never)");
   if (task == Task::CartPole) {
     cli.integer("--poles", o.poles, 1, 4, "number of poles");
   }
@@ -229,7 +242,9 @@ inline void require_float_range(const char* flag, double value) {
   if (!o.dump_gradients.empty()) {
     // These only shape training, which --dump-gradients does not do: refused, not ignored.
     for (const char* flag : {"--epochs", "--csv", "--save-params", "--batch", "--lr", "--shuffle",
-                             "--method", "--clip", "--clip-threshold", "--on-nonfinite"})
+                             "--method", "--clip", "--clip-threshold", "--on-nonfinite",
+                             "--checkpoint", "--checkpoint-every", "--evaluate-every",
+                             "--patience"})
       detail::require(!cli.given(flag), "--dump-gradients evaluates the parameters without "
                                         "training, so ", flag, " would have no effect; expected "
                                         "--dump-gradients without ", flag);

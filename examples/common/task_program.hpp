@@ -9,15 +9,15 @@
 // back to: those of the last logged epoch, or the initial ones).
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
-#include <unistd.h>
 #include <iostream>
 #include <new>
+#include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <sbptt/sbptt.hpp>
 
-#include "output_path.hpp"
 #include "task_options.hpp"
 
 namespace sbptt::examples {
@@ -39,13 +39,6 @@ DataSplit<Scalar> split_half(const Matrix<Scalar>& states) {
   return {states.leftCols(n), states.rightCols(n)};
 }
 
-/// ", step 9, sample 0", or ", parameter 3" for a gradient.
-inline std::string location(const NonFinite& where) {
-  return where.quantity == Quantity::Gradient
-             ? detail::concat(", parameter ", where.sample)
-             : detail::concat(", step ", where.step, ", sample ", where.sample);
-}
-
 /// --dump-gradients: one batch (all of `states`), no update; prints loss=… and writes
 /// `param,R,M,C,S,N`, one row per parameter. A non-finite loss, state, control or gradient is
 /// reported on stderr and returns 3; nothing is written then.
@@ -58,7 +51,7 @@ int dump_gradients(const TaskOptions& o, const Sim& sim, Ctrl& controller,
   const Scalar loss = engine.forward(states);
   const auto refuse = [&](const std::string& what, const char* when, const NonFinite& where) {
     std::cerr << to_string(o.task) << ": --dump-gradients: non-finite " << what << " ("
-              << where.value << ") " << when << location(where) << "; no gradients written\n";
+              << where.value << ") " << when << describe_where(where) << "; no gradients written\n";
     return 3;
   };
   if (const auto& where = engine.forward_non_finite())
@@ -88,26 +81,45 @@ int dump_gradients(const TaskOptions& o, const Sim& sim, Ctrl& controller,
   return 0;
 }
 
-/// "non-finite state (inf) in epoch 2, batch 1, step 9, sample 0", for the user's stderr.
-inline std::string describe(const NonFiniteEvent& event) {
-  const NonFinite& where = event.where;
-  std::string text =
-      detail::concat("non-finite ", to_string(where.quantity), " (", where.value, ") in ");
-  text += event.phase == Phase::Update
-              ? detail::concat("epoch ", event.epoch, ", batch ", event.batch)
-              : detail::concat("the ", to_string(event.phase), " of epoch ", event.epoch);
-  return text + location(where);
+/// The settings besides the trainer's and the optimizer's that decide a task's result; a
+/// checkpoint must have been made with the same.
+inline std::vector<RunSetting> task_identity(const TaskOptions& o) {
+  std::vector<RunSetting> identity{{"task", to_string(o.task)},
+                                   {"--samples", std::to_string(o.samples)},
+                                   {"--steps", std::to_string(o.time.steps)},
+                                   {"--dt", detail::concat(o.time.dt)}};
+  if (o.task == Task::CartPole || o.task == Task::Guidance)
+    identity.push_back({"--physical", o.physical ? "yes" : "no"});
+  if (o.task == Task::CartPole) identity.push_back({"--poles", std::to_string(o.poles)});
+  if (o.task == Task::Guidance) {
+    identity.push_back({"--drivers", std::to_string(o.drivers)});
+    identity.push_back({"--evaders", std::to_string(o.evaders)});
+    identity.push_back({"--rc", detail::concat(o.rc)});
+  }
+  if (o.task == Task::Quantum) {
+    identity.push_back({"--target", std::to_string(o.target)});
+    identity.push_back({"--nx", std::to_string(o.nx)});
+  }
+  return identity;
 }
 
-/// Trains `controller` for o.epochs epochs (or dumps gradients), writing the log and params.
+/// Trains `controller` for o.epochs epochs (or dumps gradients) with `run_training`, printing
+/// progress and every non-finite event to stderr.
 template <class Sim, class Ctrl, class Loss>
 int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objective<Loss>& objective,
           Index steps, DataSplit<typename Sim::Scalar> data) {
   using Scalar = typename Sim::Scalar;
   const char* name = to_string(o.task);
-  require_writable(o.csv, "--csv");
-  require_writable(o.save_params, "--save-params");
-  require_writable(o.dump_gradients, "--dump-gradients");
+  for (const auto& [flag, path] : {std::pair{"--csv", &o.csv}, std::pair{"--save-params", &o.save_params},
+                                   std::pair{"--dump-gradients", &o.dump_gradients},
+                                   std::pair{"--checkpoint", &o.checkpoint}})
+    if (!path->empty()) check_output_path(*path, flag);
+  require_distinct_files({{"--init-params", o.init_params, false},
+                          {"--init-states", o.init_states, false},
+                          {"--csv", o.csv, true},
+                          {"--save-params", o.save_params, true},
+                          {"--dump-gradients", o.dump_gradients, true},
+                          {"--checkpoint", o.checkpoint, true}});
   if (!o.init_params.empty()) load_parameters(o.init_params, controller);
   if (!o.init_states.empty()) data.train = load_states<Scalar>(o.init_states, sim.state_dim());
   if (!o.dump_gradients.empty())
@@ -134,53 +146,83 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                static_cast<long>(data.train.cols()), static_cast<long>(data.test.cols()), o.batch,
                describe(o.task, o.time).c_str(), static_cast<long>(controller.num_params()),
                o.use_float ? "float" : "double");
-  TrainingLog log;
   const double initial = static_cast<double>(trainer.engine().evaluate(data.test));
   std::fprintf(stderr, "%s: initial test loss %.6g\n", name, initial);
   if (const auto& where = trainer.engine().forward_non_finite())
     std::fprintf(stderr, "%s: warning: the initial parameters give a %s\n", name,
                  describe(NonFiniteEvent{0, -1, *where, Phase::TestEvaluation}).c_str());
+
+  RunSettings run;
+  run.epochs = o.epochs;
+  run.evaluate_every = o.evaluate_every;
+  run.patience = o.patience;
+  run.log_csv = o.csv;
+  run.checkpoint = o.checkpoint;
+  run.checkpoint_every = o.checkpoint_every;
+  run.save_params = o.save_params;
+  run.identity = task_identity(o);
   // Skipped batches are listed up to this many, then counted, so that a diverging run does
   // not flood stderr.
   constexpr long shown_skips = 5;
   long skips = 0;
-  auto skipped = [&](const NonFiniteEvent& event) {
-    return event.phase == Phase::Update && o.on_non_finite == NonFinitePolicy::SkipBatch;
+  RunCallbacks callbacks;
+  callbacks.on_resume = [&](long epoch) {
+    std::fprintf(stderr, "%s: resuming after epoch %ld from checkpoint '%s'\n", name, epoch,
+                 o.checkpoint.c_str());
   };
-  int status = 0;
-  for (long epoch = 1; epoch <= o.epochs; ++epoch) {
-    const EpochRecord record = trainer.train_epoch(data.train, data.test);
-    for (const NonFiniteEvent& event : trainer.non_finite_events()) {
-      if (skipped(event) && ++skips > shown_skips) continue;
-      std::fprintf(stderr, "%s: %s%s\n", name, describe(event).c_str(),
-                   skipped(event) ? "; batch skipped" : "");
-    }
-    if (trainer.stopped()) {
-      // A stop after a skipped batch means the whole epoch was skipped.
-      const char* why =
-          skipped(trainer.non_finite_events().back()) ? " (no batch of it was finite)" : "";
-      const std::string kept =
-          epoch == 1 ? std::string("it started from")
-                     : detail::concat("of epoch ", epoch - 1,
-                                      ", the last whose evaluation was finite");
-      std::fprintf(stderr, "%s: training stopped in epoch %ld%s; keeping the parameters %s\n",
-                   name, epoch, why, kept.c_str());
-      status = 3;
-      break;
-    }
-    log.add(record);
-    if (!o.csv.empty()) log.save(o.csv);
-    if (epoch == 1 || epoch == o.epochs || epoch % 10 == 0)
-      std::fprintf(stderr, "%s: epoch %ld  batch %.6g  train %.6g  test %.6g  %.3fs\n", name,
-                   epoch, record.batch_loss, record.train_loss, record.test_loss, record.seconds);
-  }
+  callbacks.on_non_finite = [&](const NonFiniteEvent& event, bool skipped) {
+    if (skipped && ++skips > shown_skips) return;
+    std::fprintf(stderr, "%s: %s%s\n", name, describe(event).c_str(),
+                 skipped ? "; batch skipped" : "");
+  };
+  auto loss = [](const std::optional<double>& value) {
+    char text[32] = "-";
+    if (value) std::snprintf(text, sizeof text, "%.6g", *value);
+    return std::string(text);
+  };
+  callbacks.on_epoch = [&](const EpochRecord& r) {
+    if (r.epoch == 1 || r.epoch == o.epochs || r.epoch % 10 == 0)
+      std::fprintf(stderr, "%s: epoch %ld  batch %.6g  train %s  test %s  %.3fs\n", name,
+                   r.epoch, r.batch_loss, loss(r.train_loss).c_str(), loss(r.test_loss).c_str(),
+                   r.seconds);
+  };
+  const RunResult<Scalar> result = run_training(trainer, data.train, data.test, run, callbacks);
   if (skips > shown_skips)
     std::fprintf(stderr, "%s: %ld skipped batches in all (%ld not listed)\n", name, skips,
                  skips - shown_skips);
-  if (!o.save_params.empty()) save_parameters(o.save_params, controller);
-  if (status == 0 && !log.rows().empty())
-    std::printf("final test loss %.9g\n", log.rows().back().test_loss);
-  return status;
+  const std::string saved =
+      result.saved_params.empty() ? std::string()
+                                  : detail::concat("; the parameters after epoch ", result.epochs,
+                                                   " were saved to '", result.saved_params, "'");
+  switch (result.end) {
+    case RunEnd::NonFinite: {
+      // A stop after a skipped batch means the whole epoch was skipped.
+      const char* why = result.stop_event->phase == Phase::Update &&
+                                o.on_non_finite == NonFinitePolicy::SkipBatch
+                            ? " (no batch of it was finite)"
+                            : "";
+      const std::string kept =
+          result.stop_event->epoch == 1 ? std::string("it started from")
+                             : detail::concat("of epoch ", result.epochs,
+                                              ", the last whose evaluation was finite");
+      std::fprintf(stderr, "%s: training stopped in epoch %ld%s; keeping the parameters %s\n",
+                   name, result.stop_event->epoch, why, kept.c_str());
+      return 3;
+    }
+    case RunEnd::OutputFailed:
+      std::fprintf(stderr, "%s: %s%s\n", name, result.output_error.c_str(), saved.c_str());
+      return 1;
+    case RunEnd::EarlyStop:
+      std::fprintf(stderr, "%s: no better test loss in %ld evaluations: stopped after epoch %ld; "
+                           "the best was %.9g in epoch %ld\n",
+                   name, o.patience, result.epochs, result.best_loss, result.best_epoch);
+      break;
+    case RunEnd::Finished:
+    case RunEnd::Requested: break;
+  }
+  if (result.last && result.last->test_loss)
+    std::printf("final test loss %.9g\n", *result.last->test_loss);
+  return 0;
 }
 
 /// Parses the flags for `task` and calls `body.template operator()<Scalar>(options)` with

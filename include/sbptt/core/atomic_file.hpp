@@ -1,46 +1,260 @@
 #pragma once
-/// \file Whole-file writes that never leave a half-written file: the content goes to a
-/// temporary file in the same directory, which is then renamed over the target (rename is
-/// atomic within one file system, so a reader sees the old file or the new one).
+/// \file Whole-file writes that never leave a half-written file, and that are durable.
+///
+/// A finished file appears at its path complete or not at all, and survives a machine crash
+/// once the write returns:
+/// 1. the content goes to an unnamed file (`O_TMPFILE`) in the target's directory, so a
+///    process killed while writing leaves nothing behind (where the file system lacks
+///    `O_TMPFILE`, to a named temporary `<name>.tmp.<pid>.<n>`, removed on every failure);
+/// 2. the file is fsync'ed, given a temporary name and renamed over the target (rename is
+///    atomic within one file system: a reader sees the old file or the new one);
+/// 3. the directory is fsync'ed, so the rename itself is on disk.
+///
+/// A symbolic link is followed: the write replaces the link's final target, not the link.
+/// An existing target keeps its permission bits (and its group and owner where the writer may
+/// set them); a target the writer may not write (a write-protected file) is refused rather
+/// than replaced. `check_output_path` makes the same checks up front, before any work.
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
 #include <cerrno>
-#include <chrono>
-#include <cstdio>
+#include <climits>
 #include <cstring>
-#include <fstream>
-#include <functional>
+#include <filesystem>
 #include <string>
 #include <string_view>
-#include <thread>
-#include <unistd.h>
 
 #include "sbptt/core/error.hpp"
 
 namespace sbptt {
 
-/// Writes `content` to `path` atomically. Throws `IoError` naming the path when the directory
-/// cannot be written.
-inline void write_file_atomically(const std::string& path, std::string_view content) {
-  // Unique per process, thread and moment, so concurrent writers of one target cannot clobber
-  // each other's temporaries; the last rename wins, and each renamed file is complete.
-  const std::string temporary = detail::concat(
-      path, ".tmp.", ::getpid(), ".", std::hash<std::thread::id>{}(std::this_thread::get_id()), ".",
-      std::chrono::steady_clock::now().time_since_epoch().count());
-  {
-    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    if (!out) throw IoError(detail::concat("cannot write '", temporary, "' (for '", path, "')"));
-    out.write(content.data(), static_cast<std::streamsize>(content.size()));
-    out.flush();
-    if (!out) {
-      std::remove(temporary.c_str());
-      throw IoError(detail::concat("writing '", temporary, "' failed (disk full?)"));
+namespace detail {
+
+/// Longest suffix a temporary name adds: ".tmp." + pid (≤ 10 digits) + "." + counter (≤ 20).
+inline constexpr std::size_t temporary_suffix_bytes = 36;
+
+[[nodiscard]] inline std::string os_reason(int error) { return std::strerror(error); }
+
+/// `path` with every symbolic link of its last component followed (a dangling link gives the
+/// path it points to). Throws `IoError` for a loop of links.
+[[nodiscard]] inline std::filesystem::path final_target(const std::filesystem::path& path) {
+  std::filesystem::path current = path;
+  for (int hops = 0; hops < 40; ++hops) {
+    std::error_code error;
+    if (!std::filesystem::is_symlink(std::filesystem::symlink_status(current, error))) {
+      return current;
     }
+    const std::filesystem::path link = std::filesystem::read_symlink(current, error);
+    if (error) return current;
+    current = link.is_absolute() ? link : current.parent_path() / link;
   }
-  if (std::rename(temporary.c_str(), path.c_str()) != 0) {
-    const int error = errno;  // before remove() can overwrite it
-    std::remove(temporary.c_str());
-    throw IoError(detail::concat("cannot rename '", temporary, "' to '", path,
-                                 "': ", std::strerror(error)));
+  throw IoError(concat("'", path.string(), "': too many levels of symbolic links"));
+}
+
+/// The directory a file at `target` lives in ("." for a bare name).
+[[nodiscard]] inline std::filesystem::path directory_of(const std::filesystem::path& target) {
+  return target.has_parent_path() ? target.parent_path() : std::filesystem::path(".");
+}
+
+/// Flushes a directory's entries (a rename in it) to disk. File systems that cannot sync a
+/// directory (EINVAL) are not an error.
+inline void sync_directory(const std::filesystem::path& directory, const std::string& for_path) {
+  const int fd = ::open(directory.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) {
+    throw IoError(concat("cannot open directory '", directory.string(), "' to sync '", for_path,
+                         "': ", os_reason(errno)));
   }
+  const int result = ::fsync(fd);
+  const int error = errno;
+  ::close(fd);
+  if (result != 0 && error != EINVAL) {
+    throw IoError(concat("cannot sync directory '", directory.string(), "' after writing '",
+                         for_path, "': ", os_reason(error)));
+  }
+}
+
+/// Writes all of `content` to `fd`, retrying short writes and EINTR; returns errno or 0.
+[[nodiscard]] inline int write_all(int fd, std::string_view content) {
+  while (!content.empty()) {
+    const ::ssize_t written = ::write(fd, content.data(), content.size());
+    if (written < 0) {
+      if (errno == EINTR) continue;
+      return errno;
+    }
+    content.remove_prefix(static_cast<std::size_t>(written));
+  }
+  return 0;
+}
+
+/// A number unique within this process for each temporary name.
+[[nodiscard]] inline unsigned long long next_temporary_number() {
+  static std::atomic<unsigned long long> counter{0};
+  return counter.fetch_add(1, std::memory_order_relaxed);
+}
+
+}  // namespace detail
+
+/// Fails before any work, with `IoError` naming `what` (e.g. "--csv") and the reason, when a
+/// file could not later be written at `path` the way `write_file_atomically` writes it: empty
+/// path; a directory or special file there; a missing or unwritable directory; a
+/// write-protected existing file; or a name too long for the file system once the temporary
+/// suffix is added.
+inline void check_output_path(const std::string& path, std::string_view what) {
+  detail::require<IoError>(!path.empty(), what, ": the path is empty; expected a file path to "
+                                                "write (an unset shell variable?)");
+  const std::filesystem::path target = detail::final_target(path);
+  std::error_code error;
+  const auto status = std::filesystem::status(target, error);
+  detail::require<IoError>(
+      !std::filesystem::exists(status) || std::filesystem::is_regular_file(status), what, " '",
+      path, "' exists and is not a regular file (",
+      std::filesystem::is_directory(status) ? "a directory" : "a special file",
+      "); expected a file path to write");
+  const std::filesystem::path directory = detail::directory_of(target);
+  detail::require<IoError>(std::filesystem::exists(directory, error), what, " '", path,
+                           "': directory '", directory.string(), "' does not exist");
+  detail::require<IoError>(std::filesystem::is_directory(directory, error), what, " '", path,
+                           "': '", directory.string(), "' is not a directory");
+  detail::require<IoError>(::access(directory.c_str(), W_OK) == 0, what, " '", path,
+                           "': directory '", directory.string(), "' is not writable");
+  detail::require<IoError>(!std::filesystem::exists(status) || ::access(target.c_str(), W_OK) == 0,
+                           what, " '", path, "': the file exists and is write-protected; "
+                           "expected a file this user may write (it is not replaced)");
+  const long name_max = ::pathconf(directory.c_str(), _PC_NAME_MAX);
+  const std::size_t limit = name_max > 0 ? static_cast<std::size_t>(name_max) : NAME_MAX;
+  const std::size_t name = target.filename().string().size();
+  detail::require<IoError>(name + detail::temporary_suffix_bytes <= limit, what, " '", path,
+                           "': the file name is ", name, " bytes; with the temporary suffix "
+                           "written beside it (up to ", detail::temporary_suffix_bytes,
+                           " bytes) it would exceed this file system's limit of ", limit,
+                           " bytes; expected a name of at most ",
+                           limit - std::min(limit, detail::temporary_suffix_bytes), " bytes");
+  detail::require<IoError>(target.string().size() + detail::temporary_suffix_bytes < PATH_MAX,
+                           what, " '", path, "': the path is ", target.string().size(),
+                           " bytes; expected fewer than ",
+                           PATH_MAX - detail::temporary_suffix_bytes);
+}
+
+/// A file being written for an atomic, durable replacement of `path` (see the file comment).
+/// Nothing is visible at the target until `commit()`; destroying it uncommitted discards it.
+class AtomicFile {
+public:
+  /// Opens the temporary file. Throws `IoError` naming `path` and the OS reason.
+  explicit AtomicFile(const std::string& path)
+      : path_(path), target_(detail::final_target(path)),
+        directory_(detail::directory_of(target_)) {
+    detail::require<IoError>(!path.empty(), "cannot write a file at an empty path");
+#ifdef O_TMPFILE
+    fd_ = ::open(directory_.c_str(), O_TMPFILE | O_WRONLY | O_CLOEXEC, 0666);
+    unnamed_ = fd_ >= 0 && ::access("/proc/self/fd", X_OK) == 0;
+    if (fd_ >= 0 && !unnamed_) {
+      ::close(fd_);
+      fd_ = -1;
+    }
+#endif
+    if (!unnamed_) {
+      for (int attempt = 0; fd_ < 0 && attempt < 100; ++attempt) {
+        temporary_ = temporary_name();
+        fd_ = ::open(temporary_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+        if (fd_ < 0 && errno != EEXIST) break;
+      }
+    }
+    if (fd_ < 0) {
+      temporary_.clear();
+      throw IoError(detail::concat("cannot write '", path_, "' (in directory '",
+                                   directory_.string(), "'): ", detail::os_reason(errno)));
+    }
+    keep_owner_and_mode();
+  }
+  AtomicFile(const AtomicFile&) = delete;
+  AtomicFile& operator=(const AtomicFile&) = delete;
+  ~AtomicFile() { discard(); }
+
+  /// Appends `text`. Throws `IoError` (e.g. disk full) naming the target and the reason.
+  void write(std::string_view text) {
+    const int error = detail::write_all(fd_, text);
+    if (error != 0) fail("writing", error);
+  }
+
+  /// Syncs the file, renames it over the target and syncs the directory.
+  void commit() {
+    if (::fsync(fd_) != 0) fail("syncing", errno);
+    if (unnamed_) {
+      // An unnamed file gets a name only now, complete; a name already taken is skipped.
+      const std::string self = "/proc/self/fd/" + std::to_string(fd_);
+      int result = -1;
+      for (int attempt = 0; result != 0 && attempt < 100; ++attempt) {
+        temporary_ = temporary_name();
+        result = ::linkat(AT_FDCWD, self.c_str(), AT_FDCWD, temporary_.c_str(), AT_SYMLINK_FOLLOW);
+        if (result != 0 && errno != EEXIST) break;
+      }
+      if (result != 0) {
+        temporary_.clear();
+        fail("naming the temporary file for", errno);
+      }
+    }
+    ::close(fd_);
+    fd_ = -1;
+    if (std::rename(temporary_.c_str(), target_.c_str()) != 0) {
+      const int error = errno;
+      discard();
+      throw IoError(detail::concat("cannot rename '", temporary_, "' to '", path_,
+                                   "': ", detail::os_reason(error)));
+    }
+    temporary_.clear();
+    detail::sync_directory(directory_, path_);
+  }
+
+private:
+  [[nodiscard]] std::string temporary_name() const {
+    return detail::concat(target_.string(), ".tmp.", ::getpid(), ".",
+                          detail::next_temporary_number());
+  }
+
+  void keep_owner_and_mode() {
+    struct stat existing {};
+    if (::stat(target_.c_str(), &existing) != 0) return;  // a new file: the umask decides
+    if (::access(target_.c_str(), W_OK) != 0) {
+      const int error = errno;
+      discard();
+      throw IoError(detail::concat("'", path_, "' is not writable (", detail::os_reason(error),
+                                   "); it is not replaced"));
+    }
+    // Owner and group as before where this user may set them (root; or a group it is in).
+    if (::fchown(fd_, existing.st_uid, existing.st_gid) != 0) {
+      [[maybe_unused]] const int ignored = ::fchown(fd_, static_cast<uid_t>(-1), existing.st_gid);
+    }
+    [[maybe_unused]] const int ignored = ::fchmod(fd_, existing.st_mode & 07777);
+  }
+
+  [[noreturn]] void fail(const char* doing, int error) {
+    discard();
+    throw IoError(detail::concat(doing, " '", path_, "' failed: ", detail::os_reason(error)));
+  }
+
+  void discard() noexcept {
+    if (fd_ >= 0) ::close(fd_);
+    fd_ = -1;
+    if (!temporary_.empty()) ::unlink(temporary_.c_str());
+    temporary_.clear();
+  }
+
+  std::string path_;
+  std::filesystem::path target_, directory_;
+  std::string temporary_;  ///< the name the data has before the rename; empty while unnamed
+  int fd_ = -1;
+  bool unnamed_ = false;
+};
+
+/// Writes `content` to `path` atomically and durably (see the file comment). Throws `IoError`
+/// naming the path and the OS reason when it cannot.
+inline void write_file_atomically(const std::string& path, std::string_view content) {
+  AtomicFile file(path);
+  file.write(content);
+  file.commit();
 }
 
 }  // namespace sbptt

@@ -8,6 +8,8 @@
 #include <cstdint>
 #include <numbers>
 #include <random>
+#include <sstream>
+#include <string>
 
 namespace sbptt {
 
@@ -32,6 +34,22 @@ public:
 
   /// The raw 64-bit engine output (for seeding child generators).
   std::uint64_t bits() { return engine_(); }
+
+  /// The engine's whole state as text (the standard's decimal words), for checkpoints.
+  [[nodiscard]] std::string state() const {
+    std::ostringstream out;
+    out << engine_;
+    return out.str();
+  }
+  /// Restores a `state()`; returns false (leaving the generator unchanged) on malformed text.
+  [[nodiscard]] bool restore(const std::string& state) {
+    std::istringstream in(state);
+    std::mt19937_64 engine;
+    in >> engine;
+    if (in.fail()) return false;
+    engine_ = engine;
+    return true;
+  }
 
 private:
   std::mt19937_64 engine_;

@@ -19,6 +19,7 @@
 #include <cmath>
 #include <numeric>
 #include <optional>
+#include <string>
 #include <string_view>
 #include <vector>
 
@@ -70,6 +71,24 @@ struct NonFiniteEvent {
   Phase phase = Phase::Update;
 };
 
+/// ", step 9, sample 0", or ", parameter 3" for a gradient.
+[[nodiscard]] inline std::string describe_where(const NonFinite& where) {
+  return where.quantity == Quantity::Gradient
+             ? detail::concat(", parameter ", where.sample)
+             : detail::concat(", step ", where.step, ", sample ", where.sample);
+}
+
+/// "non-finite state (inf) in epoch 2, batch 1, step 9, sample 0": the event in words.
+[[nodiscard]] inline std::string describe(const NonFiniteEvent& event) {
+  const NonFinite& where = event.where;
+  std::string text =
+      detail::concat("non-finite ", to_string(where.quantity), " (", where.value, ") in ");
+  text += event.phase == Phase::Update
+              ? detail::concat("epoch ", event.epoch, ", batch ", event.batch)
+              : detail::concat("the ", to_string(event.phase), " of epoch ", event.epoch);
+  return text + describe_where(where);
+}
+
 template <class Sim, class Ctrl, class Loss, class Optimizer>
 class Trainer {
 public:
@@ -78,6 +97,7 @@ public:
   Trainer(const Sim& sim, Ctrl& controller, Objective<Loss> objective, Index steps,
           Optimizer optimizer, TrainerOptions options)
       : controller_(controller),
+        state_dim_(sim.state_dim()),
         engine_(sim, controller, std::move(objective), steps),
         options_(options),
         clipped_(optimizer, options.clip, static_cast<Scalar>(options.clip_threshold)),
@@ -94,10 +114,15 @@ public:
     engine_.set_threads(options.threads);
   }
 
-  /// One epoch over `train` (state_dim × N_train), then the evaluation of `train` and `test`.
-  /// When `stopped()` afterwards, the record is not meaningful and the parameters are those
-  /// from before the epoch.
-  EpochRecord train_epoch(const Matrix<Scalar>& train, const Matrix<Scalar>& test) {
+  /// One epoch over `train` (state_dim × N_train, N_train ≥ 1), then, when `evaluate`, the
+  /// evaluation of `train` and of `test` (state_dim × N_test; N_test = 0 means no test set,
+  /// and test_loss stays empty). Both sets are checked before any update. When `stopped()`
+  /// afterwards, the record is not meaningful and the parameters are those from before the
+  /// epoch.
+  EpochRecord train_epoch(const Matrix<Scalar>& train, const Matrix<Scalar>& test,
+                          bool evaluate = true) {
+    check_set(train, "train", 1);
+    check_set(test, "test", 0);
     EpochRecord record;
     record.epoch = ++epoch_;
     events_.clear();
@@ -136,9 +161,26 @@ public:
       record.cos_m_r = cos_sum * per;
       record.agree_fraction = agree_sum * per;
     }
-    record.train_loss = evaluate(train, record.epoch, Phase::TrainEvaluation);
-    record.test_loss = evaluate(test, record.epoch, Phase::TestEvaluation);
+    if (evaluate) {
+      record.train_loss = this->evaluate(train, record.epoch, Phase::TrainEvaluation);
+      if (test.cols() > 0)
+        record.test_loss = this->evaluate(test, record.epoch, Phase::TestEvaluation);
+    }
     return stopped_ ? roll_back(record) : record;
+  }
+
+  /// Epochs trained so far (the number of the last one).
+  [[nodiscard]] long epoch() const { return epoch_; }
+  /// The shuffling generator's state (for checkpoints; see `Rng::state`).
+  [[nodiscard]] std::string shuffle_state() const { return shuffle_rng_.state(); }
+  /// Continues a run from a checkpoint: the next epoch is `epoch` + 1 and the shuffling
+  /// generator resumes from `shuffle_state`. The caller restores the parameters (in the
+  /// controller) and the optimizer state (`optimizer()`).
+  void resume_at(long epoch, const std::string& shuffle_state) {
+    detail::require(epoch >= 0, "Trainer::resume_at: epoch = ", epoch, "; expected >= 0");
+    detail::require(shuffle_rng_.restore(shuffle_state),
+                    "Trainer::resume_at: the shuffling state is not a generator state");
+    epoch_ = epoch;
   }
 
   /// The last non-finite event of any epoch so far, if there was one.
@@ -151,6 +193,8 @@ public:
   /// the parameters are those from before it.
   [[nodiscard]] bool stopped() const { return stopped_; }
   [[nodiscard]] Engine<Sim, Ctrl, Loss>& engine() { return engine_; }
+  /// The controller being trained (its `params()` are the parameters θ).
+  [[nodiscard]] Ctrl& controller() { return controller_; }
   /// The optimizer that takes the steps of the configured method (e.g. to change its rate).
   [[nodiscard]] Optimizer& optimizer() {
     return options_.method == Method::Combined ? combined_.inner() : clipped_.inner();
@@ -158,6 +202,14 @@ public:
   [[nodiscard]] const TrainerOptions& options() const { return options_; }
 
 private:
+  void check_set(const Matrix<Scalar>& set, const char* name, Index min_samples) const {
+    detail::require(set.cols() >= min_samples, "Trainer::train_epoch: the ", name,
+                    " set has ", set.cols(), " samples; expected at least ", min_samples);
+    detail::require(set.cols() == 0 || set.rows() == state_dim_,
+                    "Trainer::train_epoch: the ", name, " set has ", set.rows(),
+                    " rows; expected the state dimension ", state_dim_);
+  }
+
   void gather(const Matrix<Scalar>& set, Index k, Matrix<Scalar>& out) const {
     const Index first = k * options_.batch;
     const Index count = std::min(options_.batch, set.cols() - first);
@@ -238,6 +290,7 @@ private:
   }
 
   Ctrl& controller_;
+  Index state_dim_;
   Engine<Sim, Ctrl, Loss> engine_;
   TrainerOptions options_;
   ClippedUpdate<Optimizer> clipped_;

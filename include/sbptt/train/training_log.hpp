@@ -1,9 +1,11 @@
 #pragma once
-/// \file The per-epoch training log (DESIGN §4): CSV with header
+/// \file The per-epoch training log (docs/formats.md): CSV with header
 /// `epoch,batch_loss,train_loss,test_loss,update_norm2,cos_m_r,agree_fraction,seconds`.
 ///
 /// - batch_loss: mean over the epoch's mini-batches of the loss before each update;
-/// - train_loss / test_loss: the whole train / test set evaluated after the epoch;
+/// - train_loss / test_loss: the whole train / test set evaluated after the epoch; empty in an
+///   epoch without evaluation (see `RunSettings::evaluate_every`) and test_loss empty without
+///   a test set;
 /// - update_norm2: mean over mini-batches of ‖vector fed to the optimizer‖² before clipping
 ///   (the reference's "update size");
 /// - cos_m_r, agree_fraction: mean over mini-batches of cos(g_M, g_R) and of the share of
@@ -11,10 +13,17 @@
 ///   fields are empty for the other methods;
 /// - seconds: wall time of the epoch's updates (forward, sweeps, optimizer), without the
 ///   evaluation, as the reference logs it.
-#include <cmath>
+///
+/// `TrainingLogFile` appends one row per epoch to the file (never rewrites it): the cost of a
+/// run's log is linear in its epochs.
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <cstdio>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "sbptt/core/atomic_file.hpp"
@@ -25,38 +34,44 @@ namespace sbptt {
 struct EpochRecord {
   long epoch = 0;
   double batch_loss = 0;
-  double train_loss = 0;
-  double test_loss = 0;
+  std::optional<double> train_loss;  ///< empty when the epoch was not evaluated
+  std::optional<double> test_loss;   ///< empty when not evaluated or without a test set
   double update_norm2 = 0;
   std::optional<double> cos_m_r;
   std::optional<double> agree_fraction;
   double seconds = 0;
 };
 
-/// The rows of a run; `save` rewrites the whole file atomically, so a reader (or a crash)
-/// never sees a truncated log.
+/// The log's header line, without the newline.
+inline constexpr const char* training_log_header =
+    "epoch,batch_loss,train_loss,test_loss,update_norm2,cos_m_r,agree_fraction,seconds";
+
+/// One CSV row of the log, with its newline.
+[[nodiscard]] inline std::string training_log_row(const EpochRecord& r) {
+  auto field = [](const std::optional<double>& v, const char* format) {
+    char text[40] = "";
+    if (v) std::snprintf(text, sizeof text, format, *v);
+    return std::string(text);
+  };
+  char line[512];
+  std::snprintf(line, sizeof line, "%ld,%.17g,%s,%s,%.9g,%s,%s,%.6f\n", r.epoch, r.batch_loss,
+                field(r.train_loss, "%.17g").c_str(), field(r.test_loss, "%.17g").c_str(),
+                r.update_norm2, field(r.cos_m_r, "%.9g").c_str(),
+                field(r.agree_fraction, "%.9g").c_str(), r.seconds);
+  return line;
+}
+
+/// The rows of a run in memory; `save` writes them all atomically.
 class TrainingLog {
 public:
-  static constexpr const char* header =
-      "epoch,batch_loss,train_loss,test_loss,update_norm2,cos_m_r,agree_fraction,seconds";
+  static constexpr const char* header = training_log_header;
 
   void add(const EpochRecord& record) { rows_.push_back(record); }
   [[nodiscard]] const std::vector<EpochRecord>& rows() const { return rows_; }
 
   [[nodiscard]] std::string csv() const {
     std::string text = std::string(header) + "\n";
-    char line[512];
-    auto optional = [](const std::optional<double>& v) {
-      char field[32] = "";
-      if (v) std::snprintf(field, sizeof field, "%.9g", *v);
-      return std::string(field);
-    };
-    for (const auto& r : rows_) {
-      std::snprintf(line, sizeof line, "%ld,%.17g,%.17g,%.17g,%.9g,%s,%s,%.6f\n", r.epoch,
-                    r.batch_loss, r.train_loss, r.test_loss, r.update_norm2,
-                    optional(r.cos_m_r).c_str(), optional(r.agree_fraction).c_str(), r.seconds);
-      text += line;
-    }
+    for (const auto& r : rows_) text += training_log_row(r);
     return text;
   }
 
@@ -64,6 +79,96 @@ public:
 
 private:
   std::vector<EpochRecord> rows_;
+};
+
+/// The log as a file that grows by one appended row per epoch. A symbolic link at the path
+/// is followed (its target grows). Counts what it writes (`bytes_written`, `writes`) so that
+/// the linear cost can be checked.
+class TrainingLogFile {
+public:
+  /// Starts a new log at `path`: the header is written atomically and durably (replacing any
+  /// old file), then rows are appended. Throws `IoError` naming the path and the reason.
+  static TrainingLogFile create(const std::string& path) {
+    const std::string header_line = std::string(training_log_header) + "\n";
+    write_file_atomically(path, header_line);
+    TrainingLogFile log(path);
+    log.size_ = static_cast<long long>(header_line.size());
+    log.bytes_written_ = log.size_;
+    log.writes_ = 1;
+    return log;
+  }
+
+  /// Continues the log at `path` from its first `size` bytes (the size recorded with a
+  /// checkpoint): later rows, written after that checkpoint, are cut off. Throws `IoError`
+  /// when the file is missing, does not start with the header, or is shorter than `size`.
+  static TrainingLogFile resume(const std::string& path, long long size) {
+    TrainingLogFile log(path);
+    struct stat info {};
+    detail::require<IoError>(::fstat(log.fd_, &info) == 0 && info.st_size >= size,
+                             "training log '", path, "' has ", info.st_size,
+                             " bytes; the checkpoint expects at least ", size,
+                             " (the log was cut or replaced)");
+    const std::string header_line = std::string(training_log_header) + "\n";
+    std::string start(header_line.size(), '\0');
+    const ::ssize_t got = ::pread(log.fd_, start.data(), start.size(), 0);
+    detail::require<IoError>(got == static_cast<::ssize_t>(start.size()) && start == header_line,
+                             "training log '", path, "' does not start with the header '",
+                             training_log_header, "'");
+    detail::require<IoError>(::ftruncate(log.fd_, size) == 0, "cannot cut training log '",
+                             path, "' back to ", size, " bytes: ", detail::os_reason(errno));
+    log.size_ = size;
+    return log;
+  }
+
+  TrainingLogFile(TrainingLogFile&& other) noexcept
+      : path_(std::move(other.path_)), fd_(std::exchange(other.fd_, -1)), size_(other.size_),
+        bytes_written_(other.bytes_written_), writes_(other.writes_) {}
+  TrainingLogFile& operator=(TrainingLogFile&& other) noexcept {
+    std::swap(path_, other.path_);
+    std::swap(fd_, other.fd_);
+    size_ = other.size_;
+    bytes_written_ = other.bytes_written_;
+    writes_ = other.writes_;
+    return *this;
+  }
+  TrainingLogFile(const TrainingLogFile&) = delete;
+  TrainingLogFile& operator=(const TrainingLogFile&) = delete;
+  ~TrainingLogFile() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+
+  /// Appends the row of `record` with one write. Throws `IoError` (e.g. disk full).
+  void append(const EpochRecord& record) {
+    const std::string row = training_log_row(record);
+    const int error = detail::write_all(fd_, row);
+    detail::require<IoError>(error == 0, "writing training log '", path_, "' failed: ",
+                             detail::os_reason(error));
+    size_ += static_cast<long long>(row.size());
+    bytes_written_ += static_cast<long long>(row.size());
+    ++writes_;
+  }
+
+  /// Makes every appended row durable (before a checkpoint records `size()`).
+  void sync() {
+    detail::require<IoError>(::fsync(fd_) == 0, "cannot sync training log '", path_, "': ",
+                             detail::os_reason(errno));
+  }
+
+  [[nodiscard]] long long size() const { return size_; }
+  [[nodiscard]] long long bytes_written() const { return bytes_written_; }
+  [[nodiscard]] long long writes() const { return writes_; }
+  [[nodiscard]] const std::string& path() const { return path_; }
+
+private:
+  explicit TrainingLogFile(const std::string& path) : path_(path) {
+    fd_ = ::open(path.c_str(), O_RDWR | O_APPEND | O_CLOEXEC);
+    detail::require<IoError>(fd_ >= 0, "cannot open training log '", path, "': ",
+                             detail::os_reason(errno));
+  }
+
+  std::string path_;
+  int fd_ = -1;
+  long long size_ = 0, bytes_written_ = 0, writes_ = 0;
 };
 
 }  // namespace sbptt

@@ -1,0 +1,288 @@
+#pragma once
+/// \file The checkpoint of a training run (docs/training.md): everything needed to continue
+/// bit for bit as if the run had not been interrupted.
+///
+/// Plain text, one `key value` per line, vectors as a count followed by one number per line:
+///
+///     sbptt-checkpoint 1
+///     setting <name>=<value>        one line per run setting (method, batch, data fingerprints…)
+///     epoch <e>                     epochs completed
+///     shuffle <words>               the shuffling generator's state (mt19937-64, 313 words)
+///     log_bytes <n>                 size of the training log after epoch e (-1: no log)
+///     skipped_batches <n>           batches skipped so far (NonFinitePolicy::SkipBatch)
+///     since_best <n>                evaluations since the best one (for the patience stop)
+///     best_epoch <e>                0 when no evaluation yet
+///     best_loss <x>
+///     last <epoch> <batch> <train> <test> <norm2> <cos> <agree> <seconds>  ("-" = empty)
+///     params <n>      θ, n lines
+///     best_params <n> the best θ so far, n lines (0 before the first evaluation)
+///     adam_t <t>      Adam's step count, then adam_m <n> and adam_v <n> with n lines each
+///     end
+///
+/// Numbers use the round-trip precision of their type (%.17g double, %.9g float), so reading
+/// them back restores every bit. The file is written with `write_file_atomically`: complete
+/// and on disk, or not there.
+#include <algorithm>
+#include <cerrno>
+#include <cstdint>
+#include <cstdio>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "sbptt/core/atomic_file.hpp"
+#include "sbptt/core/number_text.hpp"
+#include "sbptt/core/types.hpp"
+#include "sbptt/train/training_log.hpp"
+
+namespace sbptt {
+
+/// One setting a checkpoint must share with the run that resumes it ("method" = "C").
+struct RunSetting {
+  std::string name, value;
+};
+
+/// A run's state after a completed epoch; see the file comment for the format.
+template <class Scalar>
+struct Checkpoint {
+  std::vector<RunSetting> settings;
+  long epoch = 0;
+  std::string shuffle_state;
+  long long log_bytes = -1;
+  long skipped_batches = 0;
+  long since_best = 0;
+  long best_epoch = 0;
+  double best_loss = 0;
+  std::optional<EpochRecord> last;
+  Vector<Scalar> params, best_params, adam_m, adam_v;
+  Index adam_t = 0;
+};
+
+namespace detail {
+
+inline constexpr std::string_view checkpoint_magic = "sbptt-checkpoint 1";
+
+template <class Scalar>
+void append_vector(std::string& text, const char* key, const Vector<Scalar>& values) {
+  text += concat(key, " ", values.size(), "\n");
+  for (Index i = 0; i < values.size(); ++i) {
+    append_number(text, values(i));
+    text += '\n';
+  }
+}
+
+inline void append_optional(std::string& text, const std::optional<double>& value) {
+  text += ' ';
+  if (value) {
+    append_number(text, *value);
+  } else {
+    text += '-';
+  }
+}
+
+/// Reads a checkpoint's lines in order, with errors naming the file and the line.
+class CheckpointReader {
+public:
+  CheckpointReader(std::string_view text, std::string path) : text_(text), path_(std::move(path)) {}
+
+  [[nodiscard]] bool at(std::string_view key) const {
+    const std::string_view line = peek();
+    return line.substr(0, line.find(' ')) == key;
+  }
+
+  /// The rest of the line after `key `.
+  std::string_view value(std::string_view key) {
+    const std::string_view line = next();
+    require<ParseError>(line.substr(0, key.size()) == key &&
+                            (line.size() == key.size() || line[key.size()] == ' '),
+                        where(), ": '", line.substr(0, 60), "', expected '", key, " …'");
+    return line.size() > key.size() ? line.substr(key.size() + 1) : std::string_view{};
+  }
+
+  template <class Number>
+  Number number(std::string_view key) {
+    return parse_finite<Number>(value(key), where());
+  }
+
+  long integer(std::string_view key) {
+    const double number = parse_finite<double>(value(key), where());
+    require<ParseError>(number == static_cast<double>(static_cast<long long>(number)), where(),
+                        ": expected a whole number for '", key, "'");
+    return static_cast<long>(number);
+  }
+
+  template <class Scalar>
+  Vector<Scalar> vector(std::string_view key) {
+    const long count = integer(key);
+    require<ParseError>(count >= 0 && count <= 100'000'000, where(), ": ", count,
+                        " numbers; expected 0 to 10^8");
+    Vector<Scalar> values(count);
+    for (long i = 0; i < count; ++i) values(i) = parse_finite<Scalar>(next(), where());
+    return values;
+  }
+
+  std::string_view next() {
+    require<ParseError>(position_ < text_.size(), "checkpoint '", path_, "' ends after line ",
+                        line_, "; expected more (the file is incomplete)");
+    const std::size_t end = text_.find('\n', position_);
+    require<ParseError>(end != std::string_view::npos, where(), ": the line has no end");
+    const std::string_view line = text_.substr(position_, end - position_);
+    position_ = end + 1;
+    ++line_;
+    return line;
+  }
+
+  [[nodiscard]] std::string where() const {
+    return concat("checkpoint '", path_, "', line ", line_);
+  }
+
+private:
+  [[nodiscard]] std::string_view peek() const {
+    const std::size_t end = text_.find('\n', position_);
+    return position_ < text_.size() ? text_.substr(position_, end - position_) : "";
+  }
+
+  std::string_view text_;
+  std::string path_;
+  std::size_t position_ = 0;
+  long line_ = 0;
+};
+
+inline std::optional<double> optional_field(std::string_view field, const std::string& where) {
+  if (field == "-") return std::nullopt;
+  return parse_finite<double>(field, where);
+}
+
+}  // namespace detail
+
+/// The checkpoint as text (see the file comment).
+template <class Scalar>
+[[nodiscard]] std::string checkpoint_text(const Checkpoint<Scalar>& c) {
+  std::string text = std::string(detail::checkpoint_magic) + "\n";
+  for (const RunSetting& s : c.settings) text += "setting " + s.name + "=" + s.value + "\n";
+  text += detail::concat("epoch ", c.epoch, "\nshuffle ", c.shuffle_state, "\nlog_bytes ",
+                         c.log_bytes, "\nskipped_batches ", c.skipped_batches, "\nsince_best ",
+                         c.since_best, "\nbest_epoch ", c.best_epoch, "\nbest_loss ");
+  detail::append_number(text, c.best_loss);
+  text += "\nlast";
+  if (c.last) {
+    const EpochRecord& r = *c.last;
+    text += detail::concat(' ', r.epoch);
+    for (const std::optional<double> field :
+         {std::optional(r.batch_loss), r.train_loss, r.test_loss, std::optional(r.update_norm2),
+          r.cos_m_r, r.agree_fraction, std::optional(r.seconds)})
+      detail::append_optional(text, field);
+  }
+  text += '\n';
+  detail::append_vector(text, "params", c.params);
+  detail::append_vector(text, "best_params", c.best_params);
+  text += detail::concat("adam_t ", c.adam_t, "\n");
+  detail::append_vector(text, "adam_m", c.adam_m);
+  detail::append_vector(text, "adam_v", c.adam_v);
+  return text + "end\n";
+}
+
+/// Parses `checkpoint_text`; `path` names the file in errors (`ParseError`).
+template <class Scalar>
+[[nodiscard]] Checkpoint<Scalar> parse_checkpoint(std::string_view text, const std::string& path) {
+  detail::CheckpointReader in(text, path);
+  detail::require<ParseError>(in.next() == detail::checkpoint_magic, "'", path,
+                              "' is not an sbptt checkpoint (its first line is not '",
+                              detail::checkpoint_magic, "')");
+  Checkpoint<Scalar> c;
+  while (in.at("setting")) {
+    const std::string_view setting = in.value("setting");
+    const std::size_t equals = setting.find('=');
+    detail::require<ParseError>(equals != std::string_view::npos, in.where(),
+                                ": expected 'setting name=value'");
+    c.settings.push_back(
+        {std::string(setting.substr(0, equals)), std::string(setting.substr(equals + 1))});
+  }
+  c.epoch = in.integer("epoch");
+  c.shuffle_state = std::string(in.value("shuffle"));
+  c.log_bytes = in.integer("log_bytes");
+  c.skipped_batches = in.integer("skipped_batches");
+  c.since_best = in.integer("since_best");
+  c.best_epoch = in.integer("best_epoch");
+  c.best_loss = in.number<double>("best_loss");
+  const std::string_view last = in.value("last");
+  if (!last.empty()) {
+    std::vector<std::string_view> fields;
+    for (std::size_t start = 0; start <= last.size();) {
+      const std::size_t end = std::min(last.find(' ', start), last.size());
+      fields.push_back(last.substr(start, end - start));
+      start = end + 1;
+    }
+    detail::require<ParseError>(fields.size() == 8, in.where(), ": 'last' has ", fields.size(),
+                                " fields; expected 8");
+    EpochRecord r;
+    const std::string where = in.where();
+    r.epoch = static_cast<long>(detail::parse_finite<double>(fields[0], where));
+    r.batch_loss = detail::parse_finite<double>(fields[1], where);
+    r.train_loss = detail::optional_field(fields[2], where);
+    r.test_loss = detail::optional_field(fields[3], where);
+    r.update_norm2 = detail::parse_finite<double>(fields[4], where);
+    r.cos_m_r = detail::optional_field(fields[5], where);
+    r.agree_fraction = detail::optional_field(fields[6], where);
+    r.seconds = detail::parse_finite<double>(fields[7], where);
+    c.last = r;
+  }
+  c.params = in.vector<Scalar>("params");
+  c.best_params = in.vector<Scalar>("best_params");
+  c.adam_t = in.integer("adam_t");
+  c.adam_m = in.vector<Scalar>("adam_m");
+  c.adam_v = in.vector<Scalar>("adam_v");
+  detail::require<ParseError>(in.next() == "end", in.where(), ": expected 'end'");
+  return c;
+}
+
+/// Throws `InvalidArgument` naming the first setting in which the checkpoint at `path`
+/// differs from this run (`expected`), or one that only one of them has.
+inline void require_same_settings(const std::vector<RunSetting>& expected,
+                                  const std::vector<RunSetting>& found, const std::string& path) {
+  for (const RunSetting& want : expected) {
+    const RunSetting* have = nullptr;
+    for (const RunSetting& f : found)
+      if (f.name == want.name) have = &f;
+    detail::require(have != nullptr, "checkpoint '", path, "' has no setting ", want.name,
+                    " (this run has ", want.name, " = ", want.value,
+                    "); expected a checkpoint of this run (remove it to start over)");
+    detail::require(have->value == want.value, "checkpoint '", path, "' was made with ",
+                    want.name, " = ", have->value, "; this run has ", want.name, " = ",
+                    want.value, "; expected the same settings (remove it to start over)");
+  }
+  for (const RunSetting& f : found) {
+    bool known = false;
+    for (const RunSetting& want : expected) known = known || want.name == f.name;
+    detail::require(known, "checkpoint '", path, "' was made with setting ", f.name, " = ",
+                    f.value, ", which this run does not have; expected a checkpoint of this "
+                    "run (remove it to start over)");
+  }
+}
+
+/// Saves `c` to `path` atomically and durably.
+template <class Scalar>
+void save_checkpoint(const std::string& path, const Checkpoint<Scalar>& c) {
+  write_file_atomically(path, checkpoint_text(c));
+}
+
+/// Loads the checkpoint at `path`, or nothing when no file is there. Throws `IoError` when it
+/// cannot be read and `ParseError` when it is not a complete checkpoint.
+template <class Scalar>
+[[nodiscard]] std::optional<Checkpoint<Scalar>> load_checkpoint(const std::string& path) {
+  std::FILE* file = std::fopen(path.c_str(), "rb");
+  if (file == nullptr && errno == ENOENT) return std::nullopt;
+  detail::require<IoError>(file != nullptr, "cannot read checkpoint '", path, "': ",
+                           detail::os_reason(errno));
+  std::string text;
+  char buffer[1 << 16];
+  std::size_t got = 0;
+  while ((got = std::fread(buffer, 1, sizeof buffer, file)) > 0) text.append(buffer, got);
+  const bool failed = std::ferror(file) != 0;
+  std::fclose(file);
+  detail::require<IoError>(!failed, "reading checkpoint '", path, "' failed");
+  return parse_checkpoint<Scalar>(text, path);
+}
+
+}  // namespace sbptt

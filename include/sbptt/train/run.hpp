@@ -1,0 +1,339 @@
+#pragma once
+/// \file The training driver: a whole run of a `Trainer` over epochs, with an evaluation
+/// schedule, per-epoch callbacks, an appended CSV log, best-parameter tracking, a patience
+/// stop, checkpoints with bitwise resume, and the parameters saved at the end whatever
+/// happened (docs/training.md).
+///
+/// Order of work in epoch e (each step only when configured):
+/// 1. `Trainer::train_epoch`, evaluating when e is a multiple of `evaluate_every` or the last;
+/// 2. non-finite events go to `on_non_finite`; a stop ends the run (`RunEnd::NonFinite`) with
+///    the parameters from before epoch e;
+/// 3. the best loss so far is updated (test loss, or train loss without a test set);
+/// 4. the row is appended to the log, then `on_epoch` is called;
+/// 5. a checkpoint is written when e is a multiple of `checkpoint_every`, when
+///    `checkpoint_seconds` have passed since the last one, and after the last epoch;
+/// 6. the run stops early after `patience` evaluations without a better loss.
+/// At the end the parameters (the best ones with `restore_best`) are saved, also after a
+/// non-finite stop or a failed log write (`RunEnd::OutputFailed`): one failed output never
+/// loses the trained parameters.
+///
+/// Resuming: when `checkpoint` names an existing file, the run continues from it after
+/// checking that it was made with the same settings (`RunSetting`s: the trainer's options,
+/// the optimizer's, fingerprints of the data and of the initial parameters, and the caller's
+/// `identity`); the log is cut back to its size at that checkpoint. The result is bitwise the
+/// one of an uninterrupted run (the seconds column aside, which is wall time). `epochs` is not
+/// part of the identity: a finished run can be continued with a larger `epochs`.
+#include <chrono>
+#include <cstdint>
+#include <cstring>
+#include <functional>
+#include <type_traits>
+#include <utility>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "sbptt/core/atomic_file.hpp"
+#include "sbptt/core/file_identity.hpp"
+#include "sbptt/nn/parameters_io.hpp"
+#include "sbptt/train/checkpoint.hpp"
+#include "sbptt/train/trainer.hpp"
+#include "sbptt/train/training_log.hpp"
+
+namespace sbptt {
+
+/// Which loss decides the best parameters.
+enum class BestBy { TestLoss, TrainLoss };
+
+/// Settings of a run besides those of the trainer.
+struct RunSettings {
+  long epochs = 1000;
+  long evaluate_every = 1;         ///< evaluate every k-th epoch (k ≥ 1) and the last
+  std::optional<BestBy> best_by{}; ///< default: the test loss, or the train loss without test set
+  long patience = 0;               ///< stop after this many evaluations without improvement; 0 = never
+  bool restore_best = false;       ///< end with the best parameters instead of the last
+  std::string log_csv;             ///< the training log; empty = none
+  std::string checkpoint;          ///< the checkpoint file; empty = none
+  long checkpoint_every = 1;       ///< epochs between checkpoints; 0 = only by time and at the end
+  double checkpoint_seconds = 0;   ///< also after this much wall time since the last; 0 = off
+  std::string save_params;         ///< where the final parameters go; empty = not saved
+  /// Settings of the caller that a checkpoint must share (e.g. the task's flags).
+  std::vector<RunSetting> identity{};
+};
+
+/// Hooks called during a run (each may be empty).
+struct RunCallbacks {
+  std::function<void(long epoch)> on_resume{};  ///< a checkpoint of `epoch` epochs was loaded
+  std::function<void(const EpochRecord&)> on_epoch{};  ///< after the row of each epoch is logged
+  /// Each non-finite event; `skipped` says that the batch was skipped and training goes on.
+  std::function<void(const NonFiniteEvent&, bool skipped)> on_non_finite{};
+  /// Asked after each epoch; true ends the run (`RunEnd::Requested`) after its checkpoint.
+  std::function<bool(const EpochRecord&)> should_stop{};
+};
+
+/// How a run ended.
+enum class RunEnd { Finished, EarlyStop, NonFinite, Requested, OutputFailed };
+
+/// What a run did.
+template <class Scalar>
+struct RunResult {
+  RunEnd end = RunEnd::Finished;
+  long resumed_from = 0;              ///< the checkpoint's epoch; 0 for a fresh start
+  long epochs = 0;                    ///< last completed epoch
+  std::optional<EpochRecord> last;    ///< its record
+  long best_epoch = 0;                ///< 0 when nothing was evaluated
+  double best_loss = 0;
+  Vector<Scalar> best_params;         ///< empty when nothing was evaluated
+  long skipped_batches = 0;
+  std::optional<NonFiniteEvent> stop_event;  ///< the event that stopped the run (NonFinite)
+  std::string output_error;           ///< what failed to be written (OutputFailed)
+  std::string saved_params;           ///< path the final parameters were saved to, if any
+};
+
+namespace detail {
+
+/// FNV-1a of the bytes of a matrix with its shape: equal data gives equal text.
+template <class Derived>
+[[nodiscard]] std::string fingerprint(const Eigen::DenseBase<Derived>& m) {
+  std::uint64_t hash = 1469598103934665603ULL;
+  for (Index j = 0; j < m.cols(); ++j) {
+    for (Index i = 0; i < m.rows(); ++i) {
+      const auto value = m(i, j);
+      unsigned char bytes[sizeof value];
+      std::memcpy(bytes, &value, sizeof value);
+      for (unsigned char b : bytes) hash = (hash ^ b) * 1099511628211ULL;
+    }
+  }
+  char text[64];
+  std::snprintf(text, sizeof text, "%ldx%ld fnv1a %016llx", static_cast<long>(m.rows()),
+                static_cast<long>(m.cols()), static_cast<unsigned long long>(hash));
+  return text;
+}
+
+template <class Number>
+[[nodiscard]] std::string exact(Number value) {
+  std::string text;
+  append_number(text, value);
+  return text;
+}
+
+template <class O>
+concept AdamLike = requires(O o, Vector<typename O::Scalar> v) {
+  o.first_moment();
+  o.second_moment();
+  o.iterations();
+  o.options().learning_rate;
+  o.restore(v, v, Index{});
+};
+
+}  // namespace detail
+
+/// Runs `trainer` from its current state (or from `settings.checkpoint`) to `settings.epochs`
+/// on `train` (state_dim × N, N ≥ 1) and `test` (state_dim × M; M = 0: no test set).
+/// Throws before any work for bad settings (`InvalidArgument`), unwritable or colliding
+/// outputs (`IoError`) and a checkpoint of another run (`InvalidArgument` naming the setting).
+template <class TrainerT>
+RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
+                                                  const Matrix<typename TrainerT::Scalar>& train,
+                                                  const Matrix<typename TrainerT::Scalar>& test,
+                                                  const RunSettings& settings,
+                                                  const RunCallbacks& callbacks = {}) {
+  using Scalar = typename TrainerT::Scalar;
+  using Optimizer = std::remove_cvref_t<decltype(trainer.optimizer())>;
+  detail::require(settings.epochs >= 0, "run_training: epochs = ", settings.epochs,
+                  "; expected >= 0");
+  detail::require(settings.evaluate_every >= 1, "run_training: evaluate_every = ",
+                  settings.evaluate_every, "; expected >= 1");
+  detail::require(settings.patience >= 0, "run_training: patience = ", settings.patience,
+                  "; expected >= 0 (0 = no early stop)");
+  detail::require(settings.checkpoint_every >= 0, "run_training: checkpoint_every = ",
+                  settings.checkpoint_every, "; expected >= 0");
+  detail::require(settings.checkpoint_seconds >= 0, "run_training: checkpoint_seconds = ",
+                  settings.checkpoint_seconds, "; expected >= 0");
+  const BestBy best_by = settings.best_by.value_or(test.cols() > 0 ? BestBy::TestLoss
+                                                                   : BestBy::TrainLoss);
+  detail::require(best_by == BestBy::TrainLoss || test.cols() > 0,
+                  "run_training: best_by = test loss without a test set; expected a test set "
+                  "or BestBy::TrainLoss");
+  if constexpr (!detail::AdamLike<Optimizer>) {
+    detail::require(settings.checkpoint.empty(), "run_training: checkpoints need an optimizer "
+                                                 "whose state can be saved (Adam)");
+  }
+  for (const auto& [what, path] : {std::pair{"training log", &settings.log_csv},
+                                   std::pair{"checkpoint", &settings.checkpoint},
+                                   std::pair{"parameters file", &settings.save_params}}) {
+    if (!path->empty()) check_output_path(*path, what);
+  }
+  require_distinct_files({{"training log", settings.log_csv, true},
+                          {"checkpoint", settings.checkpoint, true},
+                          {"parameters file", settings.save_params, true}});
+
+  auto& params = trainer.controller().params();
+  const TrainerOptions& o = trainer.options();
+  std::vector<RunSetting> identity = settings.identity;
+  for (RunSetting s : std::vector<RunSetting>{
+           {"method", std::string(label(o.method))},
+           {"clip", to_string(o.clip)},
+           {"clip_threshold", detail::exact(o.clip_threshold)},
+           {"batch", std::to_string(o.batch)},
+           {"shuffle", o.shuffle ? "yes" : "no"},
+           {"shuffle_seed", std::to_string(o.shuffle_seed)},
+           {"truncation", std::to_string(o.truncation)},
+           {"on_non_finite", o.on_non_finite == NonFinitePolicy::Stop ? "stop" : "skip-batch"},
+           {"scalar", sizeof(Scalar) == sizeof(float) ? "float" : "double"},
+           {"evaluate_every", std::to_string(settings.evaluate_every)},
+           {"best_by", best_by == BestBy::TestLoss ? "test loss" : "train loss"},
+           {"patience", std::to_string(settings.patience)},
+           {"train set", detail::fingerprint(train)},
+           {"test set", detail::fingerprint(test)},
+           {"initial parameters", detail::fingerprint(params)}})
+    identity.push_back(std::move(s));
+  if constexpr (detail::AdamLike<Optimizer>) {
+    const auto& adam = trainer.optimizer().options();
+    identity.push_back({"learning_rate", detail::exact(adam.learning_rate)});
+    identity.push_back({"beta1", detail::exact(adam.beta1)});
+    identity.push_back({"beta2", detail::exact(adam.beta2)});
+    identity.push_back({"epsilon", detail::exact(adam.epsilon)});
+  }
+
+  RunResult<Scalar> result;
+  long since_best = 0;
+  std::optional<TrainingLogFile> log;
+  std::optional<Checkpoint<Scalar>> resumed;
+  if (!settings.checkpoint.empty()) resumed = load_checkpoint<Scalar>(settings.checkpoint);
+  if (resumed) {
+    require_same_settings(identity, resumed->settings, settings.checkpoint);
+    detail::require<ParseError>(resumed->params.size() == params.size(), "checkpoint '",
+                                settings.checkpoint, "' has ", resumed->params.size(),
+                                " parameters; expected ", params.size());
+    if constexpr (detail::AdamLike<Optimizer>) {
+      trainer.optimizer().restore(resumed->adam_m, resumed->adam_v, resumed->adam_t);
+    }
+    trainer.resume_at(resumed->epoch, resumed->shuffle_state);
+    params = resumed->params;
+    result.resumed_from = resumed->epoch;
+    result.epochs = resumed->epoch;
+    result.last = resumed->last;
+    result.best_epoch = resumed->best_epoch;
+    result.best_loss = resumed->best_loss;
+    result.best_params = resumed->best_params;
+    result.skipped_batches = resumed->skipped_batches;
+    since_best = resumed->since_best;
+    if (callbacks.on_resume) callbacks.on_resume(resumed->epoch);
+    if (!settings.log_csv.empty()) {
+      detail::require<IoError>(resumed->log_bytes >= 0, "checkpoint '", settings.checkpoint,
+                               "' was made without a training log; expected one (the run "
+                               "would have a log without its first epochs)");
+      log = TrainingLogFile::resume(settings.log_csv, resumed->log_bytes);
+    }
+  } else if (!settings.log_csv.empty()) {
+    log = TrainingLogFile::create(settings.log_csv);
+  }
+
+  auto write_checkpoint = [&] {
+    Checkpoint<Scalar> c;
+    c.settings = identity;
+    c.epoch = result.epochs;
+    c.shuffle_state = trainer.shuffle_state();
+    if (log) {
+      log->sync();
+      c.log_bytes = log->size();
+    }
+    c.skipped_batches = result.skipped_batches;
+    c.since_best = since_best;
+    c.best_epoch = result.best_epoch;
+    c.best_loss = result.best_loss;
+    c.last = result.last;
+    c.params = params;
+    c.best_params = result.best_params;
+    if constexpr (detail::AdamLike<Optimizer>) {
+      c.adam_t = trainer.optimizer().iterations();
+      c.adam_m = trainer.optimizer().first_moment();
+      c.adam_v = trainer.optimizer().second_moment();
+    }
+    save_checkpoint(settings.checkpoint, c);
+  };
+
+  using Clock = std::chrono::steady_clock;
+  auto last_checkpoint = Clock::now();
+  const bool patience_spent = settings.patience > 0 && since_best >= settings.patience;
+  if (patience_spent) result.end = RunEnd::EarlyStop;
+  for (long epoch = trainer.epoch() + 1; epoch <= settings.epochs && !patience_spent; ++epoch) {
+    const bool evaluate = epoch % settings.evaluate_every == 0 || epoch == settings.epochs;
+    const EpochRecord record = trainer.train_epoch(train, test, evaluate);
+    for (const NonFiniteEvent& event : trainer.non_finite_events()) {
+      const bool skipped =
+          event.phase == Phase::Update && o.on_non_finite == NonFinitePolicy::SkipBatch;
+      if (skipped) ++result.skipped_batches;
+      if (callbacks.on_non_finite) callbacks.on_non_finite(event, skipped);
+    }
+    if (trainer.stopped()) {
+      result.end = RunEnd::NonFinite;
+      result.stop_event = trainer.non_finite_events().back();
+      break;
+    }
+    result.epochs = epoch;
+    result.last = record;
+    if (evaluate) {
+      const double loss = *(best_by == BestBy::TestLoss ? record.test_loss : record.train_loss);
+      if (result.best_epoch == 0 || loss < result.best_loss) {
+        result.best_epoch = epoch;
+        result.best_loss = loss;
+        result.best_params = params;
+        since_best = 0;
+      } else {
+        ++since_best;
+      }
+    }
+    bool stop = false;
+    try {
+      if (log) log->append(record);
+      if (callbacks.on_epoch) callbacks.on_epoch(record);
+      stop = callbacks.should_stop && callbacks.should_stop(record);
+      if (stop) result.end = RunEnd::Requested;
+      if (settings.patience > 0 && since_best >= settings.patience) {
+        result.end = RunEnd::EarlyStop;
+        stop = true;
+      }
+      const bool due =
+          (settings.checkpoint_every > 0 && epoch % settings.checkpoint_every == 0) ||
+          (settings.checkpoint_seconds > 0 &&
+           std::chrono::duration<double>(Clock::now() - last_checkpoint).count() >=
+               settings.checkpoint_seconds) ||
+          epoch == settings.epochs || stop;
+      if (!settings.checkpoint.empty() && due) {
+        write_checkpoint();
+        last_checkpoint = Clock::now();
+      }
+    } catch (const IoError& e) {
+      result.end = RunEnd::OutputFailed;
+      result.output_error = e.what();
+      break;
+    }
+    if (stop) break;
+  }
+  if (log && result.end != RunEnd::OutputFailed) {
+    try {
+      log->sync();
+      detail::sync_directory(detail::directory_of(detail::final_target(log->path())),
+                             log->path());
+    } catch (const IoError& e) {
+      result.end = RunEnd::OutputFailed;
+      result.output_error = e.what();
+    }
+  }
+  if (settings.restore_best && result.best_epoch > 0) params = result.best_params;
+  if (!settings.save_params.empty()) {
+    try {
+      save_parameters(settings.save_params, params);
+      result.saved_params = settings.save_params;
+    } catch (const Error& e) {
+      if (result.end != RunEnd::OutputFailed) result.end = RunEnd::OutputFailed;
+      if (!result.output_error.empty()) result.output_error += "; ";
+      result.output_error += e.what();
+    }
+  }
+  return result;
+}
+
+}  // namespace sbptt

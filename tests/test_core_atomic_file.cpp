@@ -1,0 +1,119 @@
+// Atomic, durable file writes (core/atomic_file.hpp) and file identity (core/file_identity.hpp):
+// nothing visible before the commit, links followed, mode kept, write-protected files and
+// over-long names refused up front, one file under two spellings recognised.
+#include <catch2/catch.hpp>
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "sbptt/core/atomic_file.hpp"
+#include "sbptt/core/file_identity.hpp"
+
+using namespace sbptt;
+namespace fs = std::filesystem;
+
+namespace {
+
+fs::path scratch_dir(const std::string& name) {
+  const fs::path dir =
+      fs::temp_directory_path() / ("sbptt_atomic_" + std::to_string(getpid())) / name;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+std::string file_text(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), {}};
+}
+
+long entries(const fs::path& dir) {
+  return std::distance(fs::directory_iterator(dir), fs::directory_iterator());
+}
+
+}  // namespace
+
+TEST_CASE("atomic file: nothing is in the directory until the commit", "[core]") {
+  // So a process killed while writing leaves no temporary file behind.
+  const fs::path dir = scratch_dir("invisible");
+  {
+    AtomicFile file((dir / "out.txt").string());
+    file.write(std::string(1 << 20, 'x'));
+    CHECK(entries(dir) == 0);
+  }  // destroyed uncommitted: discarded
+  CHECK(entries(dir) == 0);
+  AtomicFile file((dir / "out.txt").string());
+  file.write("done\n");
+  file.commit();
+  CHECK(entries(dir) == 1);
+  CHECK(file_text(dir / "out.txt") == "done\n");
+}
+
+TEST_CASE("atomic file: a symbolic link is followed, not replaced", "[core]") {
+  const fs::path dir = scratch_dir("link");
+  fs::create_directories(dir / "real");
+  std::ofstream(dir / "real" / "log.csv") << "old\n";
+  fs::create_symlink(dir / "real" / "log.csv", dir / "link.csv");
+  write_file_atomically((dir / "link.csv").string(), "new\n");
+  CHECK(fs::is_symlink(fs::symlink_status(dir / "link.csv")));
+  CHECK(file_text(dir / "real" / "log.csv") == "new\n");
+  CHECK(entries(dir / "real") == 1);
+}
+
+TEST_CASE("atomic file: an existing file keeps its permission bits", "[core]") {
+  const fs::path dir = scratch_dir("mode");
+  std::ofstream(dir / "p.txt") << "old\n";
+  REQUIRE(::chmod((dir / "p.txt").c_str(), 0640) == 0);
+  write_file_atomically((dir / "p.txt").string(), "new\n");
+  struct stat info {};
+  REQUIRE(::stat((dir / "p.txt").c_str(), &info) == 0);
+  CHECK((info.st_mode & 07777) == 0640);
+  CHECK(file_text(dir / "p.txt") == "new\n");
+}
+
+TEST_CASE("atomic file: a write-protected file is refused and left as it was", "[core]") {
+  if (::geteuid() == 0) return;  // root may write anything; the rule is about other users
+  const fs::path dir = scratch_dir("protected");
+  std::ofstream(dir / "p.txt") << "keep\n";
+  REQUIRE(::chmod((dir / "p.txt").c_str(), 0444) == 0);
+  CHECK_THROWS_WITH(check_output_path((dir / "p.txt").string(), "--save-params"),
+                    Catch::Contains("--save-params") && Catch::Contains("write-protected"));
+  CHECK_THROWS_AS(write_file_atomically((dir / "p.txt").string(), "new\n"), IoError);
+  CHECK(file_text(dir / "p.txt") == "keep\n");
+  CHECK(entries(dir) == 1);
+}
+
+TEST_CASE("atomic file: names too long with the temporary suffix are refused up front", "[core]") {
+  const fs::path dir = scratch_dir("long");
+  const std::string ok(200, 'a'), too_long(234, 'b');
+  CHECK_NOTHROW(check_output_path((dir / ok).string(), "--csv"));
+  CHECK_THROWS_WITH(check_output_path((dir / too_long).string(), "--csv"),
+                    Catch::Contains("--csv") && Catch::Contains("234 bytes") &&
+                        Catch::Contains("limit of 255"));
+  CHECK_THROWS_WITH(check_output_path("", "--csv"), Catch::Contains("--csv: the path is empty"));
+}
+
+TEST_CASE("file identity: one file under two spellings is caught", "[core]") {
+  const fs::path dir = scratch_dir("identity");
+  std::ofstream(dir / "a.txt") << "1\n";
+  fs::create_hard_link(dir / "a.txt", dir / "hard.txt");
+  fs::create_symlink(dir / "a.txt", dir / "soft.txt");
+  const std::string a = (dir / "a.txt").string();
+  for (const std::string& other : {(dir / "hard.txt").string(), (dir / "soft.txt").string(),
+                                   (dir / "." / "a.txt").string()}) {
+    CHECK_THROWS_WITH(require_distinct_files({{"--init-params", a, false},
+                                             {"--save-params", other, true}}),
+                      Catch::Contains("are the same file"));
+    CHECK_NOTHROW(require_distinct_files({{"--init-params", a, false},
+                                          {"--init-states", other, false}}));
+  }
+  CHECK_THROWS_WITH(require_distinct_files({{"--csv", (dir / "new.csv").string(), true},
+                                           {"--save-params", (dir / ".." / "identity" / "new.csv").string(), true}}),
+                    Catch::Contains("--csv") && Catch::Contains("--save-params"));
+  CHECK_NOTHROW(require_distinct_files({{"--csv", (dir / "x.csv").string(), true},
+                                        {"--save-params", (dir / "y.txt").string(), true}}));
+}

@@ -1,0 +1,291 @@
+// The training driver (train/run.hpp) on the linear system x' = a x + b c with c = θ x: its
+// log equals the rows the trainer returned, its evaluations equal an independent engine's,
+// the best parameters give the best loss, the patience stop, checkpoints resume bit for bit,
+// and failed outputs keep the parameters.
+#include <catch2/catch.hpp>
+
+#include <sys/resource.h>
+
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <unistd.h>
+
+#include "sbptt/bptt/losses.hpp"
+#include "sbptt/optim/adam.hpp"
+#include "sbptt/sim/linear.hpp"
+#include "sbptt/train/run.hpp"
+#include "polynomial_policy.hpp"
+
+using namespace sbptt;
+using sbptt::testing::PolynomialPolicy;
+namespace fs = std::filesystem;
+
+namespace {
+
+template <class Scalar>
+using Sim = LinearSystem<Scalar, 1, 1>;
+template <class Scalar>
+using Loss = SquaredDistanceLoss<typename Sim<Scalar>::State>;
+
+template <class Scalar>
+Objective<Loss<Scalar>> to_origin() {
+  return {Loss<Scalar>{Sim<Scalar>::State::Zero()}, LossTiming::Continuous, 1.0, 0.0};
+}
+
+template <class Scalar>
+Matrix<Scalar> spread(Index count, double first) {
+  Matrix<Scalar> m(1, count);
+  for (Index i = 0; i < count; ++i) m(0, i) = static_cast<Scalar>(first + 0.37 * double(i));
+  return m;
+}
+
+fs::path scratch(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / ("sbptt_run_" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  return dir / name;
+}
+
+std::string file_text(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), {}};
+}
+
+/// The log without its last column (seconds is wall time, the one field that differs).
+std::string without_seconds(const std::string& csv) {
+  std::string out;
+  std::size_t start = 0;
+  while (start < csv.size()) {
+    const std::size_t end = csv.find('\n', start);
+    const std::string line = csv.substr(start, end - start);
+    out += line.substr(0, line.rfind(',')) + "\n";
+    start = end + 1;
+  }
+  return out;
+}
+
+/// A trainer of θ (two coefficients) on x' = 1.05 x + 0.5 c.
+template <class Scalar>
+struct Setup {
+  const Sim<Scalar> sim = Sim<Scalar>::scalar(Scalar(1.05), Scalar(0.5));
+  PolynomialPolicy<Scalar> policy{{2, 1}};
+  Trainer<Sim<Scalar>, PolynomialPolicy<Scalar>, Loss<Scalar>, Adam<Scalar>> trainer;
+
+  explicit Setup(Method method, Index batch = 3, double lr = 0.02)
+      : trainer(sim, policy, to_origin<Scalar>(), 6, Adam<Scalar>(AdamOptions<Scalar>{Scalar(lr)}),
+                options(method, batch)) {}
+
+  static TrainerOptions options(Method method, Index batch) {
+    TrainerOptions o;
+    o.method = method;
+    o.batch = batch;
+    o.shuffle = true;
+    o.shuffle_seed = 7;
+    return o;
+  }
+};
+
+}  // namespace
+
+TEST_CASE("run: the log holds exactly the returned rows, evaluated on schedule", "[train]") {
+  Setup<double> s(Method::Combined);
+  const Matrix<double> train = spread<double>(10, -1.0), test = spread<double>(4, 0.3);
+  RunSettings settings;
+  settings.epochs = 10;
+  settings.evaluate_every = 3;
+  settings.log_csv = scratch("schedule.csv").string();
+  TrainingLog expected;
+  PolynomialPolicy<double> probe({2, 1});
+  Engine engine(s.sim, probe, to_origin<double>(), 6);
+  RunCallbacks callbacks;
+  callbacks.on_epoch = [&](const EpochRecord& r) {
+    expected.add(r);
+    const bool scheduled = r.epoch % 3 == 0 || r.epoch == 10;
+    CHECK(r.train_loss.has_value() == scheduled);
+    CHECK(r.test_loss.has_value() == scheduled);
+    if (scheduled) {  // an independent evaluation of the parameters after the epoch
+      probe.params() = s.policy.params();
+      CHECK(*r.train_loss == engine.evaluate(train));
+      CHECK(*r.test_loss == engine.evaluate(test));
+    }
+  };
+  const auto result = run_training(s.trainer, train, test, settings, callbacks);
+  CHECK(result.end == RunEnd::Finished);
+  CHECK(result.epochs == 10);
+  CHECK(expected.rows().size() == 10);
+  CHECK(file_text(settings.log_csv) == expected.csv());
+}
+
+TEST_CASE("run: the log file grows by one write per epoch, each byte written once", "[train]") {
+  const std::string path = scratch("linear.csv").string();
+  TrainingLogFile log = TrainingLogFile::create(path);
+  EpochRecord r;
+  for (long e = 1; e <= 500; ++e) {
+    r.epoch = e;
+    r.train_loss = 1.0 / double(e);
+    log.append(r);
+  }
+  CHECK(log.writes() == 501);  // the header, then one per row
+  CHECK(log.bytes_written() == static_cast<long long>(fs::file_size(path)));
+  CHECK(log.size() == static_cast<long long>(fs::file_size(path)));
+}
+
+TEST_CASE("run: an empty test set trains, and the best is by train loss", "[train]") {
+  Setup<double> s(Method::Regular);
+  const Matrix<double> train = spread<double>(6, -0.8), none(1, 0);
+  RunSettings settings;
+  settings.epochs = 12;
+  std::vector<double> train_losses;
+  RunCallbacks callbacks;
+  callbacks.on_epoch = [&](const EpochRecord& r) {
+    CHECK_FALSE(r.test_loss);
+    train_losses.push_back(r.train_loss.value());
+  };
+  const auto result = run_training(s.trainer, train, none, settings, callbacks);
+  CHECK(result.end == RunEnd::Finished);
+  const auto best = std::min_element(train_losses.begin(), train_losses.end());
+  CHECK(result.best_loss == *best);
+  CHECK(result.best_epoch == 1 + (best - train_losses.begin()));
+  PolynomialPolicy<double> probe({2, 1});
+  probe.params() = result.best_params;
+  Engine engine(s.sim, probe, to_origin<double>(), 6);
+  CHECK(engine.evaluate(train) == result.best_loss);
+}
+
+TEST_CASE("trainer: a bad test set is refused before any update", "[train]") {
+  Setup<double> s(Method::Regular);
+  const Vector<double> before = s.policy.params();
+  CHECK_THROWS_WITH(s.trainer.train_epoch(spread<double>(4, 0.1), Matrix<double>(2, 3)),
+                    Catch::Contains("test set has 2 rows"));
+  CHECK(s.policy.params() == before);
+  CHECK(s.trainer.epoch() == 0);
+}
+
+TEST_CASE("run: patience stops after that many evaluations without a better loss", "[train]") {
+  // A large rate makes Adam overshoot the optimum, so the loss stops improving.
+  Setup<double> s(Method::Regular, 3, 0.5);
+  const Matrix<double> train = spread<double>(6, -0.8), test = spread<double>(3, 0.5);
+  RunSettings settings;
+  settings.epochs = 400;
+  settings.patience = 4;
+  settings.restore_best = true;
+  std::vector<double> losses;
+  RunCallbacks callbacks;
+  callbacks.on_epoch = [&](const EpochRecord& r) { losses.push_back(*r.test_loss); };
+  const auto result = run_training(s.trainer, train, test, settings, callbacks);
+  REQUIRE(result.end == RunEnd::EarlyStop);
+  const auto best = std::min_element(losses.begin(), losses.end());
+  CHECK(result.best_epoch == 1 + (best - losses.begin()));
+  CHECK(result.epochs == result.best_epoch + 4);
+  CHECK(s.policy.params() == result.best_params);
+}
+
+TEMPLATE_TEST_CASE("run: a checkpointed run resumed twice ends bit for bit as one run", "[train]",
+                   float, double) {
+  for (Method method : {Method::Regular, Method::Combined}) {
+    const Matrix<TestType> train = spread<TestType>(10, -1.0), test = spread<TestType>(3, 0.2);
+    const fs::path whole_log = scratch("whole.csv"), part_log = scratch("part.csv");
+    const fs::path checkpoint = scratch("run.checkpoint");
+    fs::remove(checkpoint);
+    Setup<TestType> whole(method);
+    RunSettings settings;
+    settings.epochs = 17;
+    settings.evaluate_every = 2;
+    settings.patience = 50;
+    settings.log_csv = whole_log.string();
+    run_training(whole.trainer, train, test, settings);
+
+    settings.log_csv = part_log.string();
+    settings.checkpoint = checkpoint.string();
+    settings.checkpoint_every = 3;
+    long resumed_from = 0;
+    for (long stop_at : {5L, 11L, 17L}) {  // three processes: the first two end early
+      Setup<TestType> part(method);
+      settings.epochs = 17;
+      RunCallbacks callbacks;
+      // Ending at 5 and 11 (not checkpoint epochs) leaves rows after the last checkpoint in
+      // the log, as a kill would: the resumed run must cut them.
+      callbacks.should_stop = [&](const EpochRecord& r) { return r.epoch == stop_at; };
+      const auto result = run_training(part.trainer, train, test, settings, callbacks);
+      CHECK(result.resumed_from == resumed_from);
+      resumed_from = stop_at;
+      if (stop_at == 17) {
+        INFO("method " << label(method));
+        CHECK(part.policy.params() == whole.policy.params());
+        CHECK(without_seconds(file_text(part_log)) == without_seconds(file_text(whole_log)));
+        CHECK(part.trainer.optimizer().first_moment() == whole.trainer.optimizer().first_moment());
+      }
+    }
+  }
+}
+
+TEST_CASE("run: a checkpoint of other settings is refused, naming the setting", "[train]") {
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  const fs::path checkpoint = scratch("settings.checkpoint");
+  fs::remove(checkpoint);
+  RunSettings settings;
+  settings.epochs = 2;
+  settings.checkpoint = checkpoint.string();
+  settings.identity = {{"--poles", "2"}};
+  Setup<double> first(Method::Regular, 3);
+  run_training(first.trainer, train, test, settings);
+
+  Setup<double> other_batch(Method::Regular, 2);
+  CHECK_THROWS_WITH(run_training(other_batch.trainer, train, test, settings),
+                    Catch::Contains("was made with batch = 3; this run has batch = 2"));
+  settings.identity = {{"--poles", "3"}};
+  Setup<double> other_flag(Method::Regular, 3);
+  CHECK_THROWS_WITH(run_training(other_flag.trainer, train, test, settings),
+                    Catch::Contains("--poles = 2; this run has --poles = 3"));
+  settings.identity = {{"--poles", "2"}};
+  Setup<double> other_data(Method::Regular, 3);
+  CHECK_THROWS_WITH(run_training(other_data.trainer, spread<double>(6, -0.9), test, settings),
+                    Catch::Contains("train set"));
+}
+
+TEST_CASE("run: a log that cannot be written still saves the parameters", "[train]") {
+  // The file-size limit makes writes past 600 bytes fail with EFBIG, like a full disk.
+  const fs::path log = scratch("full.csv"), params = scratch("kept.txt");
+  Setup<double> s(Method::Regular);
+  RunSettings settings;
+  settings.epochs = 200;
+  settings.log_csv = log.string();
+  settings.save_params = params.string();
+  rlimit old{};
+  REQUIRE(getrlimit(RLIMIT_FSIZE, &old) == 0);
+  const auto old_handler = std::signal(SIGXFSZ, SIG_IGN);
+  rlimit small = old;
+  small.rlim_cur = 600;
+  REQUIRE(setrlimit(RLIMIT_FSIZE, &small) == 0);
+  const auto result = run_training(s.trainer, spread<double>(6, -1.0), spread<double>(2, 0.2),
+                                   settings);
+  REQUIRE(setrlimit(RLIMIT_FSIZE, &old) == 0);
+  std::signal(SIGXFSZ, old_handler);
+  CHECK(result.end == RunEnd::OutputFailed);
+  CHECK_THAT(result.output_error, Catch::Contains("full.csv"));
+  CHECK(result.epochs > 1);
+  CHECK(result.epochs < 200);
+  REQUIRE(result.saved_params == params.string());
+  CHECK(load_parameters<double>(params, 2) == s.policy.params());
+}
+
+TEST_CASE("run: outputs that are one file are refused before any work", "[train]") {
+  const fs::path file = scratch("same.txt");
+  fs::remove(file);
+  fs::remove(scratch("same_link.txt"));
+  std::ofstream(file) << "x\n";
+  fs::create_symlink(file, scratch("same_link.txt"));
+  Setup<double> s(Method::Regular);
+  RunSettings settings;
+  settings.epochs = 3;
+  settings.log_csv = file.string();
+  settings.save_params = scratch("same_link.txt").string();
+  CHECK_THROWS_WITH(run_training(s.trainer, spread<double>(4, 0.1), spread<double>(2, 0.1), settings),
+                    Catch::Contains("are the same file"));
+  CHECK(s.trainer.epoch() == 0);
+  settings.save_params = (file.parent_path() / "." / "new.txt").string();
+  settings.checkpoint = (file.parent_path() / "new.txt").string();
+  CHECK_THROWS_WITH(run_training(s.trainer, spread<double>(4, 0.1), spread<double>(2, 0.1), settings),
+                    Catch::Contains("are the same file"));
+}

@@ -8,28 +8,19 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 #include "sbptt/core/atomic_file.hpp"
 #include "sbptt/core/file_identity.hpp"
+#include "support/files.hpp"
 
 using namespace sbptt;
+using sbptt::testing::file_text;
+using sbptt::testing::fresh_directory;
 namespace fs = std::filesystem;
 
 namespace {
-
-fs::path scratch_dir(const std::string& name) {
-  const fs::path dir =
-      fs::temp_directory_path() / ("sbptt_atomic_" + std::to_string(getpid())) / name;
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
-
-std::string file_text(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), {}};
-}
 
 long entries(const fs::path& dir) {
   return std::distance(fs::directory_iterator(dir), fs::directory_iterator());
@@ -39,7 +30,7 @@ long entries(const fs::path& dir) {
 
 TEST_CASE("atomic file: nothing is in the directory until the commit", "[core]") {
   // So a process killed while writing leaves no temporary file behind.
-  const fs::path dir = scratch_dir("invisible");
+  const fs::path dir = fresh_directory("invisible");
   {
     AtomicFile file((dir / "out.txt").string());
     file.write(std::string(1 << 20, 'x'));
@@ -54,7 +45,7 @@ TEST_CASE("atomic file: nothing is in the directory until the commit", "[core]")
 }
 
 TEST_CASE("atomic file: a symbolic link is followed, not replaced", "[core]") {
-  const fs::path dir = scratch_dir("link");
+  const fs::path dir = fresh_directory("link");
   fs::create_directories(dir / "real");
   std::ofstream(dir / "real" / "log.csv") << "old\n";
   fs::create_symlink(dir / "real" / "log.csv", dir / "link.csv");
@@ -65,7 +56,7 @@ TEST_CASE("atomic file: a symbolic link is followed, not replaced", "[core]") {
 }
 
 TEST_CASE("atomic file: an existing file keeps its permission bits", "[core]") {
-  const fs::path dir = scratch_dir("mode");
+  const fs::path dir = fresh_directory("mode");
   std::ofstream(dir / "p.txt") << "old\n";
   REQUIRE(::chmod((dir / "p.txt").c_str(), 0640) == 0);
   write_file_atomically((dir / "p.txt").string(), "new\n");
@@ -77,7 +68,7 @@ TEST_CASE("atomic file: an existing file keeps its permission bits", "[core]") {
 
 TEST_CASE("atomic file: a write-protected file is refused and left as it was", "[core]") {
   if (::geteuid() == 0) return;  // root may write anything; the rule is about other users
-  const fs::path dir = scratch_dir("protected");
+  const fs::path dir = fresh_directory("protected");
   std::ofstream(dir / "p.txt") << "keep\n";
   REQUIRE(::chmod((dir / "p.txt").c_str(), 0444) == 0);
   CHECK_THROWS_WITH(check_output_path((dir / "p.txt").string(), "--save-params"),
@@ -88,7 +79,7 @@ TEST_CASE("atomic file: a write-protected file is refused and left as it was", "
 }
 
 TEST_CASE("atomic file: names too long with the temporary suffix are refused up front", "[core]") {
-  const fs::path dir = scratch_dir("long");
+  const fs::path dir = fresh_directory("long");
   const std::string ok(200, 'a'), too_long(234, 'b');
   CHECK_NOTHROW(check_output_path((dir / ok).string(), "--csv"));
   CHECK_THROWS_WITH(check_output_path((dir / too_long).string(), "--csv"),
@@ -98,7 +89,7 @@ TEST_CASE("atomic file: names too long with the temporary suffix are refused up 
 }
 
 TEST_CASE("file identity: one file under two spellings is caught", "[core]") {
-  const fs::path dir = scratch_dir("identity");
+  const fs::path dir = fresh_directory("identity");
   std::ofstream(dir / "a.txt") << "1\n";
   fs::create_hard_link(dir / "a.txt", dir / "hard.txt");
   fs::create_symlink(dir / "a.txt", dir / "soft.txt");

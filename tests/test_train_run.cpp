@@ -17,9 +17,13 @@
 #include "sbptt/sim/linear.hpp"
 #include "sbptt/train/run.hpp"
 #include "polynomial_policy.hpp"
+#include "support/files.hpp"
 
 using namespace sbptt;
 using sbptt::testing::PolynomialPolicy;
+using sbptt::testing::file_text;
+using sbptt::testing::fresh_directory;
+using sbptt::testing::without_seconds;
 namespace fs = std::filesystem;
 
 namespace {
@@ -41,28 +45,10 @@ Matrix<Scalar> spread(Index count, double first) {
   return m;
 }
 
+/// `name` in a directory of this process, emptied once at the first call.
 fs::path scratch(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("sbptt_run_" + std::to_string(getpid()));
-  fs::create_directories(dir);
+  static const fs::path dir = fresh_directory("run");
   return dir / name;
-}
-
-std::string file_text(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), {}};
-}
-
-/// The log without its last column (seconds is wall time, the one field that differs).
-std::string without_seconds(const std::string& csv) {
-  std::string out;
-  std::size_t start = 0;
-  while (start < csv.size()) {
-    const std::size_t end = csv.find('\n', start);
-    const std::string line = csv.substr(start, end - start);
-    out += line.substr(0, line.rfind(',')) + "\n";
-    start = end + 1;
-  }
-  return out;
 }
 
 /// A trainer of θ (two coefficients) on x' = 1.05 x + 0.5 c.

@@ -12,11 +12,12 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <optional>
+#include <functional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -24,8 +25,12 @@
 #include <vector>
 
 #include "sbptt/nn/parameters_io.hpp"
+#include "support/files.hpp"
 
 namespace fs = std::filesystem;
+using sbptt::testing::file_text;
+using sbptt::testing::fresh_directory;
+using sbptt::testing::without_seconds;
 
 namespace {
 
@@ -42,14 +47,15 @@ struct Outcome {
 };
 
 /// Runs `program` with `arguments` through `sh -c` (`prefix` goes first, e.g. a ulimit);
-/// output goes to a file. When `kill_after` is given, the process gets SIGKILL then.
+/// output goes to a file. While it runs, `kill_when` is asked every 100 µs; once it says
+/// true, the process gets SIGKILL.
 Outcome launch(const std::string& program, const std::string& arguments,
-               const std::string& prefix = "",
-               std::optional<std::chrono::microseconds> kill_after = std::nullopt) {
+               const std::string& prefix = "", const std::function<bool()>& kill_when = {},
+               const std::string& wrapper = "") {
   const fs::path output =
       fs::temp_directory_path() / ("sbptt_outputs_" + std::to_string(getpid()) + ".out");
   const std::string command =
-      prefix + "exec " + examples_dir() + "/" + program + " " + arguments + " > " +
+      prefix + "exec " + wrapper + examples_dir() + "/" + program + " " + arguments + " > " +
       output.string() + " 2>&1";
   const pid_t pid = fork();
   REQUIRE(pid >= 0);
@@ -57,11 +63,18 @@ Outcome launch(const std::string& program, const std::string& arguments,
     execl("/bin/sh", "sh", "-c", command.c_str(), static_cast<char*>(nullptr));
     _exit(127);
   }
-  if (kill_after) {
-    std::this_thread::sleep_for(*kill_after);
-    kill(pid, SIGKILL);
-  }
   siginfo_t info{};
+  while (kill_when) {
+    info.si_pid = 0;
+    if (waitid(P_PID, static_cast<id_t>(pid), &info, WEXITED | WNOHANG | WNOWAIT) != 0 ||
+        info.si_pid != 0)
+      break;  // it ended by itself
+    if (kill_when()) {
+      kill(pid, SIGKILL);
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::microseconds(100));
+  }
   REQUIRE(waitid(P_PID, static_cast<id_t>(pid), &info, WEXITED | WNOWAIT) == 0);
   Outcome outcome;
   std::ifstream io("/proc/" + std::to_string(pid) + "/io");  // still there: not yet reaped
@@ -79,30 +92,10 @@ Outcome launch(const std::string& program, const std::string& arguments,
   return outcome;
 }
 
+/// `name` in a directory of this process, emptied once at the first call.
 fs::path scratch(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("sbptt_outputs_" + std::to_string(getpid()));
-  fs::create_directories(dir);
+  static const fs::path dir = fresh_directory("outputs_files");
   return dir / name;
-}
-
-fs::path fresh_dir(const std::string& name) {
-  const fs::path dir = scratch(name);
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
-
-std::string file_text(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), {}};
-}
-
-/// The log without its last column (seconds is wall time, the one field that differs).
-std::string without_seconds(const std::string& csv) {
-  std::string out;
-  std::istringstream in(csv);
-  for (std::string line; std::getline(in, line);) out += line.substr(0, line.rfind(',')) + "\n";
-  return out;
 }
 
 bool contains(const std::string& text, const std::string& part) {
@@ -172,7 +165,7 @@ TEST_CASE("empty paths are refused with exit 2, naming the flag", "[programs]") 
 
 TEST_CASE("two outputs, or an input and an output, that are one file are refused",
           "[programs]") {
-  const fs::path dir = fresh_dir("same");
+  const fs::path dir = fresh_directory("same");
   const fs::path params = dir / "same.txt";
   REQUIRE(launch("toy", "--epochs 1 --save-params " + params.string()).status == 0);
   const std::string before = file_text(params);
@@ -198,7 +191,7 @@ TEST_CASE("two outputs, or an input and an output, that are one file are refused
 }
 
 TEST_CASE("a symbolic link as --csv gets its target written", "[programs]") {
-  const fs::path dir = fresh_dir("link");
+  const fs::path dir = fresh_directory("link");
   fs::create_directories(dir / "real");
   std::ofstream(dir / "real" / "log.csv") << "old\n";
   fs::create_symlink(dir / "real" / "log.csv", dir / "link.csv");
@@ -210,7 +203,7 @@ TEST_CASE("a symbolic link as --csv gets its target written", "[programs]") {
 }
 
 TEST_CASE("a replaced output keeps its owner and permission bits", "[programs]") {
-  const fs::path params = fresh_dir("mode") / "p.txt";
+  const fs::path params = fresh_directory("mode") / "p.txt";
   std::ofstream(params) << "0\n0\n";
   REQUIRE(chmod(params.c_str(), 0604) == 0);
   const bool root = geteuid() == 0;
@@ -225,45 +218,94 @@ TEST_CASE("a replaced output keeps its owner and permission bits", "[programs]")
   CHECK(file_text(params) != "0\n0\n");
 }
 
-TEST_CASE("killed with SIGKILL at random moments, a rerun with --checkpoint ends bit for bit "
+TEST_CASE("killed with SIGKILL at random epochs, a rerun with --checkpoint ends bit for bit "
           "as one uninterrupted run", "[programs]") {
   std::mt19937 random(12345);
   for (const std::string variant : {"--method R", "--method C", "--method R --float",
                                     "--method C --float"}) {
-    const fs::path dir = fresh_dir("kill");
+    const fs::path dir = fresh_directory("kill");
+    const fs::path log_path = dir / "log.csv";
     const std::string common = "--poles 2 --samples 16 --steps 40 --batch 2 --shuffle --epochs 30 " +
-                               variant + " --csv " + (dir / "log.csv").string() +
-                               " --save-params " + (dir / "p.txt").string();
-    const auto start = std::chrono::steady_clock::now();
+                               variant + " --csv " + log_path.string() + " --save-params " +
+                               (dir / "p.txt").string();
     const Outcome whole = launch("cartpole", common);
-    const auto duration = std::chrono::steady_clock::now() - start;
     REQUIRE(whole.status == 0);
-    const std::string params = file_text(dir / "p.txt"), log = file_text(dir / "log.csv");
+    const std::string params = file_text(dir / "p.txt"), log = file_text(log_path);
     fs::remove(dir / "p.txt");
-    fs::remove(dir / "log.csv");
+    fs::remove(log_path);
 
+    // Rows of the log so far (the header aside; a row being written counts once complete).
+    const auto rows = [&] {
+      const std::string text = file_text(log_path);
+      return text.empty() ? 0L : static_cast<long>(std::count(text.begin(), text.end(), '\n')) - 1;
+    };
     const std::string resumable = common + " --checkpoint " + (dir / "run.checkpoint").string();
-    std::uniform_int_distribution<long> delay(
-        10, std::chrono::duration_cast<std::chrono::microseconds>(duration).count() / 3);
     int kills = 0, resumes = 0;
+    long killed_at = 0;
     Outcome last;
-    for (int attempt = 0; attempt < 40; ++attempt) {
-      const bool kill_it = attempt < 6;  // then let it finish
-      last = launch("cartpole", resumable, "",
-                    kill_it ? std::optional(std::chrono::microseconds(delay(random)))
-                            : std::nullopt);
+    for (int attempt = 0; attempt < 10; ++attempt) {
+      // Four kills, each a random 1 to 6 epochs after the last one's; then it may finish.
+      const long target = std::min(29L, killed_at + std::uniform_int_distribution<long>(1, 6)(random));
+      std::function<bool()> kill_when;
+      if (attempt < 4) kill_when = [&] { return rows() >= target; };
+      last = launch("cartpole", resumable, "", kill_when);
       resumes += contains(last.output, "resuming after epoch") ? 1 : 0;
       // Nothing half-written is ever left beside the outputs.
       for (const auto& entry : fs::directory_iterator(dir))
         CHECK_FALSE(contains(entry.path().filename().string(), ".tmp."));
-      if (last.status == -SIGKILL) ++kills;
+      if (last.status == -SIGKILL) {
+        ++kills;
+        killed_at = rows();
+      }
       if (last.status == 0) break;
     }
     INFO(variant << ": " << kills << " kills, " << resumes << " resumes\n" << last.output);
     REQUIRE(last.status == 0);
-    CHECK(kills >= 2);
-    CHECK(resumes >= 1);
+    CHECK(kills >= 3);
+    CHECK(resumes >= 3);
     CHECK(file_text(dir / "p.txt") == params);
-    CHECK(without_seconds(file_text(dir / "log.csv")) == without_seconds(log));
+    CHECK(without_seconds(file_text(log_path)) == without_seconds(log));
   }
+}
+
+TEST_CASE("a checkpoint of other settings is refused, naming the setting", "[programs]") {
+  const fs::path dir = fresh_directory("settings");
+  const std::string checkpoint = "--epochs 2 --checkpoint " + (dir / "c").string();
+  REQUIRE(launch("toy", checkpoint).status == 0);
+  const Outcome r = launch("toy", checkpoint + " --lr 0.02");
+  INFO(r.output);
+  CHECK(r.status == 2);
+  CHECK(contains(r.output, "was made with learning_rate = 0.01; this run has learning_rate = 0.02"));
+  CHECK_FALSE(contains(r.output, "epoch 1"));
+}
+
+TEST_CASE("every finished file is synced, renamed, and its directory synced", "[programs]") {
+  // strace shows the order of the calls: fsync(file), rename(temporary, target), fsync(dir).
+  if (std::system("command -v strace > /dev/null 2>&1") != 0) return;  // not installed
+  const fs::path dir = fresh_directory("durable");
+  const fs::path trace = dir / "trace.txt";
+  const Outcome r = launch("toy", "--epochs 3 --csv " + (dir / "log.csv").string() +
+                                      " --save-params " + (dir / "p.txt").string() +
+                                      " --checkpoint " + (dir / "run.checkpoint").string(),
+                           "", {}, "strace -f -y -o " + trace.string() +
+                                       " -e trace=fsync,fdatasync,rename,renameat,renameat2 ");
+  REQUIRE(r.status == 0);
+  std::vector<std::string> calls;
+  std::istringstream in(file_text(trace));
+  for (std::string line; std::getline(in, line);)
+    if (contains(line, "fsync(") || contains(line, "rename")) calls.push_back(line);
+  int renames = 0;
+  const std::string synced_dir = "<" + dir.string() + ">)";
+  for (std::size_t i = 0; i < calls.size(); ++i) {
+    if (!contains(calls[i], "rename")) continue;
+    ++renames;
+    INFO(calls[i]);
+    REQUIRE(i > 0);
+    REQUIRE(i + 1 < calls.size());
+    CHECK(contains(calls[i - 1], "fsync(")); // the file's data first
+    CHECK(contains(calls[i - 1], "<" + dir.string() + "/"));
+    CHECK(contains(calls[i + 1], "fsync(")); // then the directory entry
+    CHECK(contains(calls[i + 1], synced_dir));
+  }
+  CHECK(renames == 1 + 3 + 1);  // the log's header, a checkpoint per epoch, the parameters
 }

@@ -17,7 +17,7 @@
 
 namespace sbptt::examples {
 
-enum class Task { Toy, CartPole, Guidance, Quantum };
+enum class Task { Toy, CartPole, Guidance, Quantum, Mujoco };
 
 [[nodiscard]] constexpr const char* to_string(Task task) {
   switch (task) {
@@ -25,6 +25,7 @@ enum class Task { Toy, CartPole, Guidance, Quantum };
     case Task::CartPole: return "cartpole";
     case Task::Guidance: return "guidance";
     case Task::Quantum: return "quantum";
+    case Task::Mujoco: return "mujoco";
   }
   return "?";
 }
@@ -42,6 +43,7 @@ struct Horizon {
     case Task::CartPole: return {100, 0.01};
     case Task::Guidance: return {60, 4.0 / 60.0};
     case Task::Quantum: return {128, 0.0625};
+    case Task::Mujoco: return {100, 0.0};  // dt: the model's opt.timestep (`resolve_mujoco_time`)
   }
   return {1, 1.0};
 }
@@ -73,6 +75,14 @@ struct TaskOptions {
   long target = 2;  ///< quantum target, numbered as in the paper's plots (0 = ground state)
   long nx = 32;
   Horizon time{100, 0.01};  ///< steps and dt after --steps / --dt / --T
+  // mujoco only: the scene and its task (examples/mujoco.cpp)
+  std::string model;            ///< --model FILE.xml
+  std::string positions;        ///< --target q1,...,qN as given (parsed once nq is known)
+  double spread = 0.1;          ///< initial qpos = qpos0 + U[−spread, spread)
+  bool check_derivatives = false;
+  /// --steps, --dt, --T as given: mujoco resolves them once the model's timestep is known.
+  std::optional<long> steps_flag;
+  std::optional<double> dt_flag, horizon_flag;
   bool use_float = false;
   long threads = 1;
   // files
@@ -142,9 +152,10 @@ inline void require_float_range(const char* flag, double value) {
   const long many = limits::max_count;
 
   CommandLine cli(to_string(task), detail::concat(
-      "sbptt task program '", to_string(task), "': trains a controller on the paper's task with "
-      "the chosen gradient (docs/programs.md). Exit codes: 0 success, 1 error, 2 bad flag, 3 a "
-      "non-finite value stopped training."));
+      "sbptt task program '", to_string(task), "': trains a controller on ",
+      task == Task::Mujoco ? "the MuJoCo scene of --model (docs/mujoco.md)" : "the paper's task",
+      " with the chosen gradient (docs/programs.md). Exit codes: 0 success, 1 error, 2 bad "
+      "flag, 3 a non-finite value stopped training."));
   cli.value("--method", "R|M|C|S|N",
             "gradient: regular, modified, combined, stopped, network-only (long names and "
             "full/physics/stop work too)", "C",
@@ -184,12 +195,12 @@ inline void require_float_range(const char* flag, double value) {
     cli.value("--dt", "X",
               "time step; alone it keeps T, which must then be a whole number of steps; a number "
               "in [1e-12, 1e6]",
-              shown(paper.dt),
+              task == Task::Mujoco ? "the model's timestep" : shown(paper.dt),
               [&](const std::string& text) { dt = parse_number("--dt", text, 1e-12, 1e6); });
     cli.value("--T", "X",
               detail::concat("horizon T = steps · dt; alone it keeps dt (a whole number of steps, "
                              "at most ", many, "); a number in [1e-12, 1e9]"),
-              shown(paper.horizon()),
+              task == Task::Mujoco ? "steps times dt" : shown(paper.horizon()),
               [&](const std::string& text) { horizon = parse_number("--T", text, 1e-12, 1e9); });
   }
   cli.flag("--float", "compute in float (default: double)", [&] { o.use_float = true; });
@@ -226,6 +237,18 @@ inline void require_float_range(const char* flag, double value) {
     cli.integer("--evaders", o.evaders, 1, 64, "evaders");
     cli.number("--rc", o.rc, 0, 1e9, "weight of the control regulariser");
   }
+  if (task == Task::Mujoco) {
+    cli.path("--model", o.model, "the MJCF (or URDF) file of the scene; required", "none");
+    cli.value("--target", "q1,...,qN",
+              "final positions, one per qpos coordinate (nq of them; hinges in radians, compared "
+              "as angles); required",
+              "none", [&](const std::string& text) { o.positions = text; });
+    cli.number("--spread", o.spread, 0, 1e3,
+               "initial states: qpos = qpos0 + U[-X, X) per coordinate, qvel = 0");
+    cli.flag("--check-derivatives",
+             "no training: print the worst error of check_jacobians at 5 initial states",
+             [&] { o.check_derivatives = true; });
+  }
   if (task == Task::Quantum) {
     cli.integer("--target", o.target, 2, 4,
                 "target state, counted as in the paper's plots (0 = ground state)");
@@ -234,7 +257,11 @@ inline void require_float_range(const char* flag, double value) {
   }
   if (!cli.parse(argc, argv)) return false;
 
-  o.time = detail_task::resolve(paper, steps, dt, horizon);
+  o.steps_flag = steps;
+  o.dt_flag = dt;
+  o.horizon_flag = horizon;
+  // mujoco's dt is the model's, known only once it is loaded (resolve_mujoco_time).
+  if (task != Task::Mujoco) o.time = detail_task::resolve(paper, steps, dt, horizon);
   if (o.use_float) {
     detail_task::require_float_range("--lr", o.lr);
     if (o.clip != ClipMode::None) detail_task::require_float_range("--clip-threshold", o.clip_threshold);
@@ -250,6 +277,12 @@ inline void require_float_range(const char* flag, double value) {
                                         "--dump-gradients without ", flag);
   }
   return true;
+}
+
+/// The time stepping of a mujoco run: the flags resolved against the model's time step.
+[[nodiscard]] inline Horizon resolve_mujoco_time(const TaskOptions& o, double model_dt) {
+  return detail_task::resolve({paper_horizon(Task::Mujoco).steps, model_dt}, o.steps_flag,
+                              o.dt_flag, o.horizon_flag);
 }
 
 }  // namespace sbptt::examples

@@ -36,6 +36,7 @@
 /// engine's non-finite report names the step. The adapter keeps MuJoCo from printing these
 /// warnings or writing MUJOCO_LOG.TXT (see `arm_mujoco_warnings`).
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -66,8 +67,13 @@ using MujocoModelPtr = std::unique_ptr<mjModel, MujocoModelDeleter>;
   std::vector<char> message(1000, '\0');
   MujocoModelPtr model(
       mj_loadXML(path.c_str(), nullptr, message.data(), static_cast<int>(message.size())));
-  detail::require(model != nullptr, "load_mujoco_model: cannot load the model file '", path,
-                  "': ", message.data());
+  if (model == nullptr) {
+    std::string reason(message.data());
+    while (!reason.empty() && std::isspace(static_cast<unsigned char>(reason.back())) != 0)
+      reason.pop_back();
+    throw InvalidArgument(
+        detail::concat("load_mujoco_model: cannot load the model file '", path, "': ", reason));
+  }
   return model;
 }
 

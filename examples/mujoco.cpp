@@ -1,0 +1,156 @@
+// Any smooth MuJoCo model (MJCF) as a task: the stock MLP controller (input: the state
+// (qpos, qvel, act); output: ctrl) learns to bring qpos to a target at the final step, from
+// initial states around the model's qpos0. Physics and its Jacobians are MuJoCo's
+// (sbptt/sim/mujoco.hpp: mj_step, mjd_transitionFD); see docs/mujoco.md.
+//   mujoco --model examples/models/double_pendulum.xml --target 3.14159,0 --method C
+//   mujoco --model scene.xml --check-derivatives
+//
+// Loss at the final step, per position coordinate i with target t_i:
+//   hinge joint: 1 − cos(q_i − t_i)    (an angle: 2π apart is the same pose; ≈ ½ (q_i − t_i)²)
+//   slide joint: ½ (q_i − t_i)²
+// Initial states: qpos = qpos0 + U[−spread, spread) per coordinate, qvel = 0, act = 0.
+// The time step is the model's (opt.timestep) unless --dt or --T are given; --steps defaults
+// to 100. `mujoco --help` lists every flag.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <sbptt/sim/mujoco.hpp>
+
+#include "task_program.hpp"
+
+using namespace sbptt;
+using sbptt::examples::Task;
+using sbptt::examples::TaskOptions;
+
+namespace {
+
+/// Whether qpos coordinate i is a hinge angle (compared modulo 2π), per qpos entry.
+std::vector<bool> hinge_coordinates(const mjModel& model) {
+  std::vector<bool> hinge(static_cast<std::size_t>(model.nq), false);
+  for (int j = 0; j < model.njnt; ++j)
+    if (model.jnt_type[j] == mjJNT_HINGE) hinge[static_cast<std::size_t>(model.jnt_qposadr[j])] = true;
+  return hinge;
+}
+
+/// "slider (slide), hinge1 (hinge)": the position coordinates, for error messages.
+std::string describe_coordinates(const mjModel& model) {
+  std::string text;
+  for (int j = 0; j < model.njnt; ++j) {
+    const char* name = model.names + model.name_jntadr[j];
+    if (!text.empty()) text += ", ";
+    text += (*name != '\0' ? std::string(name) : "joint " + std::to_string(j)) +
+            (model.jnt_type[j] == mjJNT_HINGE ? " (hinge)" : " (slide)");
+  }
+  return text;
+}
+
+/// --target as nq numbers; throws naming the flag, the value and the model's coordinates.
+Vector<double> parse_target(const std::string& text, const mjModel& model, const std::string& file) {
+  detail::require(!text.empty(), "--target is required: ", model.nq,
+                  " comma-separated positions, one per coordinate of '", file, "': ",
+                  describe_coordinates(model));
+  std::vector<double> values;
+  std::size_t start = 0;
+  while (true) {
+    const std::size_t comma = text.find(',', start);
+    values.push_back(examples::parse_number("--target", text.substr(start, comma - start), -1e6, 1e6));
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
+  detail::require(static_cast<int>(values.size()) == model.nq, "--target '", text, "' has ",
+                  values.size(), " value(s); expected nq = ", model.nq,
+                  ", one per position coordinate of '", file, "': ", describe_coordinates(model));
+  return Eigen::Map<const Vector<double>>(values.data(), static_cast<Index>(values.size()));
+}
+
+/// ℓ(x) at the final step: 1 − cos(q_i − t_i) on hinges, ½ (q_i − t_i)² on slides, summed
+/// over the nq position coordinates (the first nq entries of the state).
+template <class Scalar>
+struct TargetLoss {
+  Vector<Scalar> target;   ///< nq
+  std::vector<bool> hinge;  ///< nq
+
+  Scalar operator()(const Vector<Scalar>& x, Vector<Scalar>* grad) const {
+    using std::cos, std::sin;
+    if (grad != nullptr) grad->setZero(x.size());
+    Scalar loss(0);
+    for (Index i = 0; i < target.size(); ++i) {
+      const Scalar d = x(i) - target(i);
+      const bool angle = hinge[static_cast<std::size_t>(i)];
+      loss += angle ? Scalar(1) - cos(d) : Scalar(0.5) * d * d;
+      if (grad != nullptr) (*grad)(i) = angle ? sin(d) : d;
+    }
+    return loss;
+  }
+};
+
+template <class Scalar>
+Matrix<Scalar> initial_states(const MujocoSimulator<Scalar>& sim, double spread, Rng& rng,
+                              Index count) {
+  const Vector<Scalar> rest = sim.initial_state();
+  Matrix<Scalar> states(sim.state_dim(), count);
+  for (Index j = 0; j < count; ++j) {
+    states.col(j) = rest;
+    for (Index i = 0; i < sim.model().nq; ++i)
+      states(i, j) += static_cast<Scalar>(rng.uniform(-spread, spread));
+  }
+  return states;
+}
+
+/// --check-derivatives: check_jacobians (mjd_transitionFD against sbptt's own central
+/// differences of mj_step, and the VJP against their transposes) at five initial states with
+/// controls U[−1, 1).
+template <class Scalar>
+int check_derivatives(const MujocoSimulator<Scalar>& sim, const TaskOptions& o, Rng& rng) {
+  const Matrix<Scalar> states = initial_states(sim, o.spread, rng, 5);
+  Scalar worst_a(0), worst_b(0), worst_vjp(0);
+  for (Index j = 0; j < states.cols(); ++j) {
+    Vector<Scalar> u(sim.control_dim());
+    for (Index k = 0; k < u.size(); ++k) u(k) = static_cast<Scalar>(rng.uniform(-1.0, 1.0));
+    const auto check = check_jacobians(sim, Vector<Scalar>(states.col(j)), u);
+    worst_a = std::max(worst_a, check.state_jacobian_error);
+    worst_b = std::max(worst_b, check.control_jacobian_error);
+    worst_vjp = std::max(worst_vjp, check.vjp_error);
+  }
+  std::printf("mujoco: %s: worst relative error at 5 states: A %.3g, B %.3g, VJP %.3g\n",
+              o.model.c_str(), static_cast<double>(worst_a), static_cast<double>(worst_b),
+              static_cast<double>(worst_vjp));
+  return 0;
+}
+
+template <class Scalar>
+int run(TaskOptions o) {
+  detail::require(!o.model.empty(), "--model is required: the MJCF file of the scene");
+  const MujocoModelPtr model = load_mujoco_model(o.model);
+  o.time = examples::resolve_mujoco_time(o, model->opt.timestep);
+  model->opt.timestep = o.time.dt;
+  const MujocoSimulator<Scalar> sim = [&] {
+    try {
+      return MujocoSimulator<Scalar>(*model);
+    } catch (const InvalidArgument& e) {
+      throw InvalidArgument(detail::concat("--model '", o.model, "': ", e.what()));
+    }
+  }();
+  Rng data_rng(o.seed);
+  if (o.check_derivatives) return check_derivatives(sim, o, data_rng);
+  const Vector<double> target = parse_target(o.positions, *model, o.model);
+  auto data = examples::split_half<Scalar>(initial_states(sim, o.spread, data_rng, 2 * o.samples));
+  auto network = Network<Scalar>::mlp(sim.state_dim(), {100, 100}, sim.control_dim());
+  Rng init_rng(o.seed + 1);
+  glorot_uniform(network, init_rng, {.zero_last_kernel = true});
+  Objective<TargetLoss<Scalar>> objective;
+  objective.state_loss = {target.cast<Scalar>(), hinge_coordinates(*model)};
+  objective.timing = LossTiming::Final;
+  return examples::train(o, sim, network, objective, o.time.steps, std::move(data));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return examples::task_main(Task::Mujoco, argc, argv, []<class Scalar>(const TaskOptions& o) {
+    return run<Scalar>(o);
+  });
+}

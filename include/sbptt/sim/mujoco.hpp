@@ -267,7 +267,7 @@ public:
     if (lambda_x == nullptr && lambda_u == nullptr) return;
     auto slot = pool_->lease();
     const auto [a, b] = transition_jacobians(x, u, *slot);
-    const Vector<mjtNum> adjoint = lambda.template cast<mjtNum>();
+    const auto& adjoint = lambda.template cast<mjtNum>();  // an expression, or λ itself
     if (lambda_x != nullptr) *lambda_x = (a.transpose() * adjoint).template cast<Scalar>();
     if (lambda_u != nullptr) *lambda_u = (b.transpose() * adjoint).template cast<Scalar>();
   }

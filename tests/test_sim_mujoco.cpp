@@ -24,7 +24,10 @@
 #include "sbptt/sim/cartpole.hpp"
 #include "sbptt/sim/mujoco.hpp"
 
+#include "mujoco_cartpole_layout.hpp"
+
 using namespace sbptt;
+using sbptt::examples::to_mujoco_layout;
 
 namespace {
 
@@ -34,27 +37,6 @@ static_assert(static_assert_simulator<MujocoSimulator<float>>());
 std::string model_path(int poles) {
   return std::string(SBPTT_SOURCE_DIR) + "/tests/models/cartpole_physical_" +
          std::to_string(poles) + ".xml";
-}
-
-/// `CartPole` orders the state per pole (x, ẋ, θ_1, θ̇_1, …); MuJoCo by kind (x, θ_1, …, ẋ,
-/// θ̇_1, …). Returns the MuJoCo state of a CartPole state.
-Vector<double> to_mujoco_layout(const Vector<double>& cart, Index poles) {
-  Vector<double> mj(cart.size());
-  mj(0) = cart(0);
-  mj(poles + 1) = cart(1);
-  for (Index i = 0; i < poles; ++i) {
-    mj(1 + i) = cart(2 + 2 * i);
-    mj(poles + 2 + i) = cart(3 + 2 * i);
-  }
-  return mj;
-}
-
-/// The permutation matrix of `to_mujoco_layout` (mj = Π cart), for Jacobians: A_mj = Π A Πᵀ.
-Matrix<double> layout_permutation(Index poles) {
-  const Index n = 2 + 2 * poles;
-  Matrix<double> pi(n, n);
-  for (Index j = 0; j < n; ++j) pi.col(j) = to_mujoco_layout(Vector<double>::Unit(n, j), poles);
-  return pi;
 }
 
 /// A CartPole state anywhere on the circle with brisk velocities.
@@ -164,7 +146,7 @@ TEST_CASE("mujoco: A and B of mjd_transitionFD equal CartPole's analytic Jacobia
   for (const int poles : {1, 2}) {
     const auto cart = physical_cartpole(poles, 100);
     const auto mj = mujoco_cartpole(poles, 0.01);
-    const Matrix<double> pi = layout_permutation(poles);
+    const Matrix<double> pi = examples::mujoco_layout_permutation(poles);
     Rng rng(5);
     for (int trial = 0; trial < 10; ++trial) {
       const Vector<double> xc = random_cart_state(poles, rng);
@@ -201,7 +183,7 @@ TEST_CASE("mujoco: the finite-difference step is an option and matters as theory
   Matrix<double> a, a_coarse, a_fine, b_coarse, b_fine;
   Vector<double> b;
   cart.jacobians(xc, u, a, b);
-  const Matrix<double> pi = layout_permutation(1);
+  const Matrix<double> pi = examples::mujoco_layout_permutation(1);
   coarse.jacobians(to_mujoco_layout(xc, 1), Vector<double>(u), a_coarse, b_coarse);
   fine.jacobians(to_mujoco_layout(xc, 1), Vector<double>(u), a_fine, b_fine);
   const double error_coarse = (pi * a * pi.transpose() - a_coarse).cwiseAbs().maxCoeff();

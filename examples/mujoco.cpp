@@ -6,7 +6,7 @@
 //   mujoco --model scene.xml --check-derivatives
 //
 // Loss at the final step, per position coordinate i with target t_i:
-//   hinge joint: 1 − cos(q_i − t_i)    (an angle: 2π apart is the same pose; ≈ ½ (q_i − t_i)²)
+//   hinge joint: 1 − cos(q_i − t_i)   (2π apart is the same pose; ≈ ½ (q_i − t_i)²)
 //   slide joint: ½ (q_i − t_i)²
 // Initial states: qpos = qpos0 + U[−spread, spread) per coordinate, qvel = 0, act = 0.
 // The time step is the model's (opt.timestep) unless --dt or --T are given; --steps defaults
@@ -31,7 +31,8 @@ namespace {
 std::vector<bool> hinge_coordinates(const mjModel& model) {
   std::vector<bool> hinge(static_cast<std::size_t>(model.nq), false);
   for (int j = 0; j < model.njnt; ++j)
-    if (model.jnt_type[j] == mjJNT_HINGE) hinge[static_cast<std::size_t>(model.jnt_qposadr[j])] = true;
+    if (model.jnt_type[j] == mjJNT_HINGE)
+      hinge[static_cast<std::size_t>(model.jnt_qposadr[j])] = true;
   return hinge;
 }
 
@@ -48,7 +49,8 @@ std::string describe_coordinates(const mjModel& model) {
 }
 
 /// --target as nq numbers; throws naming the flag, the value and the model's coordinates.
-Vector<double> parse_target(const std::string& text, const mjModel& model, const std::string& file) {
+Vector<double> parse_target(const std::string& text, const mjModel& model,
+                            const std::string& file) {
   detail::require(!text.empty(), "--target is required: ", model.nq,
                   " comma-separated positions, one per coordinate of '", file, "': ",
                   describe_coordinates(model));
@@ -56,7 +58,8 @@ Vector<double> parse_target(const std::string& text, const mjModel& model, const
   std::size_t start = 0;
   while (true) {
     const std::size_t comma = text.find(',', start);
-    values.push_back(examples::parse_number("--target", text.substr(start, comma - start), -1e6, 1e6));
+    const std::string value = text.substr(start, comma - start);
+    values.push_back(examples::parse_number("--target", value, -1e6, 1e6));
     if (comma == std::string::npos) break;
     start = comma + 1;
   }

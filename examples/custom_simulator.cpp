@@ -1,6 +1,7 @@
-// A user-defined simulator trained with the combined update: a point mass on a line with
-// friction, pushed by a force u, must stop at the origin (final-state loss).
-//   p' = p + dt·v',  v' = v + dt·(u − γ v)        State (p, v), Control (u)
+// A user-defined scene trained with the combined update: a point mass on a line with friction,
+// pushed by a force u, must stop at the origin (final-state loss). The scene (point_mass.hpp)
+// is its equations, written once as a step templated on the scalar; AutoDiffSimulator derives
+// its Jacobians.
 #include <cstdio>
 
 #include "point_mass.hpp"

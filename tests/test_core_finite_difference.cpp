@@ -68,13 +68,43 @@ TEST_CASE("check_jacobians passes a correct simulator and names each planted err
     const auto a = check_jacobians(PlantedError(Where::StateJacobian, size), x, u);
     CHECK(a.state_jacobian_error == Approx(size / 1.1).epsilon(1e-3));  // / max |A| = 1.1
     CHECK(a.control_jacobian_error < 1e-9);
+    CHECK(a.vjp_error < 1e-9);  // the VJP is measured against the step, not against A
     const auto b = check_jacobians(PlantedError(Where::ControlJacobian, size), x, u);
     CHECK(b.control_jacobian_error == Approx(size / 2.0).epsilon(1e-3));  // / max |B| = 2
     CHECK(b.state_jacobian_error < 1e-9);
+    CHECK(b.vjp_error < 1e-9);  // a wrong B flags B alone
     const auto v = check_jacobians(PlantedError(Where::Vjp, size), x, u);
-    CHECK(v.vjp_error > 0.5 * size);
+    CHECK(v.vjp_error == Approx(size / 1.1).epsilon(1e-3));  // Aᵀ(0, 1) = A(1, 0)
     CHECK(std::max(v.state_jacobian_error, v.control_jacobian_error) < 1e-9);
   }
+}
+
+TEST_CASE("check_jacobians checks the VJP of a simulator that forms no Jacobians",
+          "[core][finite_difference]") {
+  /// x' = (sin x₀ + u, x₀ x₁): step and VJP only, the VJP's ∂x₁'/∂x₀ planted wrong by `size`.
+  struct VjpOnly {
+    using Scalar = double;
+    using State = Eigen::Vector2d;
+    using Control = Eigen::Matrix<double, 1, 1>;
+    double size = 0;
+    Index state_dim() const { return 2; }
+    Index control_dim() const { return 1; }
+    void step(const State& x, const Control& u, State& next) const {
+      next << std::sin(x(0)) + u(0), x(0) * x(1);
+    }
+    void vjp(const State& x, const Control&, const State& l, State* lx, Control* lu) const {
+      if (lx) *lx << std::cos(x(0)) * l(0) + (x(1) + size) * l(1), x(0) * l(1);
+      if (lu) (*lu)(0) = l(0);
+    }
+  };
+  static_assert(Simulator<VjpOnly> && !SimulatorWithJacobians<VjpOnly>);
+  const Eigen::Vector2d x(0.4, -1.3);
+  const Eigen::Matrix<double, 1, 1> u = Eigen::Matrix<double, 1, 1>::Constant(0.2);
+  const auto clean = check_jacobians(VjpOnly{}, x, u);
+  CHECK_FALSE(clean.has_jacobians);
+  CHECK(clean.worst() < 1e-9);
+  const auto wrong = check_jacobians(VjpOnly{.size = 1e-4}, x, u);
+  CHECK(wrong.vjp_error == Approx(1e-4 / 1.3).epsilon(1e-3));  // / max |A| = |x₁|
 }
 
 TEST_CASE("check_controller passes a correct controller and names each planted error",

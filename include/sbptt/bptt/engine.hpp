@@ -79,6 +79,16 @@ public:
   Engine(const Sim& sim, const Ctrl& controller, Objective<Loss> objective, Index steps)
       : sim_(sim), controller_(controller), objective_(std::move(objective)), steps_(steps) {
     detail::require(steps > 0, "Engine: steps = ", steps, "; expected a horizon of at least 1");
+    detail::require(State::SizeAtCompileTime == Eigen::Dynamic ||
+                        State::SizeAtCompileTime == sim.state_dim(),
+                    "Engine: the simulator's State holds ", State::SizeAtCompileTime,
+                    " numbers but its state_dim() = ", sim.state_dim(),
+                    "; expected them to agree");
+    detail::require(Control::SizeAtCompileTime == Eigen::Dynamic ||
+                        Control::SizeAtCompileTime == sim.control_dim(),
+                    "Engine: the simulator's Control holds ", Control::SizeAtCompileTime,
+                    " numbers but its control_dim() = ", sim.control_dim(),
+                    "; expected them to agree");
     detail::require(controller.input_dim() == sim.state_dim(), "Engine: controller input_dim = ",
                     controller.input_dim(), "; expected the simulator's state_dim = ",
                     sim.state_dim());
@@ -92,6 +102,15 @@ public:
                     "; expected a finite number >= 0");
     set_threads(1);
   }
+
+  /// The engine keeps references to the simulator and the controller: a temporary would be
+  /// destroyed at the end of the statement, so binding one is refused at compile time.
+  Engine(const Sim&& temporary_simulator, const Ctrl& controller, Objective<Loss> objective,
+         Index steps) = delete;
+  Engine(const Sim& sim, const Ctrl&& temporary_controller, Objective<Loss> objective,
+         Index steps) = delete;
+  Engine(const Sim&& temporary_simulator, const Ctrl&& temporary_controller,
+         Objective<Loss> objective, Index steps) = delete;
 
   [[nodiscard]] Index steps() const { return steps_; }
   [[nodiscard]] const Objective<Loss>& objective() const { return objective_; }

@@ -16,15 +16,12 @@ concept HasSimulatorTypes = requires {
   typename S::Scalar;
   typename S::State;
   typename S::Control;
-  typename S::StateJacobian;
-  typename S::ControlJacobian;
 };
 
 template <class S>
 concept HasSimulatorSizes = HasSimulatorTypes<S> && requires(const S& sim) {
   { sim.state_dim() } -> std::convertible_to<Index>;
   { sim.control_dim() } -> std::convertible_to<Index>;
-  { sim.dt() } -> std::convertible_to<typename S::Scalar>;
 };
 
 template <class S>
@@ -36,6 +33,10 @@ concept HasSimulatorStep = HasSimulatorTypes<S> &&
 
 template <class S>
 concept HasSimulatorJacobians = HasSimulatorTypes<S> &&
+    requires {
+      typename S::StateJacobian;
+      typename S::ControlJacobian;
+    } &&
     requires(const S& sim, const typename S::State& x, const typename S::Control& u,
              typename S::StateJacobian& a, typename S::ControlJacobian& b) {
       sim.jacobians(x, u, a, b);
@@ -86,21 +87,31 @@ concept HasControllerBackward = HasControllerTypes<C> &&
 
 }  // namespace detail
 
-/// A differentiable, immutable, thread-safe time stepper `x_next = P(x, u)`.
+/// A differentiable, immutable, thread-safe time stepper `x_next = P(x, u)`: what the engine
+/// calls, and nothing more.
 ///
 /// Members (all `const`):
-/// - `using Scalar, State, Control, StateJacobian, ControlJacobian` (Eigen types; State and
-///   Control are column vectors of sizes `state_dim()` and `control_dim()`);
-/// - `Index state_dim()`, `Index control_dim()`, `Scalar dt()`;
+/// - `using Scalar, State, Control` (Eigen column vectors of sizes `state_dim()` and
+///   `control_dim()`);
+/// - `Index state_dim()`, `Index control_dim()`;
 /// - `void step(const State& x, const Control& u, State& x_next)`;
-/// - `void jacobians(const State& x, const Control& u, StateJacobian& A, ControlJacobian& B)`
-///   with `A = ∂x_next/∂x` (state_dim × state_dim), `B = ∂x_next/∂u` (state_dim × control_dim);
 /// - `void vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
-///   Control* lambda_u)` setting `*lambda_x = Aᵀ lambda`, `*lambda_u = Bᵀ lambda`; a null pointer
-///   skips that product. `lambda_x` never aliases `lambda`.
+///   Control* lambda_u)` setting `*lambda_x = Aᵀ lambda`, `*lambda_u = Bᵀ lambda` with
+///   A = ∂x_next/∂x, B = ∂x_next/∂u; a null pointer skips that product. `lambda_x` never
+///   aliases `lambda`.
+///
+/// A time step `dt()` and the dense Jacobians are not required: the engine uses neither.
+/// `SimulatorWithJacobians` adds the Jacobians, which `check_jacobians` then checks too.
 template <class S>
 concept Simulator = detail::HasSimulatorSizes<S> && detail::HasSimulatorStep<S> &&
-                    detail::HasSimulatorJacobians<S> && detail::HasSimulatorVjp<S>;
+                    detail::HasSimulatorVjp<S>;
+
+/// A `Simulator` that also forms its dense Jacobians:
+/// - `using StateJacobian, ControlJacobian` (Eigen matrices);
+/// - `void jacobians(const State& x, const Control& u, StateJacobian& A, ControlJacobian& B)`
+///   with `A = ∂x_next/∂x` (state_dim × state_dim), `B = ∂x_next/∂u` (state_dim × control_dim).
+template <class S>
+concept SimulatorWithJacobians = Simulator<S> && detail::HasSimulatorJacobians<S>;
 
 /// A parametric batch map `Y = N(X; θ)` with one flat parameter vector θ.
 ///
@@ -122,17 +133,13 @@ concept Controller = detail::HasControllerSizes<C> && detail::HasControllerParam
 template <class S>
 consteval bool static_assert_simulator() {
   static_assert(detail::HasSimulatorTypes<S>,
-                "sbptt::Simulator: the type needs member types Scalar, State, Control, "
-                "StateJacobian and ControlJacobian");
+                "sbptt::Simulator: the type needs member types Scalar, State and Control");
   static_assert(detail::HasSimulatorSizes<S>,
-                "sbptt::Simulator: the type needs const members state_dim(), control_dim() "
-                "(convertible to Index) and dt() (convertible to Scalar)");
+                "sbptt::Simulator: the type needs const members state_dim() and control_dim() "
+                "(convertible to Index)");
   static_assert(detail::HasSimulatorStep<S>,
                 "sbptt::Simulator: the type needs `void step(const State& x, const Control& u, "
                 "State& x_next) const`");
-  static_assert(detail::HasSimulatorJacobians<S>,
-                "sbptt::Simulator: the type needs `void jacobians(const State& x, const Control& "
-                "u, StateJacobian& A, ControlJacobian& B) const`");
   static_assert(detail::HasSimulatorVjp<S>,
                 "sbptt::Simulator: the type needs `void vjp(const State& x, const Control& u, "
                 "const State& lambda, State* lambda_x, Control* lambda_u) const`");

@@ -103,7 +103,7 @@ public:
     flocking_range_ = cast(options.flocking_range);
     center_weight_ = options.physical.center == GuidanceCenter::Sum
                          ? Scalar(1)
-                         : Scalar(1) / static_cast<Scalar>(evaders);
+                         : Scalar(1) / static_cast<Scalar>(static_cast<double>(evaders));
   }
 
   [[nodiscard]] Index drivers() const { return drivers_; }

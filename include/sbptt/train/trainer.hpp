@@ -114,6 +114,16 @@ public:
     engine_.set_threads(options.threads);
   }
 
+  /// The trainer keeps references to the simulator and the controller: binding a temporary
+  /// is refused at compile time. (The objective and the optimizer are copied.)
+  Trainer(const Sim&& temporary_simulator, Ctrl& controller, Objective<Loss> objective,
+          Index steps, Optimizer optimizer, TrainerOptions options) = delete;
+  Trainer(const Sim& sim, Ctrl&& temporary_controller, Objective<Loss> objective, Index steps,
+          Optimizer optimizer, TrainerOptions options) = delete;
+  Trainer(const Sim&& temporary_simulator, Ctrl&& temporary_controller,
+          Objective<Loss> objective, Index steps, Optimizer optimizer,
+          TrainerOptions options) = delete;
+
   /// One epoch over `train` (state_dim × N_train, N_train ≥ 1), then, when `evaluate`, the
   /// evaluation of `train` and of `test` (state_dim × N_test; N_test = 0 means no test set,
   /// and test_loss stays empty). Both sets are checked before any update. When `stopped()`

@@ -81,25 +81,26 @@ TEST_CASE("check_jacobians passes a correct simulator and names each planted err
 
 TEST_CASE("check_jacobians checks the VJP of a simulator that forms no Jacobians",
           "[core][finite_difference]") {
-  /// x' = (sin x₀ + u, x₀ x₁): step and VJP only, the VJP's ∂x₁'/∂x₀ planted wrong by `size`.
+  /// x' = (sin x₀ + u₀, x₀ x₁ − u₁): step and VJP only, the VJP's ∂x₁'/∂x₀ planted wrong by
+  /// `size`.
   struct VjpOnly {
     using Scalar = double;
     using State = Eigen::Vector2d;
-    using Control = Eigen::Matrix<double, 1, 1>;
+    using Control = Eigen::Vector2d;
     double size = 0;
     Index state_dim() const { return 2; }
-    Index control_dim() const { return 1; }
+    Index control_dim() const { return 2; }
     void step(const State& x, const Control& u, State& next) const {
-      next << std::sin(x(0)) + u(0), x(0) * x(1);
+      next << std::sin(x(0)) + u(0), x(0) * x(1) - u(1);
     }
     void vjp(const State& x, const Control&, const State& l, State* lx, Control* lu) const {
       if (lx) *lx << std::cos(x(0)) * l(0) + (x(1) + size) * l(1), x(0) * l(1);
-      if (lu) (*lu)(0) = l(0);
+      if (lu) *lu << l(0), -l(1);
     }
   };
   static_assert(Simulator<VjpOnly> && !SimulatorWithJacobians<VjpOnly>);
   const Eigen::Vector2d x(0.4, -1.3);
-  const Eigen::Matrix<double, 1, 1> u = Eigen::Matrix<double, 1, 1>::Constant(0.2);
+  const Eigen::Vector2d u(0.2, -0.7);
   const auto clean = check_jacobians(VjpOnly{}, x, u);
   CHECK_FALSE(clean.has_jacobians);
   CHECK(clean.worst() < 1e-9);

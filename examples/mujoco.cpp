@@ -103,8 +103,8 @@ Matrix<Scalar> initial_states(const MujocoSimulator<Scalar>& sim, double spread,
   return states;
 }
 
-/// --check-derivatives: check_jacobians (mjd_transitionFD against sbptt's own central
-/// differences of mj_step, and the VJP against their transposes) at five initial states with
+/// --check-derivatives: check_jacobians (mjd_transitionFD and the VJP against sbptt's own
+/// central differences of mj_step) at five initial states with
 /// controls U[−1, 1).
 template <class Scalar>
 int check_derivatives(const MujocoSimulator<Scalar>& sim, const TaskOptions& o, Rng& rng) {

@@ -411,7 +411,7 @@ TEST_CASE("mujoco --check-derivatives prints mjd_transitionFD's agreement with s
   fields >> a >> skip >> skip >> b >> skip >> skip >> vjp;
   CHECK(a < 1e-6);
   CHECK(b < 1e-6);
-  CHECK(vjp < 1e-12);
+  CHECK(vjp < 1e-6);  // against central differences of the step, like A and B
 }
 
 TEST_CASE("mujoco refuses a model or target it cannot use, naming it", "[programs][mujoco]") {

@@ -55,11 +55,11 @@ constexpr int sum_or_dynamic(int n, int k) {
 namespace detail {
 template <class T>
 struct PlainScalarOf {
-  using type = T;
+  using Type = T;
 };
 template <class Derivatives>
 struct PlainScalarOf<Eigen::AutoDiffScalar<Derivatives>> {
-  using type = typename Eigen::AutoDiffScalar<Derivatives>::Real;
+  using Type = typename Eigen::AutoDiffScalar<Derivatives>::Real;
 };
 }  // namespace detail
 
@@ -68,7 +68,7 @@ struct PlainScalarOf<Eigen::AutoDiffScalar<Derivatives>> {
 /// warning where `T(dt)` would narrow a double to float.
 template <class T>
 [[nodiscard]] T constant(double value) {
-  return T(static_cast<typename detail::PlainScalarOf<T>::type>(value));
+  return T(static_cast<typename detail::PlainScalarOf<T>::Type>(value));
 }
 
 namespace detail {
@@ -114,6 +114,19 @@ void check_model_sizes(const M& model, const char* who) {
           " (-1 means dynamic)");
 }
 
+/// Requires dynamic-size inputs to match the simulator's sizes (fixed sizes are checked by
+/// their types).
+template <class Sim>
+void check_input_sizes(const Sim& sim, const typename Sim::State& x,
+                       const typename Sim::Control& u, const char* who) {
+  if constexpr (Sim::State::RowsAtCompileTime == Eigen::Dynamic ||
+                Sim::Control::RowsAtCompileTime == Eigen::Dynamic) {
+    require(x.size() == sim.state_dim() && u.size() == sim.control_dim(), who, ": x has size ",
+            x.size(), " and u size ", u.size(), "; expected state_dim() = ", sim.state_dim(),
+            " and control_dim() = ", sim.control_dim());
+  }
+}
+
 }  // namespace detail
 
 /// Value and Jacobians of r = g(x, u) by one forward-mode pass with N + K directions.
@@ -125,13 +138,13 @@ template <class Scalar, int N, int K, int R, class G>
 void automatic_jacobians(const G& g, const ColumnOf<Scalar, N>& x, const ColumnOf<Scalar, K>& u,
                          Index rows, ColumnOf<Scalar, R>& value,
                          Eigen::Matrix<Scalar, R, N>& jx, Eigen::Matrix<Scalar, R, K>& ju) {
-  constexpr int kDirections = sum_or_dynamic(N, K);
-  using D = Dual<Scalar, kDirections>;
+  constexpr int directions_at_compile_time = sum_or_dynamic(N, K);
+  using D = Dual<Scalar, directions_at_compile_time>;
   const Index n = x.size(), k = u.size(), directions = n + k;
   ColumnOf<D, N> xd(n);
   ColumnOf<D, K> ud(k);
   ColumnOf<D, R> rd(rows);
-  using Derivatives = ColumnOf<Scalar, kDirections>;
+  using Derivatives = ColumnOf<Scalar, directions_at_compile_time>;
   for (Index i = 0; i < n; ++i) xd(i) = D(x(i), Derivatives::Unit(directions, i));
   for (Index j = 0; j < k; ++j) ud(j) = D(u(j), Derivatives::Unit(directions, n + j));
   g(xd, ud, rd);
@@ -209,12 +222,7 @@ private:
   }
 
   void check_sizes(const State& x, const Control& u) const {
-    if constexpr (kStateSize == Eigen::Dynamic || kControlSize == Eigen::Dynamic) {
-      detail::require(x.size() == state_dim() && u.size() == control_dim(),
-                      "AutoDiffSimulator: x has size ", x.size(), " and u size ", u.size(),
-                      "; expected state_dim() = ", state_dim(), " and control_dim() = ",
-                      control_dim());
-    }
+    detail::check_input_sizes(*this, x, u, "AutoDiffSimulator");
   }
 
   Model model_;

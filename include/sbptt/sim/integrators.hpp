@@ -111,15 +111,15 @@ constexpr StateLayout layout_of() {
 template <class Model, class Scalar>
 class RightHandSide {
 public:
-  static constexpr int N = Model::kStateSize, K = Model::kControlSize;
+  static constexpr int kStateSize = Model::kStateSize, kControlSize = Model::kControlSize;
   static constexpr bool kSecondOrder = IsSecondOrder<Model>;
-  static constexpr int R = kSecondOrder ? half_or_dynamic(N) : N;
+  static constexpr int kRhsSize = kSecondOrder ? half_or_dynamic(kStateSize) : kStateSize;
   static constexpr StateLayout kLayout = layout_of<Model>();
-  using State = ColumnOf<Scalar, N>;
-  using Control = ColumnOf<Scalar, K>;
-  using Rhs = ColumnOf<Scalar, R>;
-  using RhsByState = Eigen::Matrix<Scalar, R, N>;
-  using RhsByControl = Eigen::Matrix<Scalar, R, K>;
+  using State = ColumnOf<Scalar, kStateSize>;
+  using Control = ColumnOf<Scalar, kControlSize>;
+  using Rhs = ColumnOf<Scalar, kRhsSize>;
+  using RhsByState = Eigen::Matrix<Scalar, kRhsSize, kStateSize>;
+  using RhsByControl = Eigen::Matrix<Scalar, kRhsSize, kControlSize>;
 
   explicit RightHandSide(const Model& model) : model_(model) {}
 
@@ -165,7 +165,7 @@ public:
   void derivative(const X& x, const U& u, Out& xdot) const {
     if constexpr (kSecondOrder) {
       const Index n = x.size();
-      ColumnOf<typename X::Scalar, R> acc(n / 2);
+      ColumnOf<typename X::Scalar, kRhsSize> acc(n / 2);
       model_.acceleration(x, u, acc);
       for (Index i = 0; i < n / 2; ++i) {
         xdot(position(i, n)) = x(velocity(i, n));
@@ -178,8 +178,8 @@ public:
 
   /// xdot = f(x, u), fx = ∂f/∂x (N × N), fu = ∂f/∂u (N × K).
   void derivative_with_jacobians(const State& x, const Control& u, State& xdot,
-                                 Eigen::Matrix<Scalar, N, N>& fx,
-                                 Eigen::Matrix<Scalar, N, K>& fu) const {
+                                 Eigen::Matrix<Scalar, kStateSize, kStateSize>& fx,
+                                 Eigen::Matrix<Scalar, kStateSize, kControlSize>& fu) const {
     if constexpr (kSecondOrder) {
       const Index n = x.size();
       Rhs acc;
@@ -383,12 +383,7 @@ private:
   static Scalar coefficient(double c) { return static_cast<Scalar>(c); }
 
   void check_sizes(const State& x, const Control& u) const {
-    if constexpr (kStateSize == Eigen::Dynamic || kControlSize == Eigen::Dynamic) {
-      detail::require(x.size() == state_dim() && u.size() == control_dim(),
-                      "Integrated: x has size ", x.size(), " and u size ", u.size(),
-                      "; expected state_dim() = ", state_dim(), " and control_dim() = ",
-                      control_dim());
-    }
+    detail::check_input_sizes(*this, x, u, "Integrated");
   }
 
   Model model_;

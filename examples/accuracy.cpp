@@ -368,6 +368,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   try {
+    std::printf("accuracy: %s code; ms of 1 thread\n", sbptt::instruction_set());
     std::printf("%-9s %-9s %-6s %6s %5s %10s %9s %11s %11s %11s\n", "sim", "sweep", "scalar",
                 "steps", "Nx", "h", "ms", "state err", "g_R err", "loss err");
     sbptt::Rng rng(42);

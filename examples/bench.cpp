@@ -471,9 +471,9 @@ int main(int argc, char** argv) {
     return 1;
   }
   try {
-    std::printf("sbptt bench: %s, %u hardware threads; epoch = Trainer::train_epoch "
+    std::printf("sbptt bench: %s code on %s, %u hardware threads; epoch = Trainer::train_epoch "
                 "(256 train in batches of 8, + evaluation of 256 train and 256 test)\n",
-                cpu_model().c_str(), std::thread::hardware_concurrency());
+                sbptt::instruction_set(), cpu_model().c_str(), std::thread::hardware_concurrency());
     const double empty_rss = in_child([] {
       RowResult r;
       rusage usage{};

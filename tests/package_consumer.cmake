@@ -1,6 +1,8 @@
 # Installs sbptt into a scratch prefix, then configures, builds and runs examples/consumer
 # and examples/consumer_mujoco (the opt-in MuJoCo component, on the cart pole of
-# tests/models) against it. Any failing step fails the test.
+# tests/models) against it; the plain consumer also with sbptt::native. Any failing step fails
+# the test, and so does a plain consumer compiled for the same instruction set as the native one
+# when that is wider than SSE2 (sbptt::sbptt must not force -march=native on consumers).
 file(REMOVE_RECURSE ${WORK_DIR})
 function(run_step)
   execute_process(COMMAND ${ARGN} RESULT_VARIABLE result OUTPUT_VARIABLE out ERROR_VARIABLE err)
@@ -8,6 +10,7 @@ function(run_step)
     message(FATAL_ERROR "step failed (${result}): ${ARGN}\n${out}\n${err}")
   endif()
   message(STATUS "${out}")
+  set(output "${out}" PARENT_SCOPE)
 endfunction()
 run_step(${CMAKE_COMMAND} -S ${SOURCE_DIR} -B ${WORK_DIR}/library -G ${GENERATOR}
          -DSBPTT_BUILD_TESTS=OFF -DSBPTT_BUILD_EXAMPLES=OFF -DCMAKE_INSTALL_PREFIX=${WORK_DIR}/prefix)
@@ -16,6 +19,13 @@ run_step(${CMAKE_COMMAND} -S ${SOURCE_DIR}/examples/consumer -B ${WORK_DIR}/cons
          -DCMAKE_PREFIX_PATH=${WORK_DIR}/prefix -DCMAKE_BUILD_TYPE=Release)
 run_step(${CMAKE_COMMAND} --build ${WORK_DIR}/consumer)
 run_step(${WORK_DIR}/consumer/consumer)
+string(REGEX MATCH "^[^ ]+" plain "${output}")
+run_step(${WORK_DIR}/consumer/consumer_native)
+string(REGEX MATCH "^[^ ]+" native "${output}")
+if(plain STREQUAL native AND NOT native STREQUAL "SSE2")
+  message(FATAL_ERROR "the plain consumer was compiled for ${plain}, as the native one: "
+                      "sbptt::sbptt forces the build machine's instruction set on consumers")
+endif()
 run_step(${CMAKE_COMMAND} -S ${SOURCE_DIR}/examples/consumer_mujoco -B ${WORK_DIR}/consumer_mujoco
          -G ${GENERATOR} -DCMAKE_PREFIX_PATH=${WORK_DIR}/prefix -DCMAKE_BUILD_TYPE=Release)
 run_step(${CMAKE_COMMAND} --build ${WORK_DIR}/consumer_mujoco)

@@ -141,11 +141,11 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
 
   std::fprintf(stderr,
                "%s: method %s, clip %s, %ld epochs, %ld train / %ld test samples, batch %ld, "
-               "%s, %ld parameters, %s\n",
+               "%s, %ld parameters, %s, %s code\n",
                name, std::string(label(o.method)).c_str(), to_string(o.clip).c_str(), o.epochs,
                static_cast<long>(data.train.cols()), static_cast<long>(data.test.cols()), o.batch,
                describe(o.task, o.time).c_str(), static_cast<long>(controller.num_params()),
-               o.use_float ? "float" : "double");
+               o.use_float ? "float" : "double", instruction_set());
   const double initial = static_cast<double>(trainer.engine().evaluate(data.test));
   std::fprintf(stderr, "%s: initial test loss %.6g\n", name, initial);
   if (const auto& where = trainer.engine().forward_non_finite())

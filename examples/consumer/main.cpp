@@ -17,6 +17,7 @@ int main() {
   const auto result = engine.regular_and_modified(sbptt::Matrix<double>::Constant(1, 1, -0.3));
   // With c ≡ 0, x_4 = -0.3 and ∂L/∂bias = (x_4 − 2) · 4 = −9.2.
   const double bias_gradient = result.regular(result.regular.size() - 1);
-  std::printf("loss = %.6f, dL/d(output bias) = %.6f (expected -9.2)\n", result.loss, bias_gradient);
+  std::printf("%s code: loss = %.6f, dL/d(output bias) = %.6f (expected -9.2)\n",
+              sbptt::instruction_set(), result.loss, bias_gradient);
   return std::abs(bias_gradient + 9.2) < 1e-12 ? 0 : 1;
 }

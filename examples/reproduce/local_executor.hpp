@@ -24,6 +24,7 @@
 #include <thread>
 #include <vector>
 
+#include <sbptt/core/instruction_set.hpp>
 #include <sbptt/train/training_log.hpp>
 
 #include "durable_files.hpp"
@@ -77,6 +78,8 @@ public:
                                                std::max<std::size_t>(todo.size(), 1))))
                     .c_str());
     std::printf("reproduce: output in %s (runs/, summary.csv, plots/)\n", out_.c_str());
+    std::printf("reproduce: %s build; runs/<name>.log names each run's\n",
+                sbptt::instruction_set());
     std::fflush(stdout);
     // More threads than cores make the runs wait for each other; the spin-then-sleep pool
     // copes, but the seconds columns then measure contention, not the method.

@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include <sbptt/core/instruction_set.hpp>
+
 #include "options.hpp"
 #include "processes.hpp"
 #include "run_files.hpp"
@@ -83,6 +85,7 @@ inline void print_plan(const Options& o, const std::vector<Run>& plan, const fs:
                 finished ? "  (finished)" : "");
     if (!finished) estimate += run.estimated_seconds(), ++todo;
   }
+  std::printf("reproduce: %s build; runs/<name>.log names each run's\n", sbptt::instruction_set());
   std::printf("%zu runs planned (profile %s, %zu finished, %zu to do), estimated %s of "
               "compute, about %s wall time with --jobs %ld\n",
               plan.size(), o.profile.c_str(), plan.size() - todo, todo,

@@ -5,6 +5,7 @@
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/file_identity.hpp"
 #include "sbptt/core/finite_difference.hpp"
+#include "sbptt/core/instruction_set.hpp"
 #include "sbptt/core/number_text.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/core/types.hpp"

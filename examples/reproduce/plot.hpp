@@ -14,6 +14,7 @@
 
 #include <sbptt/core/instruction_set.hpp>
 
+#include "calibration.hpp"
 #include "options.hpp"
 #include "processes.hpp"
 #include "run_files.hpp"
@@ -72,10 +73,16 @@ inline int plot(const Options& o, const fs::path& own_dir) {
   return 0;
 }
 
+/// --dry-run: every planned command, then the estimate from costs measured on this machine
+/// with the task programs of `bin_dir` (calibration.hpp).
 inline void print_plan(const Options& o, const std::vector<Run>& plan, const fs::path& bin_dir) {
   double estimate = 0;
   std::size_t todo = 0;
   const fs::path runs = fs::path(o.out) / "runs";
+  std::vector<Run> unfinished;
+  for (const auto& run : plan)
+    if (!fs::exists(run_file(runs, run, ".csv"))) unfinished.push_back(run);
+  const MeasuredCosts costs = measure_costs(unfinished, bin_dir, o.threads);
   for (const auto& run : plan) {
     std::string command;
     for (const auto& a : command_line(run, bin_dir, runs, o.threads))
@@ -83,10 +90,10 @@ inline void print_plan(const Options& o, const std::vector<Run>& plan, const fs:
     const bool finished = fs::exists(run_file(runs, run, ".csv"));
     std::printf("%-34s %s%s\n", run.name().c_str(), command.c_str(),
                 finished ? "  (finished)" : "");
-    if (!finished) estimate += run.estimated_seconds(), ++todo;
+    if (!finished) estimate += costs.seconds(run).value_or(run.estimated_seconds()), ++todo;
   }
   std::printf("reproduce: %s build; runs/<name>.log names each run's\n", sbptt::instruction_set());
-  std::printf("%zu runs planned (profile %s, %zu finished, %zu to do), estimated %s of "
+  std::printf("%zu runs planned (profile %s, %zu finished, %zu to do), measured estimate %s of "
               "compute, about %s wall time with --jobs %ld\n",
               plan.size(), o.profile.c_str(), plan.size() - todo, todo,
               format_duration(estimate).c_str(),

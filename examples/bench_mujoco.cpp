@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include <sbptt/core/instruction_set.hpp>
 #include <sbptt/core/rng.hpp>
 #include <sbptt/sim/cartpole.hpp>
 #include <sbptt/sim/mujoco.hpp>
@@ -140,6 +141,9 @@ int main(int argc, char** argv) {
            SBPTT_SOURCE_DIR);
   try {
     if (!cli.parse(argc, argv)) return 0;
+    // MuJoCo's own code is Debian's build, whatever this program was compiled for.
+    std::printf("instruction set: %s (sbptt's analytic rows; libmujoco is Debian's build)\n",
+                instruction_set());
     std::printf("%-38s %10s %12s %10s   ratios to the analytic row\n", "simulator (double)",
                 "step ns", "jacobians ns", "vjp ns");
     for (const Index poles : {1, 2}) cartpole_rows(poles, source, static_cast<int>(repeats));

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "programs/program_runner.hpp"
+#include "sbptt/core/instruction_set.hpp"
 
 namespace fs = std::filesystem;
 using sbptt::testing::printed_loss;
@@ -219,5 +220,28 @@ TEST_CASE("bench and accuracy check --csv before measuring and name the user's p
     CHECK(r.output.find("--csv '/nonexistent/sbptt/x.csv': directory '/nonexistent/sbptt' does "
                         "not exist") != std::string::npos);
     CHECK(r.output.find("cartpole") == std::string::npos);  // no row was measured
+  }
+}
+
+TEST_CASE("every program that prints timings states the instruction set it was built for",
+          "[programs]") {
+  // The programs are built with this test's flags, so its own instruction_set() is theirs
+  // (test_core_instruction_set checks that name against the CPU and Eigen's packets).
+  const std::string expected = sbptt::instruction_set();
+  const fs::path out = scratch("isa_dry_run");
+  struct Case {
+    std::string program, arguments;
+  };
+  for (const Case& c :
+       {Case{"cartpole", "--epochs 0 --samples 2"}, Case{"guidance", "--epochs 0 --samples 2"},
+        Case{"quantum", "--epochs 0 --samples 2"},
+        Case{"bench", "--tasks cartpole1 --scalars float --methods R --repeats 1"},
+        Case{"bench_mujoco", "--repeats 1"}, Case{"accuracy", ""},
+        Case{"reproduce", "--dry-run --tasks cartpole --complexities 1 --methods R --seeds 1 "
+                          "--epochs 1 --samples 2 --out " + out.string()}}) {
+    const Result r = run(c.program, c.arguments);
+    INFO(c.program << " " << c.arguments << "\n" << r.output);
+    CHECK(r.status == 0);
+    CHECK(r.output.find(expected) != std::string::npos);
   }
 }

@@ -1,4 +1,4 @@
-// The paper's multi-pole cart-pole swing-up (paper.md §5): one force swings 1–4 poles up within
+// The paper's multi-pole cart-pole swing-up (docs/paper.md §5): one force swings 1–4 poles up within
 // T = 1 s. MLP 2×100 tanh with a zeroed last kernel, final-state loss 1 − mean cos θ_i.
 //   cartpole --poles 4 --method C --clip norm --epochs 50 --csv out.csv
 //   cartpole --poles 4 --physical     poles coupled through the cart (CartPoleModel::Physical)

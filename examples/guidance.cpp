@@ -1,4 +1,4 @@
-// The paper's guidance-by-repulsion (herding) task (paper.md §4): drivers, steered by radial and
+// The paper's guidance-by-repulsion (herding) task (docs/paper.md §4): drivers, steered by radial and
 // tangential gains, herd evaders to the origin. MLP 2×100 tanh with a zeroed last kernel;
 // loss: mean squared evader distance over time plus rc · mean(control²).
 //   guidance --rc 0.01 --method C --epochs 50 --csv out.csv

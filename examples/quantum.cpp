@@ -1,4 +1,4 @@
-// The paper's quantum control task (paper.md §6): a field u(t) · x drives a particle in a 1-D
+// The paper's quantum control task (docs/paper.md §6): a field u(t) · x drives a particle in a 1-D
 // well from a superposition of the two lowest states to an excited state. The CNN of the
 // reference (conv k3 s2 ×2, 60 channels, dense) with a random last layer; loss: summed
 // infidelity over 128 steps. --target counts as the paper's plots (0 = ground state).

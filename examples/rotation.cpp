@@ -1,5 +1,5 @@
 // Adam on a rotational update field, and what the sign combination does about it
-// (paper.md §3.2, the repository's "Adam with Rotation" figure).
+// (docs/paper.md §3.2, the repository's "Adam with Rotation" figure).
 //
 // Loss L = θ1² + θ2², start (2, 4), 200 Adam iterations, three update fields:
 //   plain     v = θ                        (∇(L/2); Adam is invariant to a positive scale of

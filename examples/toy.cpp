@@ -1,4 +1,4 @@
-// The paper's Fig. 1 toy problem (paper.md §3.1): x' = x + c with c = θ1 x² + θ2 x, from
+// The paper's Fig. 1 toy problem (docs/paper.md §3.1): x' = x + c with c = θ1 x² + θ2 x, from
 // x_0 = −0.3 to the target 2 in 4 steps, L = ½ (x_4 − 2)². Parameters start at 0 unless
 // --init-params gives them (two lines: θ1, θ2).
 //   toy --init-params theta.txt --dump-gradients g.csv

@@ -4,14 +4,7 @@
 # the test, and so does a plain consumer compiled for the same instruction set as the native one
 # when that is wider than SSE2 (sbptt::sbptt must not force -march=native on consumers).
 file(REMOVE_RECURSE ${WORK_DIR})
-function(run_step)
-  execute_process(COMMAND ${ARGN} RESULT_VARIABLE result OUTPUT_VARIABLE out ERROR_VARIABLE err)
-  if(NOT result EQUAL 0)
-    message(FATAL_ERROR "step failed (${result}): ${ARGN}\n${out}\n${err}")
-  endif()
-  message(STATUS "${out}")
-  set(output "${out}" PARENT_SCOPE)
-endfunction()
+include(${CMAKE_CURRENT_LIST_DIR}/run_step.cmake)
 run_step(${CMAKE_COMMAND} -S ${SOURCE_DIR} -B ${WORK_DIR}/library -G ${GENERATOR}
          -DSBPTT_BUILD_TESTS=OFF -DSBPTT_BUILD_EXAMPLES=OFF -DCMAKE_INSTALL_PREFIX=${WORK_DIR}/prefix)
 run_step(${CMAKE_COMMAND} --install ${WORK_DIR}/library)
@@ -19,9 +12,9 @@ run_step(${CMAKE_COMMAND} -S ${SOURCE_DIR}/examples/consumer -B ${WORK_DIR}/cons
          -DCMAKE_PREFIX_PATH=${WORK_DIR}/prefix -DCMAKE_BUILD_TYPE=Release)
 run_step(${CMAKE_COMMAND} --build ${WORK_DIR}/consumer)
 run_step(${WORK_DIR}/consumer/consumer)
-string(REGEX MATCH "^[^ ]+" plain "${output}")
+string(REGEX MATCH "^[^ ]+" plain "${step_output}")
 run_step(${WORK_DIR}/consumer/consumer_native)
-string(REGEX MATCH "^[^ ]+" native "${output}")
+string(REGEX MATCH "^[^ ]+" native "${step_output}")
 if(plain STREQUAL native AND NOT native STREQUAL "SSE2")
   message(FATAL_ERROR "the plain consumer was compiled for ${plain}, as the native one: "
                       "sbptt::sbptt forces the build machine's instruction set on consumers")

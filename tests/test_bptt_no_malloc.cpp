@@ -45,6 +45,8 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 #include <array>
 
+#include "sbptt/objectives/cartpole.hpp"
+#include "sbptt/objectives/quantum.hpp"
 #include "sbptt/bptt/engine.hpp"
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"

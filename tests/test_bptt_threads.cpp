@@ -9,6 +9,9 @@
 #include <utility>
 #include <vector>
 
+#include "sbptt/objectives/cartpole.hpp"
+#include "sbptt/objectives/guidance.hpp"
+#include "sbptt/objectives/quantum.hpp"
 #include "sbptt/bptt/engine.hpp"
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"

@@ -1,5 +1,5 @@
 // The paper's Fig. 1 toy problem: P(x, c) = x + c, c = θ1 x² + θ2 x (a user-defined
-// controller), x_0 = −0.3, target 2, 4 steps, L = ½ (x_4 − 2)². Values: paper.md §3.1.
+// controller), x_0 = −0.3, target 2, 4 steps, L = ½ (x_4 − 2)². Values: docs/paper.md §3.1.
 #include <catch2/catch.hpp>
 
 #include <array>
@@ -86,7 +86,7 @@ struct Row {
   std::array<double, 2> regular, modified, combined;
 };
 
-// paper.md §3.1 (6 significant digits as printed there).
+// docs/paper.md §3.1 (6 significant digits as printed there).
 const Row table[] = {
     {{0, 0}, -0.3, 2.645, {-0.828, 2.76}, {-0.828, 2.76}, {-0.828, 2.76}},
     {{1, 1}, -0.996677, 4.49004, {-2.91843, 3.21987}, {-5.44069, 7.52841}, {-5.44069, 7.52841}},
@@ -99,7 +99,7 @@ const Row table[] = {
 
 }  // namespace
 
-TEMPLATE_TEST_CASE("toy: g_R, g_M and g_C match the table of paper.md §3.1", "[bptt][toy]", float,
+TEMPLATE_TEST_CASE("toy: g_R, g_M and g_C match the table of docs/paper.md §3.1", "[bptt][toy]", float,
                    double) {
   Toy<TestType> toy;
   for (const Row& row : table) {

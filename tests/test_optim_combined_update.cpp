@@ -72,7 +72,7 @@ TEMPLATE_TEST_CASE("combine reproduces the paper's toy-problem table", "[optim][
                    double) {
   using Scalar = TestType;
   Vector<Scalar> out;
-  // paper.md §3.1, θ = (2, −1): the vanishing regular gradient disagrees in the 2nd component.
+  // docs/paper.md §3.1, θ = (2, −1): the vanishing regular gradient disagrees in the 2nd component.
   const Vector<Scalar> g_r1 = vec<Scalar>({-2.11568e-3, -2.05214e-2});
   const Vector<Scalar> g_m1 = vec<Scalar>({-0.253321, 0.0935972});
   sbptt::combine(g_m1, g_r1, out);

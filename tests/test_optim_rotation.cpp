@@ -1,4 +1,4 @@
-// The rotation picture of paper.md §3.2 (and examples/rotation.cpp) as a check: on the bowl
+// The rotation picture of docs/paper.md §3.2 (and examples/rotation.cpp) as a check: on the bowl
 // L = θ1² + θ2² from (2, 4), Adam converges on the gradient field, stalls on the rotated field,
 // and the sign combination of the two recovers most of the progress.
 #include <catch2/catch.hpp>

@@ -10,6 +10,7 @@
 #include <thread>
 #include <vector>
 
+#include "sbptt/objectives/cartpole.hpp"
 #include "sbptt/bptt/objective.hpp"
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/finite_difference.hpp"

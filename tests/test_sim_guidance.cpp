@@ -14,6 +14,7 @@
 #include <thread>
 #include <vector>
 
+#include "sbptt/objectives/guidance.hpp"
 #include "sbptt/bptt/engine.hpp"
 #include "sbptt/bptt/objective.hpp"
 #include "sbptt/core/concepts.hpp"

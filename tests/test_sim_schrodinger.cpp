@@ -17,6 +17,7 @@
 #include <thread>
 #include <vector>
 
+#include "sbptt/objectives/quantum.hpp"
 #include "sbptt/core/finite_difference.hpp"
 #include "sbptt/sim/schrodinger.hpp"
 

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include "sbptt/objectives/cartpole.hpp"
+#include "sbptt/objectives/guidance.hpp"
 #include "sbptt/bptt/engine.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/nn/init.hpp"

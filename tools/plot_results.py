@@ -4,7 +4,7 @@
     python3 tools/plot_results.py OUT_DIR [--window 30]
 
 Reads OUT_DIR/summary.csv (written by examples/reproduce) and the training logs
-OUT_DIR/runs/<run>.csv it names (DESIGN §4), and draws into OUT_DIR/plots/:
+OUT_DIR/runs/<run>.csv it names (docs/formats.md), and draws into OUT_DIR/plots/:
 
 - <task>_test_loss.png: the paper's figures. Test loss against epoch, smoothed with a trailing
   moving average (30 epochs, like the paper; the first epochs average what exists so far), one

@@ -1,5 +1,5 @@
 // Smallest downstream program: the paper's toy problem through the installed headers.
-// Exits non-zero unless the engine reproduces g_R at θ = (0, 0) from paper.md §3.1.
+// Exits non-zero unless the engine reproduces g_R at θ = (0, 0) from docs/paper.md §3.1.
 #include <cmath>
 #include <cstdio>
 

@@ -96,7 +96,7 @@ Profile quick_profile() {
 }
 
 Profile paper_profile() {
-  // The published grids (paper.md §4–§6): 1000 epochs, 256 + 256 samples, one seed each.
+  // The published grids (docs/paper.md §4–§6): 1000 epochs, 256 + 256 samples, one seed each.
   std::vector<Setting> s;
   for (double poles : {1, 2, 3, 4}) s.push_back({cartpole, poles, 1, 1000, 256});
   for (double rc : {1.0, 0.1, 0.01, 0.001}) s.push_back({guidance, rc, 1, 1000, 256});

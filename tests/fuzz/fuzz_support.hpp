@@ -28,7 +28,7 @@ template <class Scalar>
   return count == 0 || std::memcmp(a, b, count * sizeof(Scalar)) == 0;
 }
 
-/// The blanks the interchange formats allow around a number (DESIGN §4): space, tab, CR.
+/// The blanks the interchange formats allow around a number (docs/formats.md): space, tab, CR.
 [[nodiscard]] inline bool is_blank(char c) { return c == ' ' || c == '\t' || c == '\r'; }
 
 [[nodiscard]] inline std::string_view trim(std::string_view text) {

@@ -5,6 +5,7 @@
 #include <string_view>
 #include <vector>
 
+#include "sbptt/core/sign.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt {
@@ -42,21 +43,12 @@ struct SweepDiagnostics {
 /// Diagnostics comparing the modified vector g_M with the regular gradient g_R.
 struct ComparisonDiagnostics {
   double cos_modified_regular = 0;  ///< cos(g_M, g_R); 0 when either is zero
-  double agree_fraction = 0;        ///< fraction of components with sign(g_M) == sign(g_R)
+  double agree_fraction = 0;        ///< `sign_agreement(g_M, g_R)` (core/sign.hpp)
 };
 
-namespace detail {
 
-/// TF's sign: -1, 0 or +1, and NaN for NaN (so it never compares equal).
-template <class Scalar>
-[[nodiscard]] Scalar tf_sign(Scalar v) {
-  if (std::isnan(v)) return v;
-  return static_cast<Scalar>((Scalar(0) < v) - (v < Scalar(0)));
-}
-
-}  // namespace detail
-
-/// cos(g_M, g_R) and the sign-agreement fraction (sign(0) = 0; NaN never agrees).
+/// cos(g_M, g_R) and the sign-agreement fraction of `sign_agreement` (core/sign.hpp: sign(0) =
+/// 0, NaN never agrees, 1 for empty vectors) of g_M and g_R (size n each).
 template <class Scalar>
 [[nodiscard]] ComparisonDiagnostics compare(const Vector<Scalar>& modified,
                                             const Vector<Scalar>& regular) {
@@ -64,11 +56,7 @@ template <class Scalar>
   const double dot = static_cast<double>(modified.dot(regular));
   const double norms = static_cast<double>(modified.norm() * regular.norm());
   result.cos_modified_regular = norms > 0 ? dot / norms : 0.0;
-  Index agree = 0;
-  for (Index i = 0; i < modified.size(); ++i)
-    agree += detail::tf_sign(modified(i)) == detail::tf_sign(regular(i)) ? 1 : 0;
-  result.agree_fraction =
-      modified.size() > 0 ? static_cast<double>(agree) / static_cast<double>(modified.size()) : 0.0;
+  result.agree_fraction = static_cast<double>(sign_agreement(modified, regular));
   return result;
 }
 

@@ -36,8 +36,8 @@
 #include "sbptt/bptt/trajectory.hpp"
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/error.hpp"
-#include "sbptt/detail/engine_buffers.hpp"
-#include "sbptt/detail/parallel.hpp"
+#include "sbptt/bptt/engine_buffers.hpp"
+#include "sbptt/core/parallel.hpp"
 
 namespace sbptt {
 

@@ -11,16 +11,10 @@
 /// control. The batch loss is the mean of L over samples.
 #include <concepts>
 
+#include "sbptt/core/concepts.hpp"  // StateLoss
 #include "sbptt/core/types.hpp"
 
 namespace sbptt {
-
-/// A per-sample state loss: `Scalar operator()(const State& x, State* grad) const` returns
-/// ℓ(x) and, when `grad` is not null, sets `*grad = ∂ℓ/∂x` (state_dim).
-template <class Loss, class State>
-concept StateLoss = requires(const Loss& loss, const State& x, State* grad) {
-  { loss(x, grad) } -> std::convertible_to<typename State::Scalar>;
-};
 
 /// Which states the state loss scores.
 enum class LossTiming {

@@ -167,4 +167,11 @@ consteval bool static_assert_controller() {
   return true;
 }
 
+/// A per-sample state loss: `Scalar operator()(const State& x, State* grad) const` returns
+/// ℓ(x) and, when `grad` is not null, sets `*grad = ∂ℓ/∂x` (state_dim).
+template <class Loss, class State>
+concept StateLoss = requires(const Loss& loss, const State& x, State* grad) {
+  { loss(x, grad) } -> std::convertible_to<typename State::Scalar>;
+};
+
 }  // namespace sbptt

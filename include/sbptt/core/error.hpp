@@ -20,7 +20,7 @@ public:
   using Error::Error;
 };
 
-/// Text that is not in the expected interchange format (DESIGN §4).
+/// Text that is not in the expected interchange format (docs/formats.md).
 class ParseError : public Error {
 public:
   using Error::Error;

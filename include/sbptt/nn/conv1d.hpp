@@ -5,7 +5,7 @@
 /// entry (p, c) at row p·C_in + c. The output (P positions × C_out channels,
 /// P = (L − K)/s + 1, trailing positions that do not fill a window are dropped) uses the same
 /// layout, so flattening a conv output for a following dense layer costs nothing: the column
-/// already *is* the position-major flatten of DESIGN §4.
+/// already *is* the position-major flatten of docs/formats.md.
 ///
 /// Parameter layout (PyTorch `Conv1d` order): weight (C_out × C_in × K) row-major, then the
 /// bias (C_out). Read as a C_out × (C_in·K) row-major matrix W, with column index c·K + j:

@@ -1,7 +1,7 @@
 #pragma once
 /// \file Fully connected layer `y = f(W x + b)`.
 ///
-/// Parameter layout inside the flat vector (DESIGN §4, PyTorch `Linear` order): the weight W
+/// Parameter layout inside the flat vector (docs/formats.md, PyTorch `Linear` order): the weight W
 /// (outputs × inputs) row-major, then the bias b (outputs). The layer reads and writes its slice
 /// through `Eigen::Map`s, so the network's single parameter vector is never copied.
 #include <string>

@@ -2,7 +2,7 @@
 /// \file Sequential network of dense and 1-D convolution layers with one flat parameter
 /// vector: the library's `Controller`.
 ///
-/// Parameter order (DESIGN §4): layers from input to output, each layer's weight then its bias
+/// Parameter order (docs/formats.md): layers from input to output, each layer's weight then its bias
 /// (see dense.hpp and conv1d.hpp for the per-layer layouts). A conv output feeds a dense layer
 /// with no reshape, because samples are stored position-major throughout.
 ///

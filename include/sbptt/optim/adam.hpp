@@ -30,6 +30,7 @@
 
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
+#include "sbptt/optim/step_checks.hpp"
 
 namespace sbptt {
 
@@ -42,33 +43,6 @@ struct AdamOptions {
   Scalar epsilon = Scalar(1e-7);        ///< added to √v (not √v̂), finite and > 0
 };
 
-namespace detail {
-
-template <std::floating_point Scalar>
-void require_learning_rate(Scalar learning_rate, const char* who) {
-  require(std::isfinite(learning_rate) && learning_rate > Scalar(0), who, ": learning rate = ",
-          learning_rate, "; expected a finite number > 0");
-}
-
-/// β must leave some weight on the new value (β < 1) and be a decay (β ≥ 0).
-template <std::floating_point Scalar>
-void require_decay(Scalar beta, const char* who, const char* name) {
-  require(beta >= Scalar(0) && beta < Scalar(1), who, ": ", name, " = ", beta,
-          "; expected a number in [0, 1)");
-}
-
-/// The step's two vectors must match each other and, once state exists, the state.
-template <std::floating_point Scalar>
-void require_step_sizes(const Vector<Scalar>& params, const Vector<Scalar>& grad,
-                        Index state_size, bool has_state, const char* who) {
-  require(grad.size() == params.size(), who, ": gradient size = ", grad.size(),
-          ", expected the parameter size ", params.size());
-  require(!has_state || params.size() == state_size, who, ": parameter size = ", params.size(),
-          ", expected ", state_size,
-          " (the size the optimizer state was created with; call reset() to start over)");
-}
-
-}  // namespace detail
 
 /// Adam on a flat parameter vector, Keras/TF form (see the file comment for the formula and
 /// how it differs from PyTorch). State (m, v, t) is created on the first `step`.

@@ -16,6 +16,7 @@
 /// is what TF does (an overflowing regular gradient is masked out and training continues). For
 /// g_M it is our choice: with a sign that maps NaN to 0, as Eigen's older sign functor under
 /// tf.sign does, a NaN in g_M would pass wherever g_R is 0, and poison the optimizer state.
+/// The sign and the agreement rule are core/sign.hpp's, shared with the diagnostics.
 ///
 /// Order, as in the reference: combine → clip → optimizer step. `ClippedUpdate` is the clip →
 /// step half and serves the non-combined modes; `CombinedUpdate` adds the combination in front
@@ -25,6 +26,7 @@
 #include <utility>
 
 #include "sbptt/core/error.hpp"
+#include "sbptt/core/sign.hpp"  // tf_sign, signs_agree, sign_agreement
 #include "sbptt/core/types.hpp"
 #include "sbptt/optim/clip.hpp"
 
@@ -40,18 +42,6 @@ concept FlatOptimizer = std::floating_point<typename O::Scalar> &&
     };
 
 namespace detail {
-
-/// TF's sign for real numbers: −1, 0 or +1, and 0 for NaN (callers test NaN separately).
-template <std::floating_point Scalar>
-[[nodiscard]] int tf_sign(Scalar x) {
-  return static_cast<int>(x > Scalar(0)) - static_cast<int>(x < Scalar(0));
-}
-
-/// Whether component i keeps g_M under the combination rule (see the file comment).
-template <std::floating_point Scalar>
-[[nodiscard]] bool signs_agree(Scalar modified, Scalar regular) {
-  return !std::isnan(modified) && !std::isnan(regular) && tf_sign(modified) == tf_sign(regular);
-}
 
 /// `combine`, returning how many components kept g_M.
 template <std::floating_point Scalar>
@@ -72,12 +62,6 @@ Index combine_counting(const Vector<Scalar>& g_modified, const Vector<Scalar>& g
   return agreeing;
 }
 
-/// agreeing / n, and 1 for n = 0 (nothing disagrees).
-template <std::floating_point Scalar>
-[[nodiscard]] Scalar agreement_fraction(Index agreeing, Index n) {
-  return n == 0 ? Scalar(1) : static_cast<Scalar>(agreeing) / static_cast<Scalar>(n);
-}
-
 }  // namespace detail
 
 /// The combined vector g_C (size n) from g_M and g_R (size n each); throws `InvalidArgument`
@@ -86,20 +70,6 @@ template <std::floating_point Scalar>
 void combine(const Vector<Scalar>& g_modified, const Vector<Scalar>& g_regular,
              Vector<Scalar>& out) {
   (void)detail::combine_counting(g_modified, g_regular, out);
-}
-
-/// Fraction of the n components whose signs agree under the combination rule (two zeros
-/// agree, NaN never does), i.e. the share of g_M that `combine` keeps; 1 for n = 0.
-template <std::floating_point Scalar>
-[[nodiscard]] Scalar sign_agreement(const Vector<Scalar>& g_modified,
-                                    const Vector<Scalar>& g_regular) {
-  detail::require(g_modified.size() == g_regular.size(), "sign_agreement: g_R size = ",
-                  g_regular.size(), ", expected the g_M size ", g_modified.size());
-  Index agreeing = 0;
-  for (Index i = 0; i < g_modified.size(); ++i) {
-    agreeing += detail::signs_agree(g_modified(i), g_regular(i)) ? 1 : 0;
-  }
-  return detail::agreement_fraction<Scalar>(agreeing, g_modified.size());
 }
 
 /// clip → `Inner::step`: the update path of the non-combined modes (R, M, S, N). Keeps a

@@ -16,7 +16,7 @@
 
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
-#include "sbptt/optim/adam.hpp"  // detail::require_learning_rate, require_decay, require_step_sizes
+#include "sbptt/optim/step_checks.hpp"
 
 namespace sbptt {
 

@@ -38,7 +38,6 @@
 
 #include <Eigen/Core>
 
-#include "sbptt/bptt/objective.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/core/types.hpp"
@@ -413,17 +412,6 @@ struct CartPoleUprightLoss {
     return Scalar(1) - cos_sum * inv_poles;
   }
 };
-
-/// The paper's cart-pole objective: `CartPoleUprightLoss` on the final state only, no control
-/// regulariser.
-template <class Scalar = double, int Poles = 1>
-[[nodiscard]] Objective<CartPoleUprightLoss<Scalar, Poles>> cartpole_objective() {
-  Objective<CartPoleUprightLoss<Scalar, Poles>> objective;
-  objective.timing = LossTiming::Final;
-  objective.step_weight = 1.0;
-  objective.control_weight = 0.0;
-  return objective;
-}
 
 /// Draws `count` initial states of the paper's distribution (state_dim × count, one sample per
 /// column): x, ẋ, θ̇_i ~ U[−1, 1), θ_i = π + U[−1, 1)·π/6 (hanging ± 30°). Draws are taken per

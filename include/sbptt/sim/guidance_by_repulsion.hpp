@@ -33,7 +33,6 @@
 
 #include <Eigen/Core>
 
-#include "sbptt/bptt/objective.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/core/types.hpp"
@@ -334,33 +333,6 @@ public:
 private:
   Index drivers_, evaders_;
 };
-
-/// The paper's guidance objective for a simulator: `GuidanceLoss` at every step n = 1..Nt
-/// weighted 1/Nt (a time mean), plus rc · mean_{n,d,k} c_{n,d,k}². Throws unless rc is finite
-/// and ≥ 0.
-template <class Scalar, int Drivers, int Evaders>
-[[nodiscard]] Objective<GuidanceLoss<Scalar, Drivers, Evaders>> guidance_objective(
-    const GuidanceByRepulsion<Scalar, Drivers, Evaders>& sim, double rc) {
-  detail::require(std::isfinite(rc) && rc >= 0, "guidance_objective: rc = ", rc,
-                  ", expected a finite value >= 0");
-  Objective<GuidanceLoss<Scalar, Drivers, Evaders>> objective{
-      GuidanceLoss<Scalar, Drivers, Evaders>(sim.drivers(), sim.evaders())};
-  objective.timing = LossTiming::Continuous;
-  objective.step_weight = 1.0 / static_cast<double>(sim.steps());
-  objective.control_weight = rc;
-  return objective;
-}
-
-/// Same for fixed agent counts without a simulator at hand: `steps` is the rollout length m.
-template <class Scalar = double, int Drivers = 2, int Evaders = 4>
-  requires(Drivers != Eigen::Dynamic && Evaders != Eigen::Dynamic)
-[[nodiscard]] Objective<GuidanceLoss<Scalar, Drivers, Evaders>> guidance_objective(
-    double rc, Index steps = 60) {
-  detail::require(steps >= 1, "guidance_objective: steps = ", steps, ", expected >= 1");
-  GuidanceOptions options;
-  options.steps = steps;
-  return guidance_objective(GuidanceByRepulsion<Scalar, Drivers, Evaders>(options), rc);
-}
 
 /// Draws `count` initial states of the paper's distribution (state_dim × count, one sample per
 /// column; all velocities 0). Per sample, in this order: each driver radius ~ U[3, 4) (uniform

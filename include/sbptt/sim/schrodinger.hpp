@@ -17,7 +17,7 @@
 /// M = U₁⁻¹U₂ is the Cayley transform of the Hermitian hH, hence unitary for every u: the norm
 /// is kept exactly, and in the real layout A = ∂ψ'/∂ψ is orthogonal.
 ///
-/// State layout (DESIGN §4): real, size 2·Nx, (Re ψ_1, Im ψ_1, Re ψ_2, Im ψ_2, …), the memory
+/// State layout (docs/formats.md): real, size 2·Nx, (Re ψ_1, Im ψ_1, Re ψ_2, Im ψ_2, …), the memory
 /// layout of a complex vector. Control: u, a 1-vector.
 ///
 /// Derivatives. A complex-linear map m acts on one (Re, Im) pair as the 2×2 block
@@ -37,7 +37,6 @@
 #include <numbers>
 #include <type_traits>
 
-#include "sbptt/bptt/objective.hpp"
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/rng.hpp"
@@ -366,21 +365,6 @@ private:
   Index target_index_;
   State target_;
 };
-
-/// The paper's objective: L = Σ_{n=1..m} (1 − |⟨φ_target, ψ_n⟩|²), summed over time
-/// (Continuous timing, step weight 1, no control regulariser); the batch mean is the engine's.
-template <class Scalar, int Nx>
-[[nodiscard]] Objective<QuantumInfidelityLoss<Scalar, Nx>> quantum_objective(
-    const Schrodinger1D<Scalar, Nx>& sim, Index target) {
-  return {QuantumInfidelityLoss<Scalar, Nx>(sim, target), LossTiming::Continuous, 1.0, 0.0};
-}
-
-/// Same for a fixed grid size, e.g. `quantum_objective(5)` for the paper's hardest target.
-template <class Scalar = double, int Nx = 32>
-  requires(Nx != Eigen::Dynamic)
-[[nodiscard]] Objective<QuantumInfidelityLoss<Scalar, Nx>> quantum_objective(Index target) {
-  return quantum_objective(Schrodinger1D<Scalar, Nx>(), target);
-}
 
 static_assert(Simulator<Schrodinger1D<double>>);
 static_assert(Simulator<Schrodinger1D<float, 8>>);

@@ -284,14 +284,7 @@ private:
         last_norm2_ = static_cast<double>(clipped_.last_norm2());
       }
     }
-    if (!bad && !controller_.params().allFinite()) {
-      for (Index p = 0; p < controller_.params().size(); ++p) {
-        if (!std::isfinite(controller_.params()(p))) {
-          bad = NonFinite{Quantity::Gradient, -1, p, static_cast<double>(controller_.params()(p))};
-          break;
-        }
-      }
-    }
+    if (!bad) bad = detail::first_non_finite_component(controller_.params());
     if (bad) {
       controller_.params() = backup_;
       optimizer() = saved_optimizer_;

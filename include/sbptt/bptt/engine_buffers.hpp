@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "sbptt/bptt/diagnostics.hpp"
+#include "sbptt/core/non_finite.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt::detail {
@@ -79,15 +80,9 @@ private:
 template <class Scalar>
 void note_first_non_finite(Quantity quantity, Index step, const Matrix<Scalar>& values,
                            std::optional<NonFinite>& slot, Index first = 0) {
-  if (values.allFinite()) return;
-  for (Index b = 0; b < values.cols(); ++b) {
-    for (Index r = 0; r < values.rows(); ++r) {
-      if (!std::isfinite(values(r, b))) {
-        slot = NonFinite{quantity, step, first + b, static_cast<double>(values(r, b))};
-        return;
-      }
-    }
-  }
+  if (const auto at = first_non_finite(values))
+    slot = NonFinite{quantity, step, first + at->column,
+                     static_cast<double>(values(at->row, at->column))};
 }
 
 template <class Scalar, class Workspace, class Scratch>
@@ -99,12 +94,12 @@ void EvaluationChunk<Scalar, Workspace, Scratch>::note(Quantity quantity, Index 
   if (non_finite) order = rank;
 }
 
-/// The first non-finite component of a gradient (step −1, `sample` = parameter index).
+/// The first non-finite component of a gradient or parameter vector (step −1, `sample` =
+/// parameter index).
 template <class Scalar>
 [[nodiscard]] std::optional<NonFinite> first_non_finite_component(const Vector<Scalar>& g) {
-  if (g.allFinite()) return std::nullopt;
-  for (Index p = 0; p < g.size(); ++p)
-    if (!std::isfinite(g(p))) return NonFinite{Quantity::Gradient, -1, p, static_cast<double>(g(p))};
+  if (const auto at = first_non_finite(g))
+    return NonFinite{Quantity::Gradient, -1, at->row, static_cast<double>(g(at->row))};
   return std::nullopt;
 }
 

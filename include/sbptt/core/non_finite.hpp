@@ -1,0 +1,31 @@
+#pragma once
+/// \file The one scan for NaN and Inf: where the first non-finite entry of a matrix or vector
+/// is, so that every report (engine, trainer, programs) names the same entry.
+#include <cmath>
+#include <optional>
+
+#include <Eigen/Core>
+
+#include "sbptt/core/types.hpp"
+
+namespace sbptt {
+
+/// Row and column of an entry.
+struct EntryIndex {
+  Index row = 0;
+  Index column = 0;
+};
+
+/// The first NaN/Inf of `values` (rows × columns, any Eigen expression), scanning column by
+/// column (for a batch: sample by sample); nullopt when every entry is finite. Costs one
+/// vectorised `allFinite` when there is none.
+template <class Derived>
+[[nodiscard]] std::optional<EntryIndex> first_non_finite(const Eigen::DenseBase<Derived>& values) {
+  if (values.allFinite()) return std::nullopt;
+  for (Index c = 0; c < values.cols(); ++c)
+    for (Index r = 0; r < values.rows(); ++r)
+      if (!std::isfinite(values(r, c))) return EntryIndex{r, c};
+  return std::nullopt;  // unreachable: allFinite was false
+}
+
+}  // namespace sbptt

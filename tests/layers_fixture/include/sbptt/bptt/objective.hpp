@@ -1,0 +1,2 @@
+#pragma once
+// A fixture for the layer check: the engine layer, included from below.

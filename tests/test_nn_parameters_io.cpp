@@ -1,4 +1,4 @@
-// The parameters file (DESIGN §4): exact round trips, printf-identical text, and every kind of
+// The parameters file (docs/formats.md): exact round trips, printf-identical text, and every kind of
 // malformed file refused with the file, line and text named.
 #include <catch2/catch.hpp>
 
@@ -143,9 +143,55 @@ TEST_CASE("malformed parameters files are refused with the line and the text", "
   REQUIRE_THROWS_WITH(load("1,5\n", 1), Contains("line 1") && Contains("trailing characters ',5'"));
   REQUIRE_THROWS_WITH(load("++1\n", 1), Contains("line 1") && Contains("'++1'"));
   REQUIRE_THROWS_WITH(load("1\n2\n3\n", 4), Contains("expected 4 numbers, got 3"));
-  REQUIRE_THROWS_WITH(load("1\n2\n3\n4\n5\n", 4), Contains("expected 4 numbers, got 5"));
+  // One number too many is refused at that line, before the rest of the file is read.
+  REQUIRE_THROWS_WITH(load("1\n2\n3\n4\n5\nnot read\n", 4),
+                      Contains("line 5: more than the 4 numbers expected"));
   REQUIRE_THROWS_WITH(load("", 4), Contains("expected 4 numbers, got 0"));
   REQUIRE_NOTHROW(load("1\n2\n3\n4\n", 4));
+}
+
+TEST_CASE("reading a parameters file is bounded and never echoes binary bytes", "[nn][io]") {
+  TempDir dir;
+  const fs::path file = dir.path / "long.txt";
+  // 4 MB of digits and no newline (like /dev/zero): refused after 64 characters, by line 1.
+  write_text(file, std::string(4'000'000, '1'));
+  REQUIRE_THROWS_WITH(sbptt::load_parameters<double>(file, 2),
+                      Contains("line 1: longer than 64 characters") &&
+                          Contains("expected one number per line"));
+  // A number needs at most 25 characters; 64 leaves room for blanks, and no more.
+  write_text(file, std::string(64, ' ') + "1\n2\n");
+  REQUIRE_THROWS_WITH(sbptt::load_parameters<double>(file, 2), Contains("line 1: longer than 64"));
+  write_text(file, std::string(63, ' ') + "1\n2\n");
+  CHECK(sbptt::load_parameters<double>(file, 2)(0) == 1.0);
+  // Bytes of a binary file are shown escaped, never raw.
+  write_text(file, std::string("\x01\x7f\xff\x1b[2J", 7) + "\n");
+  try {
+    (void)sbptt::load_parameters<double>(file, 1);
+    FAIL("a binary line was accepted");
+  } catch (const sbptt::ParseError& e) {
+    const std::string message = e.what();
+    CHECK(message.find("'\\x01\\x7f\\xff\\x1b[2J' is not a number") != std::string::npos);
+    CHECK(message.find('\x1b') == std::string::npos);
+  }
+}
+
+TEST_CASE("a trailing blank line is accepted in parameters files, as in states files",
+          "[nn][io]") {
+  TempDir dir;
+  const fs::path file = dir.path / "trailing.txt";
+  write_text(file, "1.5\n-2\n\n  \n");
+  const auto theta = sbptt::load_parameters<double>(file, 2);
+  CHECK(theta(0) == 1.5);
+  CHECK(theta(1) == -2.0);
+  // In the middle a blank line still means a missing number.
+  write_text(file, "1.5\n\n-2\n");
+  REQUIRE_THROWS_WITH(sbptt::load_parameters<double>(file, 2), Contains("line 2: empty"));
+}
+
+TEST_CASE("a parameters file that cannot be opened says why", "[nn][io]") {
+  REQUIRE_THROWS_WITH(sbptt::load_parameters<double>("/nonexistent/p.txt", 2),
+                      Contains("cannot open '/nonexistent/p.txt' for reading (No such file or "
+                               "directory)"));
 }
 
 TEST_CASE("a failed load leaves the controller unchanged", "[nn][io]") {

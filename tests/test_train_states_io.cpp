@@ -1,4 +1,4 @@
-// The states file (DESIGN §4): exact round trips and a clear error for every malformed input.
+// The states file (docs/formats.md): exact round trips and a clear error for every malformed input.
 #include <catch2/catch.hpp>
 
 #include <filesystem>
@@ -56,4 +56,21 @@ TEST_CASE("states file: unreadable paths are IoErrors naming the path", "[io]") 
   REQUIRE_THROWS_WITH(load_states<double>("/nonexistent/states.csv", 2), Contains("/nonexistent/states.csv"));
   REQUIRE_THROWS_WITH(load_states<double>(std::filesystem::temp_directory_path(), 2), Contains("is a directory"));
   REQUIRE_THROWS_AS(save_states<double>("/nonexistent/dir/s.csv", Matrix<double>::Zero(2, 2)), IoError);
+}
+
+TEST_CASE("states file: reading is bounded by the longest row state_dim numbers can make", "[io]") {
+  const auto path = std::filesystem::temp_directory_path() / "sbptt_states_long.csv";
+  // 4 MB without a newline: refused after 3 × 65 characters.
+  std::ofstream(path, std::ios::binary) << std::string(4'000'000, '0');
+  REQUIRE_THROWS_WITH(load_states<double>(path, 3),
+                      Contains("line 1: longer than 195 characters") &&
+                          Contains("expected a row of 3 numbers"));
+  std::ofstream(path, std::ios::binary) << "1,2,3\n\n";  // a trailing blank line is fine
+  CHECK(load_states<double>(path, 3).cols() == 1);
+  std::filesystem::remove(path);
+}
+
+TEST_CASE("states file: a file that cannot be opened says why", "[io]") {
+  REQUIRE_THROWS_WITH(load_states<double>("/nonexistent/states.csv", 2),
+                      Contains("(No such file or directory)"));
 }

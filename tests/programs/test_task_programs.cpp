@@ -234,6 +234,22 @@ TEST_CASE("unreadable inputs and unwritable outputs fail at once with exit 1", "
   }
 }
 
+TEST_CASE("a parameters or states file without newlines is refused at once", "[programs]") {
+  // /dev/zero never ends: a reader without a bound would fill the memory (capped here, so that
+  // a regression fails instead of taking the machine down).
+  const std::string cap = sbptt::testing::address_sanitizer ? "" : "ulimit -v 4000000; ";
+  for (const auto& [flag, expected] :
+       {std::pair<std::string, std::string>{"--init-params", "line 1: longer than 64 characters"},
+        {"--init-states", "line 1: longer than 260 characters"}}) {
+    const Result r = run("cartpole", "--epochs 1 --samples 8 --steps 3 " + flag + " /dev/zero", cap);
+    INFO(flag << "\n" << r.output);
+    CHECK(r.status == 1);
+    CHECK(r.output.find(expected) != std::string::npos);
+    CHECK(r.output.find("\\x00\\x00") != std::string::npos);  // shown escaped, not raw
+    CHECK(r.output.find('\0') == std::string::npos);
+  }
+}
+
 TEST_CASE("running out of memory names the sizes asked for", "[programs]") {
   // Under ASan the programs cannot even start in 2 GB of address space (its shadow memory).
   if (sbptt::testing::address_sanitizer) return;

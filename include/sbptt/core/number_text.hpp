@@ -1,5 +1,6 @@
 #pragma once
-/// \file Exact number ↔ text conversion for the interchange files (DESIGN §4).
+/// \file Exact number ↔ text conversion for the interchange files (docs/formats.md), and the
+/// bounded line reader their loaders share.
 ///
 /// `std::to_chars` / `std::from_chars` give the printf `%.17g` (double) or `%.9g` (float)
 /// strings and exact round-trips, but ignore the global C locale (printf would write "0,5"
@@ -7,6 +8,8 @@
 /// (spaces, tabs, a CR from a Windows editor), nothing else.
 #include <charconv>
 #include <cmath>
+#include <cstdio>
+#include <streambuf>
 #include <string>
 #include <string_view>
 #include <system_error>
@@ -27,6 +30,48 @@ inline constexpr int round_trip_digits = std::is_same_v<Scalar, float> ? 9 : 17;
   return text;
 }
 
+/// The longest field a number of our files can need: a sign, 17 significant digits, a point
+/// and an exponent such as e-308 are 25 characters; the rest allows blanks around it.
+inline constexpr std::size_t max_number_chars = 64;
+
+/// `text` as it may be shown in a message: at most `max_chars` characters, every byte that is
+/// not printable ASCII written as \xNN, so that a binary file is never echoed to a terminal.
+[[nodiscard]] inline std::string printable(std::string_view text, std::size_t max_chars = 40) {
+  std::string shown;
+  for (std::size_t i = 0; i < text.size() && i < max_chars; ++i) {
+    const auto byte = static_cast<unsigned char>(text[i]);
+    if (byte >= 0x20 && byte < 0x7f) {
+      shown += static_cast<char>(byte);
+    } else {
+      char escaped[8];
+      std::snprintf(escaped, sizeof escaped, "\\x%02x", static_cast<unsigned>(byte));
+      shown += escaped;
+    }
+  }
+  if (text.size() > max_chars) shown += "...";
+  return shown;
+}
+
+/// What `read_bounded_line` found.
+enum class LineRead { Line, End, TooLong };
+
+/// Reads one line (without its '\n') of at most `max_chars` characters into `line`. Returns
+/// End at the end of the input, TooLong as soon as the line exceeds `max_chars` (the rest is
+/// never read, so a file without newlines such as /dev/zero costs at most `max_chars`).
+[[nodiscard]] inline LineRead read_bounded_line(std::streambuf& in, std::string& line,
+                                                std::size_t max_chars) {
+  line.clear();
+  using Traits = std::streambuf::traits_type;
+  auto c = in.sbumpc();
+  if (Traits::eq_int_type(c, Traits::eof())) return LineRead::End;
+  while (!Traits::eq_int_type(c, Traits::eof()) && Traits::to_char_type(c) != '\n') {
+    if (line.size() == max_chars) return LineRead::TooLong;
+    line += Traits::to_char_type(c);
+    c = in.sbumpc();
+  }
+  return LineRead::Line;
+}
+
 /// Parses one finite number; `where` prefixes every error ("file 'p', line 3").
 template <class Scalar>
 [[nodiscard]] Scalar parse_finite(std::string_view field, const std::string& where) {
@@ -38,15 +83,15 @@ template <class Scalar>
     digits.remove_prefix(1);
   Scalar value{};
   const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
-  require<ParseError>(error != std::errc::invalid_argument, where, ": '", text,
+  require<ParseError>(error != std::errc::invalid_argument, where, ": '", printable(text),
                       "' is not a number");
-  require<ParseError>(error != std::errc::result_out_of_range, where, ": '", text,
+  require<ParseError>(error != std::errc::result_out_of_range, where, ": '", printable(text),
                       "' is out of range for the scalar type");
   require<ParseError>(end == digits.data() + digits.size(), where, ": trailing characters '",
-                      std::string_view(end, static_cast<std::size_t>(
-                                                digits.data() + digits.size() - end)),
-                      "' after the number in '", text, "'");
-  require<ParseError>(std::isfinite(value), where, ": '", text,
+                      printable(std::string_view(end, static_cast<std::size_t>(
+                                                          digits.data() + digits.size() - end))),
+                      "' after the number in '", printable(text), "'");
+  require<ParseError>(std::isfinite(value), where, ": '", printable(text),
                       "' is not finite, expected a finite number");
   return value;
 }

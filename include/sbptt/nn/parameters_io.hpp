@@ -1,5 +1,5 @@
 #pragma once
-/// \file The parameters file (DESIGN §4): plain text, one number per line, in flat-vector order.
+/// \file The parameters file (docs/formats.md): plain text, one number per line, in flat-vector order.
 ///
 /// Numbers are written as printf `%.17g` for double and `%.9g` for float, the shortest fixed
 /// precision that round-trips every value bit for bit (core/number_text.hpp).
@@ -10,6 +10,8 @@
 /// text. Writing goes to a temporary file beside the target, renamed over it at the end, so a
 /// crash never leaves a half-written parameters file.
 #include <cmath>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -41,10 +43,13 @@ void save_parameters(const std::filesystem::path& path, const Vector<Scalar>& th
   write_file_atomically(path.string(), text);
 }
 
-/// Reads a parameters file that must hold exactly `expected` numbers.
+/// Reads a parameters file that must hold exactly `expected` numbers, one per line (blank lines
+/// at the end are ignored, as in states files).
 /// \return the flat parameter vector, `expected` entries
-/// Throws `IoError` if `path` cannot be read, `ParseError` for a malformed line or a wrong count
-/// ("expected N numbers, got M").
+/// Throws `IoError` if `path` cannot be read (with the system's reason), `ParseError` for a
+/// malformed line or a wrong count ("expected N numbers, got M"). Reading is bounded: a line
+/// longer than a number can be, or a number beyond the `expected`-th, is refused at once,
+/// without reading the rest of the file.
 template <class Scalar>
 [[nodiscard]] Vector<Scalar> load_parameters(const std::filesystem::path& path, Index expected) {
   std::error_code error;
@@ -52,18 +57,38 @@ template <class Scalar>
                            "load_parameters: '", path.string(), "' is a directory, expected a "
                            "parameters file");
   std::ifstream in(path, std::ios::binary);
-  detail::require<IoError>(static_cast<bool>(in), "load_parameters: cannot open '",
-                           path.string(), "' for reading");
+  if (!in) {
+    const int reason = errno;
+    throw IoError(detail::concat("load_parameters: cannot open '", path.string(),
+                                 "' for reading (", std::strerror(reason), ")"));
+  }
   std::vector<Scalar> values;
   values.reserve(static_cast<std::size_t>(expected > 0 ? expected : 0));
   std::string line;
-  Index line_number = 0;
-  while (std::getline(in, line)) {
+  Index line_number = 0, blank_run_start = 0;
+  const auto where = [&] {
+    return detail::concat("parameters file '", path.string(), "', line ", line_number);
+  };
+  while (true) {
+    const detail::LineRead read = detail::read_bounded_line(*in.rdbuf(), line,
+                                                            detail::max_number_chars);
+    if (read == detail::LineRead::End) break;
     ++line_number;
-    values.push_back(detail::parse_finite<Scalar>(
-        line, detail::concat("parameters file '", path.string(), "', line ", line_number)));
+    detail::require<ParseError>(read == detail::LineRead::Line, where(), ": longer than ",
+                                detail::max_number_chars, " characters (it starts '",
+                                detail::printable(line), "'); expected one number per line");
+    if (detail::trim_blanks(line).empty()) {  // allowed only at the end of the file
+      if (blank_run_start == 0) blank_run_start = line_number;
+      continue;
+    }
+    detail::require<ParseError>(blank_run_start == 0, "parameters file '", path.string(),
+                                "', line ", blank_run_start,
+                                ": empty, expected one number");
+    detail::require<ParseError>(static_cast<Index>(values.size()) < expected, where(),
+                                ": more than the ", expected, " numbers expected");
+    values.push_back(detail::parse_finite<Scalar>(line, where()));
   }
-  detail::require<IoError>(in.eof(), "load_parameters: reading '", path.string(),
+  detail::require<IoError>(!in.bad(), "load_parameters: reading '", path.string(),
                            "' failed after line ", line_number);
   const auto count = static_cast<Index>(values.size());
   detail::require<ParseError>(count == expected, "parameters file '", path.string(),

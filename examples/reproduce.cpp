@@ -47,11 +47,7 @@ int main(int argc, char** argv) {
   std::vector<Run> plan;
   try {
     options = parse_options(argc, argv);
-    if (options.help) {
-      std::printf("usage: reproduce [flags]\nflags: %s\nSee docs/reproduce.md.\n",
-                  accepted_flags);
-      return 0;
-    }
+    if (options.help) return 0;  // parse_options printed it
     if (!options.python.empty() && !can_execute(options.python))
       throw InvalidArgument(concat("--python '", options.python, "' is no executable program; "
                                    "expected a path or a name on PATH"));

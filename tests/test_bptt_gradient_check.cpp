@@ -8,6 +8,8 @@
 #include "sbptt/bptt/losses.hpp"
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"
+#include "sbptt/objectives/cartpole.hpp"
+#include "sbptt/objectives/guidance.hpp"
 #include "sbptt/sim/cartpole.hpp"
 #include "sbptt/sim/guidance_by_repulsion.hpp"
 #include "sbptt/sim/linear.hpp"

@@ -14,19 +14,13 @@
 #include <sbptt/optim/clip.hpp>
 #include <sbptt/train/method.hpp>
 
-#include "argument_cursor.hpp"
+#include "command_line.hpp"
 #include "flag_values.hpp"
 #include "limits.hpp"
 
 #include "grid.hpp"
 
 namespace reproduce {
-
-inline constexpr const char* accepted_flags =
-    "--profile quick|paper, --tasks cartpole,guidance,quantum, --methods R,M,C,S,N, "
-    "--clips none,value,norm, --complexities LIST, --seeds N, --epochs N, --samples N, "
-    "--float, --jobs N, --threads N, --out DIR, --bin-dir DIR, --dry-run, --emit parallel|slurm, "
-    "--shard K/N, --run NAME, --merge, --no-plot, --python EXE, --plot-script FILE, --help";
 
 struct Options {
   std::string profile = "quick";
@@ -38,18 +32,13 @@ struct Options {
   long jobs = 2;
   long threads = 1;  ///< per task program; not part of a run's identity (see command_line)
   std::string out, bin_dir, python, plot_script;
-  bool dry_run = false, plot = true, help = false, use_float = false;
+  bool dry_run = false, plot = true, help = false, use_float = false;  // help: printed, exit 0
   // What to do with the plan (at most one; running it with --jobs when none is given):
   std::string emit;     ///< "parallel" or "slurm": print or write it for another executor
   bool merge = false;   ///< summary, table and figures from the finished runs; list the rest
   std::string run;      ///< run only the run of this name (what emitted commands do)
   long shard_index = 0, shard_count = 1;  ///< --shard K/N: the runs k with k % N == K - 1
 };
-
-inline std::string non_empty(const std::string& flag, std::string value) {
-  if (value.empty()) throw InvalidArgument(concat(flag, " ''; expected a non-empty path"));
-  return value;
-}
 
 /// Each item of a comma-separated flag value, parsed; a bad item's message names the flag.
 template <class Parse>
@@ -65,75 +54,105 @@ auto parse_items(const std::string& flag, const std::string& text, Parse parse) 
   return list;
 }
 
+inline int parse_task(const std::string& item) {
+  for (int t = 0; t < task_count; ++t)
+    if (item == tasks[t].name) return t;
+  throw InvalidArgument(concat("'", item, "' is not a task; expected cartpole, guidance or "
+                                          "quantum"));
+}
+
+/// --shard K/N: the zero-based K and N.
+inline std::pair<long, long> parse_shard(const std::string& text) {
+  constexpr long count_limit = sbptt::examples::limits::max_count;
+  const auto slash = text.find('/');
+  if (slash == std::string::npos)
+    throw InvalidArgument(concat("--shard '", text, "' is not K/N; expected e.g. 2/3"));
+  const long count = parse_integer("--shard N", text.substr(slash + 1), 1, count_limit);
+  return {parse_integer("--shard K", text.substr(0, slash), 1, count) - 1, count};
+}
+
+/// `text` if it is `first` or `second`, else an error naming the flag and both.
+inline std::string parse_choice(const std::string& flag, const std::string& text,
+                                const std::string& first, const std::string& second) {
+  if (text != first && text != second)
+    throw InvalidArgument(concat(flag, " '", text, "' is unknown; expected ", first, " or ",
+                                 second));
+  return text;
+}
+
 inline Options parse_options(int argc, const char* const* argv) {
   // The task programs' limit: a value they would refuse is refused here, before any run starts.
   constexpr long count_limit = sbptt::examples::limits::max_count;
   Options o;
-  sbptt::examples::ArgumentCursor args(argc, argv);
-  while (args.next()) {
-    const std::string& f = args.flag();
-    if (f == "--profile") {
-      o.profile = args.value();
-      if (o.profile != "quick" && o.profile != "paper")
-        throw InvalidArgument(concat("--profile '", o.profile, "' is unknown; expected quick or "
-                                                               "paper"));
-    } else if (f == "--tasks") {
-      std::vector<int> list;
-      for (const auto& item : parse_list(f, args.value())) {
-        int found = -1;
-        for (int t = 0; t < task_count; ++t)
-          if (item == tasks[t].name) found = t;
-        if (found < 0)
-          throw InvalidArgument(concat("--tasks: '", item, "' is not a task; expected "
-                                                           "cartpole, guidance or quantum"));
-        list.push_back(found);
-      }
-      o.tasks = list;
-    } else if (f == "--methods") {
-      o.methods = parse_items(f, args.value(), [](const std::string& item) {
-        return sbptt::parse_method(item);
-      });
-    } else if (f == "--clips") {
-      o.clips = parse_items(f, args.value(), [](const std::string& item) {
-        return sbptt::parse_clip_mode(item);
-      });
-    } else if (f == "--complexities") {
-      std::vector<double> list;
-      for (const auto& item : parse_list(f, args.value()))
-        list.push_back(parse_number(f, item, 0, 1e9));
-      o.complexities = list;
-    } else if (f == "--seeds") o.seeds = parse_integer(f, args.value(), 1, 1000);
-    else if (f == "--epochs") o.epochs = parse_integer(f, args.value(), 1, count_limit);
-    else if (f == "--samples") o.samples = parse_integer(f, args.value(), 1, count_limit);
-    else if (f == "--jobs") o.jobs = parse_integer(f, args.value(), 1, 256);
-    else if (f == "--threads") o.threads = parse_integer(f, args.value(), 1, 256);
-    else if (f == "--out") o.out = non_empty(f, args.value());
-    else if (f == "--bin-dir") o.bin_dir = non_empty(f, args.value());
-    else if (f == "--python") o.python = non_empty(f, args.value());
-    else if (f == "--plot-script") o.plot_script = non_empty(f, args.value());
-    else if (f == "--dry-run") args.no_value(), o.dry_run = true;
-    else if (f == "--merge") args.no_value(), o.merge = true;
-    else if (f == "--run") o.run = non_empty(f, args.value());
-    else if (f == "--emit") {
-      o.emit = args.value();
-      if (o.emit != "parallel" && o.emit != "slurm")
-        throw InvalidArgument(concat("--emit '", o.emit, "' is unknown; expected parallel or "
-                                                         "slurm"));
-    } else if (f == "--shard") {
-      const std::string text = args.value();
-      const auto slash = text.find('/');
-      if (slash == std::string::npos)
-        throw InvalidArgument(concat("--shard '", text, "' is not K/N; expected e.g. 2/3"));
-      o.shard_count =
-          parse_integer("--shard N", text.substr(slash + 1), 1, count_limit);
-      o.shard_index =
-          parse_integer("--shard K", text.substr(0, slash), 1, o.shard_count) -
-          1;
-    }
-    else if (f == "--float") args.no_value(), o.use_float = true;
-    else if (f == "--no-plot") args.no_value(), o.plot = false;
-    else if (f == "--help") args.no_value(), o.help = true;
-    else args.unknown(accepted_flags);
+  sbptt::examples::CommandLine cli(
+      "reproduce",
+      "Runs the paper's grid (task x complexity x method x clip x seed) with the task programs, "
+      "resumably, here (--jobs), through GNU parallel or Slurm (--emit), or in shards; writes "
+      "summary.csv, a results table and figures. See docs/reproduce.md.");
+  cli.value("--profile", "quick|paper", "the grid and budget: quick (about 10 min) or the "
+            "published settings", o.profile,
+            [&](const std::string& v) { o.profile = parse_choice("--profile", v, "quick", "paper"); });
+  cli.value("--tasks", "LIST", "tasks to run, comma-separated: cartpole, guidance, quantum",
+            "all", [&](const std::string& v) { o.tasks = parse_items("--tasks", v, parse_task); });
+  cli.value("--methods", "LIST", "gradient methods, comma-separated: R, M, C, S, N",
+            "the profile's", [&](const std::string& v) {
+              o.methods = parse_items("--methods", v, [](const std::string& item) {
+                return sbptt::parse_method(item);
+              });
+            });
+  cli.value("--clips", "LIST", "clip modes, comma-separated: none, value, norm",
+            "the profile's", [&](const std::string& v) {
+              o.clips = parse_items("--clips", v, [](const std::string& item) {
+                return sbptt::parse_clip_mode(item);
+              });
+            });
+  cli.value("--complexities", "LIST", "settings to keep, comma-separated (poles, rc or target); "
+            "each a number in [0, 1e9] that the profile has", "all",
+            [&](const std::string& v) {
+              o.complexities = parse_items("--complexities", v, [](const std::string& item) {
+                return parse_number("--complexities", item, 0, 1e9);
+              });
+            });
+  cli.value("--seeds", "N", "seeds per setting (42, 43, ...); an integer in [1, 1000]",
+            "the profile's", [&](const std::string& v) {
+              o.seeds = parse_integer("--seeds", v, 1, 1000);
+            });
+  const std::string count_range = concat("an integer in [1, ", count_limit, "]");
+  cli.value("--epochs", "N", "epochs of every run; " + count_range, "the profile's",
+            [&](const std::string& v) { o.epochs = parse_integer("--epochs", v, 1, count_limit); });
+  cli.value("--samples", "N", "training samples of every run; " + count_range, "the profile's",
+            [&](const std::string& v) {
+              o.samples = parse_integer("--samples", v, 1, count_limit);
+            });
+  cli.flag("--float", "train in float (the paper's precision); default double",
+           [&] { o.use_float = true; });
+  cli.integer("--jobs", o.jobs, 1, 256, "runs at once");
+  cli.integer("--threads", o.threads, 1, 256, "threads of each task program (no part of a "
+              "run's identity)");
+  cli.path("--out", o.out, "output folder", "out/<profile>")->type_name("DIR");
+  cli.path("--bin-dir", o.bin_dir, "folder of the task programs", "beside reproduce")
+      ->type_name("DIR");
+  cli.flag("--dry-run", "print the plan and the measured time estimate; run nothing",
+           [&] { o.dry_run = true; });
+  cli.value("--emit", "parallel|slurm", "print one command per unfinished run for GNU parallel, "
+            "or write a Slurm array script", "none", [&](const std::string& v) {
+              o.emit = parse_choice("--emit", v, "parallel", "slurm");
+            });
+  cli.value("--shard", "K/N", "run only every N-th run from the K-th (1 <= K <= N)", "1/1",
+            [&](const std::string& v) {
+              std::tie(o.shard_index, o.shard_count) = parse_shard(v);
+            });
+  cli.path("--run", o.run, "run only the run of this name (what emitted commands do)")
+      ->type_name("NAME");
+  cli.flag("--merge", "summary, table and figures from the finished runs; list the missing",
+           [&] { o.merge = true; });
+  cli.flag("--no-plot", "skip the figures", [&] { o.plot = false; });
+  cli.path("--python", o.python, "Python interpreter for the figures", "python3")
+      ->type_name("EXE");
+  cli.path("--plot-script", o.plot_script, "plotting script", "tools/plot_results.py");
+  if (!cli.parse(argc, argv)) {
+    o.help = true;
+    return o;
   }
   if (o.out.empty()) o.out = "out/" + o.profile;
   const std::vector<std::pair<bool, const char*>> modes{

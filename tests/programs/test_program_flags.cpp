@@ -77,7 +77,16 @@ TEST_CASE("--help of every program lists each flag with its meaning, default and
       {"accuracy", {{{"--csv", true, false}}}},
       {"rotation",
        {{{"--k", true, true}, {"--lr", true, true}, {"--iterations", true, true},
-         {"--csv", true, false}}}}};
+         {"--csv", true, false}}}},
+      {"reproduce",
+       {{{"--profile", true, false}, {"--tasks", true, false}, {"--methods", true, false},
+         {"--clips", true, false}, {"--complexities", true, true}, {"--seeds", true, true},
+         {"--epochs", true, true}, {"--samples", true, true}, {"--float", false, false},
+         {"--jobs", true, true}, {"--threads", true, true}, {"--out", true, false},
+         {"--bin-dir", true, false}, {"--dry-run", false, false}, {"--emit", true, false},
+         {"--shard", true, false}, {"--run", true, false}, {"--merge", false, false},
+         {"--no-plot", false, false}, {"--python", true, false},
+         {"--plot-script", true, false}}}}};
   for (const Program& program : programs) {
     const Result r = run(program.name, "--help");
     INFO(program.name << " --help\n" << r.output);

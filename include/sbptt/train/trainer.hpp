@@ -1,6 +1,8 @@
 #pragma once
-/// \file The training loop: mini-batches in a fixed order (as the reference), one update per
-/// batch with the chosen method, then an evaluation of the whole train and test sets.
+/// \file The training epoch: mini-batches in a fixed order (as the reference) or reshuffled,
+/// one update per batch with the chosen method, then (unless the caller skips it) an
+/// evaluation of the whole train set and of the test set, if there is one. A whole run with
+/// its log, schedule and checkpoints is `run_training` (train/run.hpp).
 ///
 /// Update of one mini-batch:
 /// - R, M, S, N: one forward pass, one sweep of that mode, clip, optimizer step;

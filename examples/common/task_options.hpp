@@ -69,6 +69,7 @@ struct TaskOptions {
   // task sizes
   long poles = 1;
   bool physical = false;  ///< cart pole and guidance: the physical variants, not the reference quirks
+  bool chain = false;     ///< cart pole: the serial n-link chain (`--poles` links, 1..3)
   long drivers = 2;
   long evaders = 4;
   double rc = 0.1;
@@ -232,6 +233,17 @@ inline void require_float_range(const char* flag, double value) {
              "the physical variant instead of the reference's quirks (docs/simulators.md); "
              "default off",
              [&] { o.physical = true; });
+  if (task == Task::CartPole)
+    cli.value("--model", "reference|physical|chain",
+              "cart-pole equations: the reference's, poles side by side coupled through the cart "
+              "(= --physical), or --poles links hinged end to end (1 to 3; docs/simulators.md)",
+              "reference", [&](const std::string& text) {
+                if (text == "physical") o.physical = true;
+                else if (text == "chain") o.chain = true;
+                else if (text != "reference")
+                  throw InvalidArgument(detail::concat("--model '", text, "' is unknown; expected "
+                                                       "reference, physical or chain"));
+              });
   if (task == Task::Guidance) {
     cli.integer("--drivers", o.drivers, 1, 16, "drivers (2 and 4 evaders run fixed-size)");
     cli.integer("--evaders", o.evaders, 1, 64, "evaders");
@@ -257,6 +269,10 @@ inline void require_float_range(const char* flag, double value) {
   }
   if (!cli.parse(argc, argv)) return false;
 
+  detail::require(!(o.chain && o.physical), "--model chain and --physical both given; expected "
+                                           "one cart-pole model");
+  detail::require(!o.chain || o.poles <= 3, "--poles ", o.poles, " with --model chain; expected "
+                                            "1 to 3 links");
   o.steps_flag = steps;
   o.dt_flag = dt;
   o.horizon_flag = horizon;

@@ -12,6 +12,7 @@
 #include "sbptt/core/sign.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/sim/autodiff.hpp"
+#include "sbptt/sim/cart_chain.hpp"
 #include "sbptt/sim/cartpole.hpp"
 #include "sbptt/sim/guidance_by_repulsion.hpp"
 #include "sbptt/sim/guidance_forces.hpp"

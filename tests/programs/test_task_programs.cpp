@@ -3,6 +3,7 @@
 // paper-setting check that C lowers the 2-pole cart-pole loss within 20 epochs.
 #include <catch2/catch.hpp>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -181,6 +182,28 @@ TEST_CASE("--physical runs the physical variants of the cart pole and guidance",
   const Result toy = run("toy", "--physical");
   CHECK(toy.status == 2);
   CHECK(toy.output.find("unknown flag '--physical'") != std::string::npos);
+}
+
+TEST_CASE("--model chain runs the n-link chain on a cart, 1 to 3 links", "[programs]") {
+  const fs::path dump = scratch("chain_dump.csv");
+  auto loss = [&](const std::string& arguments) {
+    const Result r = run("cartpole", arguments + " --samples 4 --dump-gradients " + dump.string());
+    INFO(arguments << "\n" << r.output);
+    REQUIRE(r.status == 0);
+    return printed_loss(r.output);
+  };
+  // One link is the physical one-pole cart pole; two links hinged end to end are not two poles
+  // side by side.
+  CHECK(std::abs(loss("--poles 1 --model chain") - loss("--poles 1 --physical")) < 1e-12);
+  CHECK(std::abs(loss("--poles 2 --model chain") - loss("--poles 2 --physical")) > 1e-6);
+  CHECK(std::abs(loss("--poles 1 --model physical") - loss("--poles 1 --physical")) == 0);
+  CHECK(std::isfinite(loss("--poles 3 --model chain --float")));
+  const Result four = run("cartpole", "--poles 4 --model chain");
+  CHECK(four.status == 2);
+  CHECK(four.output.find("--poles 4 with --model chain; expected 1 to 3 links") != std::string::npos);
+  const Result unknown = run("cartpole", "--model ladder");
+  CHECK(unknown.status == 2);
+  CHECK(unknown.output.find("--model 'ladder' is unknown") != std::string::npos);
 }
 
 TEST_CASE("bad flags get exit code 2 and a message naming the value", "[programs]") {

@@ -413,24 +413,32 @@ struct CartPoleUprightLoss {
   }
 };
 
-/// Draws `count` initial states of the paper's distribution (state_dim × count, one sample per
-/// column): x, ẋ, θ̇_i ~ U[−1, 1), θ_i = π + U[−1, 1)·π/6 (hanging ± 30°). Draws are taken per
-/// sample in state-layout order, so sample j depends only on the stream position.
-template <class Scalar, int Poles>
-[[nodiscard]] Matrix<Scalar> cartpole_initial_states(const CartPole<Scalar, Poles>& sim, Rng& rng,
-                                                     Index count) {
+/// Draws `count` initial states of the paper's distribution for `poles` poles (or links of
+/// `CartChain`, whose layout is the same): (2 + 2·poles) × count, one sample per column;
+/// x, ẋ, θ̇_i ~ U[−1, 1), θ_i = π + U[−1, 1)·π/6 (hanging ± 30°). Draws are taken per sample in
+/// state-layout order, so sample j depends only on the stream position.
+template <class Scalar>
+[[nodiscard]] Matrix<Scalar> cartpole_initial_states(Index poles, Rng& rng, Index count) {
+  detail::require(poles >= 1, "cartpole_initial_states: poles = ", poles, ", expected >= 1");
   detail::require(count >= 0, "cartpole_initial_states: count = ", count, ", expected >= 0");
   constexpr double pi = std::numbers::pi;
-  Matrix<Scalar> states(sim.state_dim(), count);
+  Matrix<Scalar> states(2 + 2 * poles, count);
   for (Index j = 0; j < count; ++j) {
     states(0, j) = static_cast<Scalar>(rng.uniform(-1.0, 1.0));
     states(1, j) = static_cast<Scalar>(rng.uniform(-1.0, 1.0));
-    for (Index i = 0; i < sim.poles(); ++i) {
+    for (Index i = 0; i < poles; ++i) {
       states(2 + 2 * i, j) = static_cast<Scalar>(pi + rng.uniform(-1.0, 1.0) * pi / 6.0);
       states(3 + 2 * i, j) = static_cast<Scalar>(rng.uniform(-1.0, 1.0));
     }
   }
   return states;
+}
+
+/// The same for the poles of `sim`.
+template <class Scalar, int Poles>
+[[nodiscard]] Matrix<Scalar> cartpole_initial_states(const CartPole<Scalar, Poles>& sim, Rng& rng,
+                                                     Index count) {
+  return cartpole_initial_states<Scalar>(sim.poles(), rng, count);
 }
 
 }  // namespace sbptt

@@ -77,7 +77,7 @@ int main(int argc, char** argv) {
       return code;
     }
     for (const auto& run : plan) {
-      const fs::path program = bin_dir / run.info().name;
+      const fs::path program = bin_dir / run.info().program;
       if (!is_executable(program))
         throw sbptt::IoError(concat("no executable task program '", program.string(),
                                     "'; build the examples or pass --bin-dir DIR"));

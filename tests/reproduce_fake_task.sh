@@ -26,6 +26,7 @@ while [ $# -gt 0 ]; do
     --seed) seed=$2; shift 2 ;;
     --method) method=$2; shift 2 ;;
     --clip) clip=$2; shift 2 ;;
+    --model) shift 2 ;;
     --poles|--rc|--target|--samples) [ "$1" = --samples ] || complexity=$2; shift 2 ;;
     *) echo "$task: unknown flag '$1'" >&2; exit 2 ;;
   esac

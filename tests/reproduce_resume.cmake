@@ -50,6 +50,13 @@ execute_process(COMMAND "${REPRODUCE}" --tasks cartpole --complexities 4 --metho
                 OUTPUT_VARIABLE out ERROR_QUIET)
 check("--dry-run shows --threads 4 on the command line" rc EQUAL 0 AND out MATCHES
       "cartpole --poles 4 [^\n]* --threads 4 --csv ")
+# The reviewers profile: the cart chain, 1-3 links x R, M, C, S x 3 seeds, through cartpole.
+execute_process(COMMAND "${REPRODUCE}" --profile reviewers --epochs 2 --samples 8
+                --bin-dir "${WORK_DIR}/fake" --dry-run --out "${WORK_DIR}/dry"
+                RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+check("--profile reviewers plans the chain's 36 runs through cartpole --model chain\n${out}${err}"
+      rc EQUAL 0 AND out MATCHES "36 runs planned \\(profile reviewers" AND out MATCHES
+      "chain_n3_C_norm_s44 +[^\n]*/cartpole --model chain --poles 3 --method C --clip norm")
 # The estimate is measured: the fake programs sleep 0.12 s per epoch whatever the samples, so
 # two runs of 100 epochs take at least 24 s (the built-in table says 3 s for 8 samples).
 execute_process(COMMAND "${REPRODUCE}" --tasks cartpole --complexities 4 --methods R,C

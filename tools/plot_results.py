@@ -53,7 +53,7 @@ METHOD_ORDER = ["R", "M", "C", "S", "N"]
 CLIP_STYLES = {"norm": "-", "value": "--", "none": ":"}
 CLIP_MARKERS = {"norm": "o", "value": "s", "none": "^"}
 CLIP_ORDER = ["none", "value", "norm"]
-TASK_ORDER = ["cartpole", "guidance", "quantum"]
+TASK_ORDER = ["cartpole", "guidance", "quantum", "chain"]
 PANEL_SIZE = (5.2, 3.9)  # inches
 # One panel alone is narrower than the titles and legends written for a row of them.
 MIN_WIDTH = 8.5  # inches
@@ -62,6 +62,7 @@ TASKS = {
     "cartpole": ("Number of poles: {}", False),
     "guidance": ("Regularization: rc = {}", True),
     "quantum": ("Target state: {}", False),
+    "chain": ("Links of the chain: {}", False),
 }
 
 

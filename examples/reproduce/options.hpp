@@ -57,8 +57,8 @@ auto parse_items(const std::string& flag, const std::string& text, Parse parse) 
 inline int parse_task(const std::string& item) {
   for (int t = 0; t < task_count; ++t)
     if (item == tasks[t].name) return t;
-  throw InvalidArgument(concat("'", item, "' is not a task; expected cartpole, guidance or "
-                                          "quantum"));
+  throw InvalidArgument(concat("'", item, "' is not a task; expected cartpole, guidance, "
+                                          "quantum or chain"));
 }
 
 /// --shard K/N: the zero-based K and N.
@@ -71,13 +71,14 @@ inline std::pair<long, long> parse_shard(const std::string& text) {
   return {parse_integer("--shard K", text.substr(0, slash), 1, count) - 1, count};
 }
 
-/// `text` if it is `first` or `second`, else an error naming the flag and both.
+/// `text` if it is one of `choices`, else an error naming the flag and the choices.
 inline std::string parse_choice(const std::string& flag, const std::string& text,
-                                const std::string& first, const std::string& second) {
-  if (text != first && text != second)
-    throw InvalidArgument(concat(flag, " '", text, "' is unknown; expected ", first, " or ",
-                                 second));
-  return text;
+                                const std::vector<std::string>& choices) {
+  if (std::find(choices.begin(), choices.end(), text) != choices.end()) return text;
+  std::string expected;
+  for (std::size_t k = 0; k < choices.size(); ++k)
+    expected += concat(k == 0 ? "" : k + 1 == choices.size() ? " or " : ", ", choices[k]);
+  throw InvalidArgument(concat(flag, " '", text, "' is unknown; expected ", expected));
 }
 
 inline Options parse_options(int argc, const char* const* argv) {
@@ -89,10 +90,12 @@ inline Options parse_options(int argc, const char* const* argv) {
       "Runs the paper's grid (task x complexity x method x clip x seed) with the task programs, "
       "resumably, here (--jobs), through GNU parallel or Slurm (--emit), or in shards; writes "
       "summary.csv, a results table and figures. See docs/reproduce.md.");
-  cli.value("--profile", "quick|paper", "the grid and budget: quick (about 10 min) or the "
-            "published settings", o.profile,
-            [&](const std::string& v) { o.profile = parse_choice("--profile", v, "quick", "paper"); });
-  cli.value("--tasks", "LIST", "tasks to run, comma-separated: cartpole, guidance, quantum",
+  cli.value("--profile", "NAME", "the grid and budget: quick (about 10 min), paper (the "
+            "published settings) or reviewers (the cart chain at the published budget)",
+            o.profile, [&](const std::string& v) {
+              o.profile = parse_choice("--profile", v, {"quick", "paper", "reviewers"});
+            });
+  cli.value("--tasks", "LIST", "tasks to run, comma-separated: cartpole, guidance, quantum, chain",
             "all", [&](const std::string& v) { o.tasks = parse_items("--tasks", v, parse_task); });
   cli.value("--methods", "LIST", "gradient methods, comma-separated: R, M, C, S, N",
             "the profile's", [&](const std::string& v) {
@@ -136,7 +139,7 @@ inline Options parse_options(int argc, const char* const* argv) {
            [&] { o.dry_run = true; });
   cli.value("--emit", "parallel|slurm", "print one command per unfinished run for GNU parallel, "
             "or write a Slurm array script", "none", [&](const std::string& v) {
-              o.emit = parse_choice("--emit", v, "parallel", "slurm");
+              o.emit = parse_choice("--emit", v, {"parallel", "slurm"});
             });
   cli.value("--shard", "K/N", "run only every N-th run from the K-th (1 <= K <= N)", "1/1",
             [&](const std::string& v) {
@@ -176,7 +179,9 @@ inline bool selected(const std::optional<std::vector<T>>& filter, const T& value
 
 /// The runs of the profile after filters and overrides, in grid order.
 inline std::vector<Run> make_plan(const Options& o) {
-  const Profile profile = o.profile == "paper" ? paper_profile() : quick_profile();
+  const Profile profile = o.profile == "paper"       ? paper_profile()
+                          : o.profile == "reviewers" ? reviewers_profile()
+                                                     : quick_profile();
   const auto methods = o.methods ? *o.methods : profile.methods;
   const auto clips = o.clips ? *o.clips : profile.clips;
   if (o.complexities) {

@@ -28,7 +28,7 @@ inline fs::path run_file(const fs::path& runs, const Run& run, const char* suffi
 /// resumes from its last epoch (the checkpoint holds the log's rows too) under any executor.
 inline std::vector<std::string> command_line(const Run& run, const fs::path& bin_dir,
                                              const fs::path& runs, long threads) {
-  const fs::path program = bin_dir / run.info().name;
+  const fs::path program = bin_dir / run.info().program;
   std::vector<std::string> argv{program.string()};
   for (const auto& f : run.flags()) argv.push_back(f);
   argv.insert(argv.end(), {"--threads", std::to_string(threads), "--csv",

@@ -27,6 +27,14 @@
 // Finally, float against double at the paper's settings: the relative error of the final
 // state and of g_R for horizons of m/4, m/2, 3m/4 and m steps.
 //
+// Integrator axis (cart pole, 4 poles): which of the reference's semi-implicit Euler, Heun (RK2)
+// and RK4 reaches a given error cheapest. All three solve the same controlled problem: the
+// network acts every T/25 = 0.04 (zero-order hold) and the physics takes s = 1 … 64 substeps of
+// the integrator in between (h = 0.04/s). The paper's step h = 0.01 is s = 4 of semi-implicit
+// Euler; its error is "the paper's accuracy". The reference is RK4 with 1024 substeps. All three
+// run through `Integrated` with automatic f-Jacobians over the cart pole's equations
+// (examples/common/cartpole_equations.hpp), so their milliseconds compare like with like.
+//
 // Usage: accuracy [--csv FILE]    (plot: python3 tools/plot_accuracy.py FILE PNG)
 #include <algorithm>
 #include <chrono>
@@ -38,6 +46,7 @@
 #include <sbptt/sbptt.hpp>
 
 #include "command_line.hpp"
+#include "cartpole_equations.hpp"
 
 namespace {
 
@@ -248,6 +257,57 @@ void sweep_steps(const std::string& name, const std::vector<Index>& steps_list, 
   }
 }
 
+/// The integrator axis of the file comment: sweep `label` of `Method` against `reference`.
+template <class Method>
+void sweep_integrator(const std::string& label, const Network<double>& net,
+                      const Matrix<double>& x0, const Outcome& reference) {
+  constexpr Index kControlSteps = 25;
+  for (const Index substeps : {1, 2, 4, 8, 16, 32, 64}) {
+    const double h = 0.04 / static_cast<double>(substeps);
+    const HeldControl sim(
+        sbptt::Integrated<sbptt::examples::CartPoleEquations<4>, Method>({}, h), substeps);
+    const Outcome out = run_engine(sim, net, sbptt::cartpole_objective<double, 4>(),
+                                   kControlSteps, x0, true);
+    report({"cartpole", label, "double", kControlSteps * substeps, 0, h, out.ms,
+            relative(out.final_states, reference.final_states),
+            relative(out.gradient, reference.gradient),
+            std::abs(out.loss - reference.loss) / std::abs(reference.loss)});
+  }
+}
+
+/// The integrator axis for the cart pole with 4 poles, and which integrator reaches the paper's
+/// accuracy (semi-implicit Euler at h = 0.01) cheapest.
+void integrator_axis(const Network<double>& net, const Matrix<double>& x0) {
+  using Equations = sbptt::examples::CartPoleEquations<4>;
+  const Index substeps = 1024;
+  const HeldControl reference_sim(
+      sbptt::Integrated<Equations, sbptt::RungeKutta4>({}, 0.04 / static_cast<double>(substeps)),
+      substeps);
+  const Outcome reference =
+      run_engine(reference_sim, net, sbptt::cartpole_objective<double, 4>(), 25, x0, false);
+  sweep_integrator<sbptt::SemiImplicitEuler>("sie", net, x0, reference);
+  sweep_integrator<sbptt::Heun>("rk2", net, x0, reference);
+  sweep_integrator<sbptt::RungeKutta4>("rk4", net, x0, reference);
+  const Point* paper = nullptr;
+  for (const auto& p : points)
+    if (p.sweep == "sie" && std::abs(p.h - 0.01) < 1e-12) paper = &p;
+  if (paper == nullptr) return;
+  std::printf("\nintegrators, cart pole 4 poles, control every 0.04: the paper's accuracy "
+              "(semi-implicit Euler, h = 0.01) is state %.3e, g_R %.3e at %.3f ms\n",
+              paper->state_error, paper->grad_error, paper->ms);
+  for (const char* label : {"sie", "rk2", "rk4"}) {
+    const Point* cheapest = nullptr;
+    for (const auto& p : points)
+      if (p.sweep == label && p.state_error <= paper->state_error &&
+          p.grad_error <= paper->grad_error && (cheapest == nullptr || p.ms < cheapest->ms))
+        cheapest = &p;
+    if (cheapest != nullptr)
+      std::printf("  %s reaches it at h = %.5g (%lld steps): %.3f ms (state %.3e, g_R %.3e)\n",
+                  label, cheapest->h, static_cast<long long>(cheapest->steps), cheapest->ms,
+                  cheapest->state_error, cheapest->grad_error);
+  }
+}
+
 sbptt::CartPole<double, 4> cartpole_d(Index m) {
   sbptt::CartPoleOptions o;
   o.steps = m;
@@ -351,11 +411,14 @@ void write_csv(const std::string& path) {
 
 int main(int argc, char** argv) {
   std::string csv;
+  bool integrators_only = false;
   try {
     sbptt::examples::CommandLine cli(
         "accuracy", "Discretisation and float error of each simulator and of its gradient g_R "
                     "(docs/benchmarks.md). Exit codes: 0 success, 1 error, 2 bad flag.");
     cli.path("--csv", csv, "also write every point as CSV here (plot: tools/plot_accuracy.py)");
+    cli.flag("--integrators-only", "run only the cart pole's integrator axis",
+             [&integrators_only] { integrators_only = true; });
     if (!cli.parse(argc, argv)) return 0;
   } catch (const sbptt::InvalidArgument& e) {
     std::fprintf(stderr, "accuracy: %s\n", e.what());
@@ -372,6 +435,13 @@ int main(int argc, char** argv) {
     std::printf("%-9s %-9s %-6s %6s %5s %10s %9s %11s %11s %11s\n", "sim", "sweep", "scalar",
                 "steps", "Nx", "h", "ms", "state err", "g_R err", "loss err");
     sbptt::Rng rng(42);
+    if (integrators_only) {
+      sbptt::Rng same(42);  // the cart pole's data of the full run
+      integrator_axis(mlp<double>(10, 1),
+                      sbptt::cartpole_initial_states(cartpole_d(100), same, kBatch));
+      if (!csv.empty()) write_csv(csv);
+      return 0;
+    }
     {  // cart pole, 4 poles, T = 1 (paper: m = 100)
       const auto net = mlp<double>(10, 1);
       const Matrix<double> x0 = sbptt::cartpole_initial_states(cartpole_d(100), rng, kBatch);
@@ -388,6 +458,7 @@ int main(int argc, char** argv) {
       sweep_steps<float>("cartpole", steps, make, objective, net, x0, 1.0);
       precision("cartpole", make(double{}, 100), make(float{}, 100), objective(make(0.0, 100)),
                 objective(make(0.0f, 100)), net, x0, 100);
+      integrator_axis(net, x0);
     }
     {  // guidance 2-4, T = 4 (paper: m = 60)
       const auto make = [](auto s, Index m) {
@@ -420,8 +491,9 @@ int main(int argc, char** argv) {
     std::printf("\nobserved orders in double (slope of log error against log h; over the 4 "
                 "finest points, and over the finest pair):\n");
     for (const auto& [sim, sweep] : std::vector<std::pair<std::string, std::string>>{
-             {"cartpole", "dt"}, {"guidance", "dt"}, {"quantum", "dt"}, {"quantum", "nx"}}) {
-      std::printf("  %-8s in %-2s: final state %.2f (%.2f), g_R %.2f (%.2f)\n", sim.c_str(),
+             {"cartpole", "dt"}, {"cartpole", "sie"}, {"cartpole", "rk2"}, {"cartpole", "rk4"},
+             {"guidance", "dt"}, {"quantum", "dt"}, {"quantum", "nx"}}) {
+      std::printf("  %-8s in %-3s: final state %.2f (%.2f), g_R %.2f (%.2f)\n", sim.c_str(),
                   sweep.c_str(), order(sim, sweep, "double", false, 4),
                   order(sim, sweep, "double", false, 2), order(sim, sweep, "double", true, 4),
                   order(sim, sweep, "double", true, 2));

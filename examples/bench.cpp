@@ -7,6 +7,9 @@
 // updates, lr 1e-3) over the full horizon, then the evaluation of the 256-sample train and
 // test sets. Extra rows (quantum, R, float) repeat the epoch on finer grids, Nx = 64, 128,
 // 256, with the CNN widened to match, to show that the simulator's work grows linearly in Nx.
+// Rows cartpole4-auto, cartpole4-ode, guidance-auto and guidance-ode build the same scenes
+// through AutoDiffSimulator and through Integrated (examples/common/scene_routes.hpp), to price
+// automatic derivatives against the hand-written ones.
 //
 // Columns:
 //   ms/epoch     best of --repeats timed epochs (after one warm-up epoch), 1 thread
@@ -25,7 +28,8 @@
 //
 // Usage: bench [--csv FILE] [--repeats R] [--threads N] [--tasks LIST] [--scalars LIST]
 //              [--methods LETTERS]
-//   --tasks    comma list of cartpole1, cartpole4, guidance, quantum, quantum-nx (default all)
+//   --tasks    comma list of cartpole1, cartpole4, cartpole4-auto, cartpole4-ode, guidance,
+//              guidance-auto, guidance-ode, quantum, quantum-nx (default all)
 //   --scalars  comma list of float, double (default both)
 //   --methods  letters out of RMCS (default RMCS)
 #include <sys/resource.h>
@@ -50,6 +54,7 @@
 #include <sbptt/sbptt.hpp>
 
 #include "command_line.hpp"
+#include "scene_routes.hpp"
 
 namespace {
 
@@ -62,8 +67,9 @@ struct Settings {
   std::string csv;
   int repeats = 2;
   Index threads = 2;
-  std::vector<std::string> tasks = {"cartpole1", "cartpole4", "guidance", "quantum",
-                                    "quantum-nx"};
+  std::vector<std::string> tasks = {"cartpole1",     "cartpole4",    "cartpole4-auto",
+                                    "cartpole4-ode", "guidance",     "guidance-auto",
+                                    "guidance-ode",  "quantum",      "quantum-nx"};
   std::vector<std::string> scalars = {"float", "double"};
   std::string methods = "RMCS";
 };
@@ -250,32 +256,37 @@ Network<S> paper_cnn(Index nx) {
   return net;
 }
 
-template <class S, int Poles>
+using sbptt::examples::Route;
+
+/// The cart pole's row, its simulator built by route R (data and objective from the shipped one).
+template <class S, int Poles, Route R = Route::Analytic>
 RowResult cartpole_row(const Settings& settings, Method method) {
-  const sbptt::CartPole<S, Poles> sim;
+  const sbptt::CartPole<S, Poles> shipped;
+  const auto sim = sbptt::examples::cartpole_route<S, Poles, R>();
   sbptt::Rng rng(42);
-  const Matrix<S> train = sbptt::cartpole_initial_states(sim, rng, 256);
-  const Matrix<S> test = sbptt::cartpole_initial_states(sim, rng, 256);
+  const Matrix<S> train = sbptt::cartpole_initial_states(shipped, rng, 256);
+  const Matrix<S> test = sbptt::cartpole_initial_states(shipped, rng, 256);
   const auto net = paper_mlp<S>(sim.state_dim(), 1);
-  RowResult r = measure(settings, sim, net, sbptt::cartpole_objective<S, Poles>(), sim.steps(),
-                        train, test, method);
+  RowResult r = measure(settings, sim, net, sbptt::cartpole_objective<S, Poles>(),
+                        shipped.steps(), train, test, method);
   r.nx = sim.state_dim();
-  r.steps = sim.steps();
+  r.steps = shipped.steps();
   r.params = net.num_params();
   return r;
 }
 
-template <class S>
+template <class S, Route R = Route::Analytic>
 RowResult guidance_row(const Settings& settings, Method method) {
-  const sbptt::GuidanceByRepulsion<S, 2, 4> sim;
+  const sbptt::GuidanceByRepulsion<S, 2, 4> shipped;
+  const auto sim = sbptt::examples::guidance_route<S, R>();
   sbptt::Rng rng(42);
-  const Matrix<S> train = sbptt::guidance_initial_states(sim, rng, 256);
-  const Matrix<S> test = sbptt::guidance_initial_states(sim, rng, 256);
+  const Matrix<S> train = sbptt::guidance_initial_states(shipped, rng, 256);
+  const Matrix<S> test = sbptt::guidance_initial_states(shipped, rng, 256);
   const auto net = paper_mlp<S>(sim.state_dim(), sim.control_dim());
-  RowResult r = measure(settings, sim, net, sbptt::guidance_objective(sim, 0.1), sim.steps(),
-                        train, test, method);
+  RowResult r = measure(settings, sim, net, sbptt::guidance_objective(shipped, 0.1),
+                        shipped.steps(), train, test, method);
   r.nx = sim.state_dim();
-  r.steps = sim.steps();
+  r.steps = shipped.steps();
   r.params = net.num_params();
   return r;
 }
@@ -364,10 +375,14 @@ bool parse(int argc, char** argv, Settings& s) {
   cli.path("--csv", s.csv, "also write the rows as CSV here");
   cli.integer("--repeats", s.repeats, 1, 100, "timed epochs per row (the best is kept)");
   cli.integer("--threads", s.threads, 1, 64, "threads of the threaded column");
-  cli.value("--tasks", "LIST", "comma list of cartpole1, cartpole4, guidance, quantum, quantum-nx",
+  cli.value("--tasks", "LIST",
+            "comma list of cartpole1, cartpole4, cartpole4-auto, cartpole4-ode, guidance, "
+            "guidance-auto, guidance-ode, quantum, quantum-nx",
             "all", [&s](const std::string& text) {
               s.tasks = parse_list("--tasks", text,
-                                   {"cartpole1", "cartpole4", "guidance", "quantum", "quantum-nx"});
+                                   {"cartpole1", "cartpole4", "cartpole4-auto", "cartpole4-ode",
+                                    "guidance", "guidance-auto", "guidance-ode", "quantum",
+                                    "quantum-nx"});
             });
   cli.value("--scalars", "LIST", "comma list of float, double", "float,double",
             [&s](const std::string& text) {
@@ -420,6 +435,20 @@ void summarize(const std::vector<Row>& rows, const double peak[2], Index threads
     std::printf("  %-13s float R epoch: %5.1f%% of the float peak %.1f GFLOP/s (target >= %.0f%%): "
                 "%s\n",
                 label, 100 * fraction, peak[0], 100 * target, verdict(fraction >= target));
+  }
+  for (const char* task : {"cartpole4-auto", "cartpole4-ode", "guidance-auto", "guidance-ode"}) {
+    const std::string analytic = std::string(task).substr(0, std::string(task).find('-'));
+    for (const char* scalar : {"float", "double"}) {
+      const Row* a = find_row(rows, analytic, scalar, "R");
+      const Row* r = find_row(rows, task, scalar, "R");
+      if (a == nullptr || r == nullptr) continue;
+      const double ratio = r->result.ms_epoch / a->result.ms_epoch;
+      std::printf("  %-14s %-6s R: epoch %.2fx, simulator %.1fx the analytic one%s\n", task,
+                  scalar, ratio, r->result.sim_ns / a->result.sim_ns,
+                  std::string(task) == "cartpole4-auto"
+                      ? (ratio <= 1.5 ? " (target <= 1.5: met)" : " (target <= 1.5: MISSED)")
+                      : "");
+    }
   }
   for (const char* task : {"cartpole1", "cartpole4", "guidance", "quantum"}) {
     for (const char* scalar : {"float", "double"}) {
@@ -530,7 +559,15 @@ int main(int argc, char** argv) {
     };
     add("cartpole1", cartpole_row<float, 1>, cartpole_row<double, 1>);
     add("cartpole4", cartpole_row<float, 4>, cartpole_row<double, 4>);
+    add("cartpole4-auto", cartpole_row<float, 4, Route::Automatic>,
+        cartpole_row<double, 4, Route::Automatic>);
+    add("cartpole4-ode", cartpole_row<float, 4, Route::Integrated>,
+        cartpole_row<double, 4, Route::Integrated>);
     add("guidance", guidance_row<float>, guidance_row<double>);
+    add("guidance-auto", guidance_row<float, Route::Automatic>,
+        guidance_row<double, Route::Automatic>);
+    add("guidance-ode", guidance_row<float, Route::Integrated>,
+        guidance_row<double, Route::Integrated>);
     add("quantum", quantum_row<float, 32>, quantum_row<double, 32>);
     const bool float_r = settings.methods.find('R') != std::string::npos &&
                          std::find(settings.scalars.begin(), settings.scalars.end(), "float") !=
@@ -547,7 +584,7 @@ int main(int argc, char** argv) {
                       [once] { return quantum_row<float, 256>(once, Method::Regular); }});
     }
 
-    std::printf("%-9s %-6s %-1s %4s %5s %6s %9s %7s %7s %6s %9s %5s %8s %8s %7s\n", "task",
+    std::printf("%-14s %-6s %-1s %4s %5s %6s %9s %7s %7s %6s %9s %5s %8s %8s %7s\n", "task",
                 "scalar", "m", "Nx", "steps", "params", "ms/epoch", "GFLOP", "GFLOP/s", "%peak",
                 ("ms " + std::to_string(settings.threads) + "t").c_str(),
                 ("x" + std::to_string(settings.threads) + "t").c_str(), "sim ns", "trajKiB",
@@ -557,14 +594,14 @@ int main(int argc, char** argv) {
       Row row{job.task, job.scalar, std::string(1, job.method), in_child(job.run)};
       const RowResult& r = row.result;
       if (r.ok == 0) {
-        std::printf("%-9s %-6s %-1s failed: %s\n", job.task.c_str(), job.scalar.c_str(),
+        std::printf("%-14s %-6s %-1s failed: %s\n", job.task.c_str(), job.scalar.c_str(),
                     row.method.c_str(), r.error);
         rows.push_back(row);
         continue;
       }
       const double p = peak[job.scalar == "float" ? 0 : 1];
       const double gflops = r.gflop / (r.ms_epoch / 1e3);
-      std::printf("%-9s %-6s %-1s %4lld %5lld %6lld %9.1f %7.3f %7.2f %5.1f%% %9.1f %5.2f %8.0f "
+      std::printf("%-14s %-6s %-1s %4lld %5lld %6lld %9.1f %7.3f %7.2f %5.1f%% %9.1f %5.2f %8.0f "
                   "%8.0f %7.1f\n",
                   job.task.c_str(), job.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
                   r.params, r.ms_epoch, r.gflop, gflops, 100 * gflops / p, r.ms_threads,

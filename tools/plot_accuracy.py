@@ -13,7 +13,11 @@ state_error, grad_error, loss_error) and draws, log-log:
   value, with reference slopes 1 and 2 (first-order Euler, second-order Crank–Nicolson and
   3-point Laplacian);
 - right column: float against double at the paper's settings, error against the horizon
-  (fraction of the paper's number of steps), final state (top) and g_R (bottom).
+  (fraction of the paper's number of steps), final state (top) and g_R (bottom);
+- third row: the cart pole's integrator axis (sweeps "sie", "rk2", "rk4": semi-implicit Euler,
+  Heun, RK4 at a fixed control rate): the error-against-time front of each integrator for the
+  final state and g_R, with the paper's accuracy (semi-implicit Euler at h = 0.01) as a
+  horizontal line, and the errors against h with slopes 1, 2 and 4.
 
 Uses matplotlib's Agg backend (Debian: python3-matplotlib). The PNG is written to a temporary
 file and renamed, so a reader never sees half a picture. Bad arguments: message, exit 2.
@@ -35,6 +39,8 @@ except ImportError as error:  # a missing package is a setup problem, not a bug:
 SIM_COLOURS = {"cartpole": "#d62728", "guidance": "#1f77b4", "quantum": "#2ca02c"}
 SWEEP_MARKERS = {"dt": "o", "nx": "s"}
 SCALAR_STYLES = {"double": "-", "float": "--"}
+INTEGRATORS = {"sie": ("semi-implicit Euler", "#d62728"), "rk2": ("Heun (RK2)", "#ff7f0e"),
+               "rk4": ("RK4", "#9467bd")}
 # The paper's step (dt) or grid spacing (dx) for each sweep: the x axis of the bottom row is
 # h divided by this.
 PAPER_H = {("cartpole", "dt"): 0.01, ("guidance", "dt"): 4.0 / 60.0,
@@ -90,8 +96,9 @@ def main():
     rows = read(source)
     sweeps = curves(rows, lambda s: s in ("dt", "nx"))
     precision = curves(rows, lambda s: s == "precision")
+    integrators = curves(rows, lambda s: s in INTEGRATORS)
 
-    figure, axes = plt.subplots(2, 3, figsize=(16, 9.5))
+    figure, axes = plt.subplots(3, 3, figsize=(16, 14))
     for (sim, sweep, scalar), points in sorted(sweeps.items()):
         style = dict(color=SIM_COLOURS.get(sim, "black"), marker=SWEEP_MARKERS.get(sweep, "x"),
                      linestyle=SCALAR_STYLES.get(scalar, ":"), markersize=4,
@@ -131,6 +138,36 @@ def main():
         axes[row_index][2].set_xlabel("horizon / paper's horizon")
         axes[row_index][2].set_ylabel(f"relative error of the {name}")
         axes[row_index][2].set_title(f"float against double: {name}")
+    paper = [p for (_, sweep, _), points in integrators.items() if sweep == "sie"
+             for p in points if abs(p["h"] - 0.01) < 1e-9]
+    for (_, sweep, _), points in sorted(integrators.items()):
+        name, colour = INTEGRATORS[sweep]
+        style = dict(color=colour, marker="o", markersize=4, label=name)
+        for column, key in enumerate(("state_error", "grad_error")):
+            keep = [p for p in points if p[key] > 0]
+            axes[2][column].loglog([p["ms"] for p in keep], [p[key] for p in keep], **style)
+        keep = [p for p in points if p["state_error"] > 0]
+        axes[2][2].loglog([p["h"] for p in keep], [p["state_error"] for p in keep], **style)
+    for column, name in enumerate(("final state", "gradient g_R")):
+        key = ("state_error", "grad_error")[column]
+        if paper:
+            axes[2][column].axhline(paper[0][key], color="grey", linewidth=0.8,
+                                    label="paper's accuracy (semi-implicit Euler, h = 0.01)")
+        axes[2][column].set_xlabel("ms per forward + Full sweep (batch 8, 1 thread)")
+        axes[2][column].set_ylabel(f"relative error of the {name}")
+        axes[2][column].set_title(f"cart pole integrators: {name} error against time")
+    axes[2][2].set_xlabel("physics step h (control every 0.04)")
+    axes[2][2].set_ylabel("relative error of the final state")
+    axes[2][2].set_title("cart pole integrators: error against h")
+    if integrators:
+        low, high = axes[2][2].get_xlim()
+        bottom, top = axes[2][2].get_ylim()
+        for slope, dash in ((1, (1, 2)), (2, (4, 2)), (4, (6, 2, 1, 2))):
+            ys = [top * (x / high) ** slope for x in (low, high)]
+            axes[2][2].loglog([low, high], ys, color="grey", linewidth=0.8, dashes=dash,
+                              label=f"slope {slope}")
+        axes[2][2].set_xlim(low, high)
+        axes[2][2].set_ylim(bottom, top)
     for axis in axes.flat:
         axis.grid(True, which="major", alpha=0.3)
         axis.legend(fontsize=7)

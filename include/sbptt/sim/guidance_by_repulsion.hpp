@@ -88,7 +88,10 @@ public:
                     Evaders, " unless that is Eigen::Dynamic");
     detail::validate_guidance_options(options);
     const auto flocking = options.physical.flocking;
-    const auto cast = [](double v) { return static_cast<Scalar>(v); };
+    // Through NumTraits' Literal (float for a float dual number): one rounding, no warning.
+    const auto cast = [](double v) {
+      return static_cast<Scalar>(static_cast<typename Eigen::NumTraits<Scalar>::Literal>(v));
+    };
     dt_ = cast(options.horizon / static_cast<double>(options.steps));
     epsilon_ = cast(options.epsilon);
     driver_friction_ = cast(options.driver_friction);
@@ -102,7 +105,7 @@ public:
     flocking_range_ = cast(options.flocking_range);
     center_weight_ = options.physical.center == GuidanceCenter::Sum
                          ? Scalar(1)
-                         : Scalar(1) / static_cast<Scalar>(static_cast<double>(evaders));
+                         : Scalar(1) / cast(static_cast<double>(evaders));
   }
 
   [[nodiscard]] Index drivers() const { return drivers_; }

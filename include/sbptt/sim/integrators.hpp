@@ -155,7 +155,9 @@ public:
       model_.derivative(x, u, value);
       model_.derivative_jacobians(x, u, gx, gu);
     } else {
-      auto g = [this](const auto& xd, const auto& ud, auto& out) { evaluate(xd, ud, out); };
+      auto g = [this](const auto& xd, const auto& ud, auto& out) {
+        this->evaluate(xd, ud, out);
+      };
       automatic_jacobians<Scalar>(g, x, u, rows(x.size()), value, gx, gu);
     }
   }

@@ -113,7 +113,7 @@ inline bool mujoco_step_failed(const mjData& data) {
 /// One `mjData` with the row-major Jacobian buffers of `mjd_transitionFD`.
 struct MujocoSlot {
   struct DataDeleter {
-    void operator()(mjData* data) const { mj_deleteData(data); }
+    void operator()(mjData* released) const { mj_deleteData(released); }
   };
   std::unique_ptr<mjData, DataDeleter> data;
   std::vector<mjtNum> state_jacobian, control_jacobian;  ///< n × n and n × nu, row-major

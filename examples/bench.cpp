@@ -94,6 +94,7 @@ class CountingNetwork {
 public:
   using Scalar = S;
   using Workspace = typename Network<S>::Workspace;
+  using PackedWeights = typename Network<S>::PackedWeights;
 
   explicit CountingNetwork(Network<S>& net) : net_(net) {
     for (const auto& layer : net.layers()) {
@@ -118,8 +119,14 @@ public:
   [[nodiscard]] const sbptt::Vector<S>& params() const { return net_.params(); }
   [[nodiscard]] sbptt::Vector<S>& params() { return net_.params(); }
 
+  void pack(PackedWeights& packed) const { net_.pack(packed); }
   void forward(const Matrix<S>& x, Matrix<S>& y, Workspace& ws) const {
     net_.forward(x, y, ws);
+    macs_.fetch_add(per_sample_ * x.cols(), std::memory_order_relaxed);
+  }
+  void forward(const Matrix<S>& x, Matrix<S>& y, Workspace& ws,
+               const PackedWeights& packed) const {
+    net_.forward(x, y, ws, packed);
     macs_.fetch_add(per_sample_ * x.cols(), std::memory_order_relaxed);
   }
   /// Parameter VJP of every layer, input VJP of every layer but the first, and of the first
@@ -127,14 +134,23 @@ public:
   void backward(const Workspace& ws, const Matrix<S>& dy, sbptt::Vector<S>& grad,
                 Matrix<S>* dx) const {
     net_.backward(ws, dy, grad, dx);
-    const Index per = per_sample_ + hidden_input_ + (dx != nullptr ? first_input_ : 0);
-    macs_.fetch_add(per * dy.cols(), std::memory_order_relaxed);
+    count_backward(dy.cols(), dx != nullptr);
+  }
+  void backward(const Workspace& ws, const Matrix<S>& dy, sbptt::Vector<S>& grad, Matrix<S>* dx,
+                const PackedWeights& packed) const {
+    net_.backward(ws, dy, grad, dx, packed);
+    count_backward(dy.cols(), dx != nullptr);
   }
 
   [[nodiscard]] long long macs() const { return macs_.load(); }
   void reset() { macs_ = 0; }
 
 private:
+  void count_backward(Index batch, bool input_vjp) const {
+    const Index per = per_sample_ + hidden_input_ + (input_vjp ? first_input_ : 0);
+    macs_.fetch_add(per * batch, std::memory_order_relaxed);
+  }
+
   Network<S>& net_;
   Index per_sample_ = 0, hidden_input_ = 0, first_input_ = 0;
   mutable std::atomic<long long> macs_{0};

@@ -14,9 +14,10 @@
 ///
 /// Cost and memory: the controller runs once per step on the whole batch (one product per
 /// layer, never per sample); a `PackingController` packs its parameters once per rollout
-/// (`forward`, `evaluate`), and the reverse sweeps use the packing of the last rollout; the simulator, the loss and their VJPs run per sample. After the
-/// first call at a batch shape, `forward`, `reverse` and `regular_and_modified` allocate
-/// nothing (every buffer is kept and resized only when the shape changes).
+/// (`forward`, `evaluate`), and the reverse sweeps use the packing of the last rollout. The
+/// simulator, the loss and their VJPs run per sample. After the first call at a batch shape,
+/// `forward`, `reverse` and `regular_and_modified` allocate nothing (every buffer is kept and
+/// resized only when the shape changes).
 ///
 /// Threads (`set_threads`): the per-sample work of a step (simulator step and VJP, loss seeds)
 /// is split over the samples; `regular_and_modified` runs its two sweeps at once; `evaluate`

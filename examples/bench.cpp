@@ -26,6 +26,10 @@
 //
 // Every row runs in its own child process, so that its RSS is its own.
 //
+// The parts: bench/rows.hpp (what a row measures, how each task's row is built, the child
+// process), bench/counting_network.hpp (the GFLOP count), bench/targets.hpp (the targets, met
+// or MISSED, and the CSV); this file keeps the flags and the order of the rows.
+//
 // Usage: bench [--csv FILE] [--repeats R] [--threads N] [--tasks LIST] [--scalars LIST]
 //              [--methods LETTERS]
 //   --tasks    comma list of cartpole1, cartpole4, cartpole4-auto, cartpole4-ode, guidance,

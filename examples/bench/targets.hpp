@@ -1,5 +1,6 @@
 #pragma once
-/// \file bench's verdicts: the speed targets, met or MISSED in this run, and the CSV rows.
+/// \file bench's verdicts: the speed targets of docs/benchmarks.md, met or MISSED in this run, and
+/// the CSV rows.
 
 #include <cstdio>
 #include <string>

@@ -26,6 +26,10 @@
 //
 // Every row runs in its own child process, so that its RSS is its own.
 //
+// The parts: bench/rows.hpp (what a row measures, how each task's row is built, the child
+// process), bench/counting_network.hpp (the GFLOP count), bench/targets.hpp (the targets, met
+// or MISSED, and the CSV); this file keeps the flags and the order of the rows.
+//
 // Usage: bench [--csv FILE] [--repeats R] [--threads N] [--tasks LIST] [--scalars LIST]
 //              [--methods LETTERS]
 //   --tasks    comma list of cartpole1, cartpole4, cartpole4-auto, cartpole4-ode, guidance,
@@ -33,309 +37,25 @@
 //   --scalars  comma list of float, double (default both)
 //   --methods  letters out of RMCS (default RMCS)
 #include <sys/resource.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <algorithm>
-#include <atomic>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <functional>
 #include <string>
 #include <thread>
-#include <tuple>
-#include <type_traits>
-#include <utility>
-#include <variant>
 #include <vector>
 
 #include <sbptt/sbptt.hpp>
 
+#include "bench/rows.hpp"
+#include "bench/targets.hpp"
 #include "command_line.hpp"
-#include "scene_routes.hpp"
+
+using namespace bench;  // NOLINT(google-build-using-namespace): the program's own namespace
 
 namespace {
-
-using sbptt::Index;
-using sbptt::Matrix;
-using sbptt::Method;
-using sbptt::Network;
-
-struct Settings {
-  std::string csv;
-  int repeats = 2;
-  Index threads = 2;
-  std::vector<std::string> tasks = {"cartpole1",     "cartpole4",    "cartpole4-auto",
-                                    "cartpole4-ode", "guidance",     "guidance-auto",
-                                    "guidance-ode",  "quantum",      "quantum-nx"};
-  std::vector<std::string> scalars = {"float", "double"};
-  std::string methods = "RMCS";
-};
-
-/// What one row measures (plain data: it crosses a pipe from the child process).
-struct RowResult {
-  long long nx = 0, steps = 0, params = 0;  ///< state size (Nx for quantum), horizon, θ size
-  double ms_epoch = 0, gflop = 0, ms_threads = 0, sim_ns = 0;
-  double trajectory_bytes = 0, rss_kib = 0;
-  int ok = 0;
-  char error[200] = {};
-};
-
-struct Row {
-  std::string task, scalar, method;
-  RowResult result;
-};
-
-/// A `Network` seen through the Controller concept, counting the multiply-adds it executes.
-template <class S>
-class CountingNetwork {
-public:
-  using Scalar = S;
-  using Workspace = typename Network<S>::Workspace;
-
-  explicit CountingNetwork(Network<S>& net) : net_(net) {
-    for (const auto& layer : net.layers()) {
-      const Index macs = std::visit(
-          [](const auto& l) -> Index {
-            if constexpr (std::is_same_v<std::decay_t<decltype(l)>, sbptt::Conv1d>) {
-              return l.output_length() * l.out_channels * l.in_channels * l.kernel;
-            } else {
-              return l.inputs * l.outputs;
-            }
-          },
-          layer);
-      per_sample_ += macs;
-      if (&layer != &net.layers().front()) hidden_input_ += macs;
-    }
-    first_input_ = per_sample_ - hidden_input_;
-  }
-
-  [[nodiscard]] Index input_dim() const { return net_.input_dim(); }
-  [[nodiscard]] Index output_dim() const { return net_.output_dim(); }
-  [[nodiscard]] Index num_params() const { return net_.num_params(); }
-  [[nodiscard]] const sbptt::Vector<S>& params() const { return net_.params(); }
-  [[nodiscard]] sbptt::Vector<S>& params() { return net_.params(); }
-
-  void forward(const Matrix<S>& x, Matrix<S>& y, Workspace& ws) const {
-    net_.forward(x, y, ws);
-    macs_.fetch_add(per_sample_ * x.cols(), std::memory_order_relaxed);
-  }
-  /// Parameter VJP of every layer, input VJP of every layer but the first, and of the first
-  /// one only when dX is asked for (exactly what `Network::backward` executes).
-  void backward(const Workspace& ws, const Matrix<S>& dy, sbptt::Vector<S>& grad,
-                Matrix<S>* dx) const {
-    net_.backward(ws, dy, grad, dx);
-    const Index per = per_sample_ + hidden_input_ + (dx != nullptr ? first_input_ : 0);
-    macs_.fetch_add(per * dy.cols(), std::memory_order_relaxed);
-  }
-
-  [[nodiscard]] long long macs() const { return macs_.load(); }
-  void reset() { macs_ = 0; }
-
-private:
-  Network<S>& net_;
-  Index per_sample_ = 0, hidden_input_ = 0, first_input_ = 0;
-  mutable std::atomic<long long> macs_{0};
-};
-
-double now_ms() {
-  return std::chrono::duration<double, std::milli>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-
-/// Best GFLOP/s of an n×n product on this thread (Eigen without threads: one core).
-template <class S>
-double measure_peak() {
-  double best = 0;
-  for (const Index n : {512, 768, 1024}) {
-    const Matrix<S> a = Matrix<S>::Random(n, n), b = Matrix<S>::Random(n, n);
-    Matrix<S> c(n, n);
-    for (int repeat = 0; repeat < 4; ++repeat) {
-      const double start = now_ms();
-      c.noalias() = a * b;
-      const double ms = now_ms() - start;
-      best = std::max(best, 2.0 * static_cast<double>(n * n) * static_cast<double>(n) / (ms * 1e6));
-    }
-  }
-  return best;
-}
-
-/// ns per sample of `step` + full `vjp` over the stored trajectory of the engine.
-template <class Sim, class Engine>
-double simulator_ns(const Sim& sim, const Engine& engine) {
-  const auto& tr = engine.trajectory();
-  typename Sim::State x(sim.state_dim()), next(sim.state_dim()), lx(sim.state_dim());
-  typename Sim::Control u(sim.control_dim()), lu(sim.control_dim());
-  double best = 1e300;
-  typename Sim::Scalar sum = 0;  // consumed below, so that no call can be optimised away
-  for (int repeat = 0; repeat < 3; ++repeat) {
-    const double start = now_ms();
-    for (Index n = 0; n < tr.steps(); ++n) {
-      const auto i = static_cast<std::size_t>(n);
-      for (Index b = 0; b < tr.batch(); ++b) {
-        x = tr.states[i].col(b);
-        u = tr.controls[i].col(b);
-        sim.step(x, u, next);
-        sim.vjp(x, u, next, &lx, &lu);  // λ = x_{n+1}: any vector does
-        sum += next(0) + lx(0) + lu(0);
-      }
-    }
-    best = std::min(best, now_ms() - start);
-  }
-  volatile double sink = static_cast<double>(sum);
-  (void)sink;
-  return best * 1e6 / static_cast<double>(tr.steps() * tr.batch());
-}
-
-/// One row: warm-up + timed epochs at 1 and at N threads.
-template <class Sim, class Objective>
-RowResult measure(const Settings& settings, const Sim& sim,
-                  const Network<typename Sim::Scalar>& initial, const Objective& objective,
-                  Index steps, const Matrix<typename Sim::Scalar>& train,
-                  const Matrix<typename Sim::Scalar>& test, Method method) {
-  using S = typename Sim::Scalar;
-  RowResult r;
-  for (const Index threads : {Index{1}, settings.threads}) {
-    Network<S> net = initial;
-    CountingNetwork<S> counted(net);
-    sbptt::TrainerOptions options;
-    options.method = method;
-    options.batch = 8;
-    options.threads = threads;
-    sbptt::Trainer trainer(sim, counted, objective, steps,
-                           sbptt::Adam<S>(sbptt::AdamOptions<S>{S(1e-3)}), options);
-    trainer.train_epoch(train, test);  // warm-up: buffers sized, pages touched
-    counted.reset();
-    double best = 1e300;
-    for (int repeat = 0; repeat < settings.repeats; ++repeat) {
-      const double start = now_ms();
-      trainer.train_epoch(train, test);
-      best = std::min(best, now_ms() - start);
-    }
-    if (threads == 1) {
-      r.ms_epoch = best;
-      r.gflop = 2.0 * static_cast<double>(counted.macs()) / settings.repeats / 1e9;
-      r.sim_ns = simulator_ns(sim, trainer.engine());
-      r.trajectory_bytes = static_cast<double>(trainer.engine().trajectory().bytes());
-    } else {
-      r.ms_threads = best;
-    }
-    if (settings.threads == 1) r.ms_threads = r.ms_epoch;
-    if (settings.threads == 1) break;
-  }
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  r.rss_kib = static_cast<double>(usage.ru_maxrss);
-  r.ok = 1;
-  return r;
-}
-
-/// Glorot-uniform MLP 2×100 tanh with the last kernel zeroed (the paper's cart pole/guidance).
-template <class S>
-Network<S> paper_mlp(Index inputs, Index outputs) {
-  auto net = Network<S>::mlp(inputs, {100, 100}, outputs);
-  sbptt::Rng rng(42);
-  sbptt::GlorotOptions options;
-  options.zero_last_kernel = true;
-  sbptt::glorot_uniform(net, rng, options);
-  return net;
-}
-
-/// The paper's quantum CNN, for Nx grid points: conv 2→60 k3 s2 tanh, conv 60→60 k3 s2 tanh,
-/// dense → 1 (Nx = 32: 15 and 7 positions, 11,701 parameters).
-template <class S>
-Network<S> paper_cnn(Index nx) {
-  const sbptt::Conv1d first{nx, 2, 60, 3, 2, sbptt::Activation::Tanh};
-  const sbptt::Conv1d second{first.output_length(), 60, 60, 3, 2, sbptt::Activation::Tanh};
-  Network<S> net({first, second, sbptt::Dense{second.output_dim(), 1}});
-  sbptt::Rng rng(42);
-  sbptt::glorot_uniform(net, rng);
-  return net;
-}
-
-using sbptt::examples::Route;
-
-/// The cart pole's row, its simulator built by route R (data and objective from the shipped one).
-template <class S, int Poles, Route R = Route::Analytic>
-RowResult cartpole_row(const Settings& settings, Method method) {
-  const sbptt::CartPole<S, Poles> shipped;
-  const auto sim = sbptt::examples::cartpole_route<S, Poles, R>();
-  sbptt::Rng rng(42);
-  const Matrix<S> train = sbptt::cartpole_initial_states(shipped, rng, 256);
-  const Matrix<S> test = sbptt::cartpole_initial_states(shipped, rng, 256);
-  const auto net = paper_mlp<S>(sim.state_dim(), 1);
-  RowResult r = measure(settings, sim, net, sbptt::cartpole_objective<S, Poles>(),
-                        shipped.steps(), train, test, method);
-  r.nx = sim.state_dim();
-  r.steps = shipped.steps();
-  r.params = net.num_params();
-  return r;
-}
-
-template <class S, Route R = Route::Analytic>
-RowResult guidance_row(const Settings& settings, Method method) {
-  const sbptt::GuidanceByRepulsion<S, 2, 4> shipped;
-  const auto sim = sbptt::examples::guidance_route<S, R>();
-  sbptt::Rng rng(42);
-  const Matrix<S> train = sbptt::guidance_initial_states(shipped, rng, 256);
-  const Matrix<S> test = sbptt::guidance_initial_states(shipped, rng, 256);
-  const auto net = paper_mlp<S>(sim.state_dim(), sim.control_dim());
-  RowResult r = measure(settings, sim, net, sbptt::guidance_objective(shipped, 0.1),
-                        shipped.steps(), train, test, method);
-  r.nx = sim.state_dim();
-  r.steps = shipped.steps();
-  r.params = net.num_params();
-  return r;
-}
-
-template <class S, int Nx>
-RowResult quantum_row(const Settings& settings, Method method) {
-  const sbptt::Schrodinger1D<S, Nx> sim;
-  sbptt::Rng rng(42);
-  const Matrix<S> train = sim.initial_states(rng, 256);
-  const Matrix<S> test = sim.initial_states(rng, 256);
-  const auto net = paper_cnn<S>(Nx);
-  RowResult r = measure(settings, sim, net, sbptt::quantum_objective(sim, 4), sim.steps(), train,
-                        test, method);
-  r.nx = Nx;
-  r.steps = sim.steps();
-  r.params = net.num_params();
-  return r;
-}
-
-/// Runs `body` in a child process and returns what it wrote into the pipe.
-RowResult in_child(const std::function<RowResult()>& body) {
-  int fds[2];
-  if (pipe(fds) != 0) throw sbptt::IoError("bench: pipe() failed");
-  std::fflush(nullptr);
-  const pid_t pid = fork();
-  if (pid < 0) throw sbptt::IoError("bench: fork() failed");
-  if (pid == 0) {
-    close(fds[0]);
-    RowResult r;
-    try {
-      r = body();
-    } catch (const std::exception& e) {
-      std::snprintf(r.error, sizeof r.error, "%s", e.what());
-    }
-    const ssize_t written = write(fds[1], &r, sizeof r);
-    _exit(written == static_cast<ssize_t>(sizeof r) ? 0 : 1);
-  }
-  close(fds[1]);
-  RowResult r;
-  const ssize_t got = read(fds[0], &r, sizeof r);
-  close(fds[0]);
-  int status = 0;
-  waitpid(pid, &status, 0);
-  if (got != static_cast<ssize_t>(sizeof r)) {
-    r = RowResult{};
-    std::snprintf(r.error, sizeof r.error, "child process failed (status %d)", status);
-  }
-  return r;
-}
 
 std::vector<std::string> split(const std::string& text) {
   std::vector<std::string> parts;
@@ -407,104 +127,6 @@ std::string cpu_model() {
 
 bool wanted(const Settings& s, const std::string& task) {
   return std::find(s.tasks.begin(), s.tasks.end(), task) != s.tasks.end();
-}
-
-const Row* find_row(const std::vector<Row>& rows, const std::string& task,
-                    const std::string& scalar, const std::string& method, long long nx = 0) {
-  for (const auto& row : rows)
-    if (row.task == task && row.scalar == scalar && row.method == method && row.result.ok != 0 &&
-        (nx == 0 || row.result.nx == nx))
-      return &row;
-  return nullptr;
-}
-
-/// The speed targets (docs/benchmarks.md), measured in this run: one line each, met or MISSED.
-void summarize(const std::vector<Row>& rows, const double peak[2], Index threads) {
-  std::printf("\ntargets (%s code; 1 thread unless stated):\n", sbptt::instruction_set());
-  const auto verdict = [](bool met) { return met ? "met" : "MISSED"; };
-  // The paper's grid for quantum control (Nx = 32), not the finer grids of quantum-nx.
-  const auto row_of = [&](const char* task, const char* scalar, const char* method) {
-    return find_row(rows, task, scalar, method, std::string(task) == "quantum" ? 32 : 0);
-  };
-  for (const auto& [task, label, target] :
-       {std::tuple{"cartpole4", "cart pole 4", 0.60}, std::tuple{"guidance", "guidance", 0.60},
-        std::tuple{"quantum", "quantum Nx 32", 0.55}}) {
-    const Row* r = row_of(task, "float", "R");
-    if (r == nullptr) continue;
-    const double fraction = r->result.gflop / (r->result.ms_epoch / 1e3) / peak[0];
-    std::printf("  %-13s float R epoch: %5.1f%% of the float peak %.1f GFLOP/s (target >= %.0f%%): "
-                "%s\n",
-                label, 100 * fraction, peak[0], 100 * target, verdict(fraction >= target));
-  }
-  for (const char* task : {"cartpole4-auto", "cartpole4-ode", "guidance-auto", "guidance-ode"}) {
-    const std::string analytic = std::string(task).substr(0, std::string(task).find('-'));
-    for (const char* scalar : {"float", "double"}) {
-      const Row* a = find_row(rows, analytic, scalar, "R");
-      const Row* r = find_row(rows, task, scalar, "R");
-      if (a == nullptr || r == nullptr) continue;
-      const double ratio = r->result.ms_epoch / a->result.ms_epoch;
-      std::printf("  %-14s %-6s R: epoch %.2fx, simulator %.1fx the analytic one%s\n", task,
-                  scalar, ratio, r->result.sim_ns / a->result.sim_ns,
-                  std::string(task) == "cartpole4-auto"
-                      ? (ratio <= 1.5 ? " (target <= 1.5: met)" : " (target <= 1.5: MISSED)")
-                      : "");
-    }
-  }
-  for (const char* task : {"cartpole1", "cartpole4", "guidance", "quantum"}) {
-    for (const char* scalar : {"float", "double"}) {
-      const Row* c = row_of(task, scalar, "C");
-      const Row* r = row_of(task, scalar, "R");
-      if (c == nullptr || r == nullptr) continue;
-      const double ratio = c->result.ms_epoch / r->result.ms_epoch;
-      std::printf("  %-9s %-6s C/R epoch time %.2f (target <= 1.3): %s\n", task, scalar, ratio,
-                  verdict(ratio <= 1.3));
-    }
-  }
-  if (threads == 2) {
-    for (const char* task : {"cartpole4", "quantum"}) {
-      for (const auto& [method, target] : {std::pair{"C", 1.7}, std::pair{"R", 1.35}}) {
-        const Row* r = row_of(task, "float", method);
-        if (r == nullptr) continue;
-        const double speedup = r->result.ms_epoch / r->result.ms_threads;
-        std::printf("  %-9s float %s: 2 threads %.2fx faster than 1 (target >= %.2f): %s\n",
-                    task, method, speedup, target, verdict(speedup >= target));
-      }
-    }
-  } else {
-    std::printf("  (the 2-thread targets need --threads 2)\n");
-  }
-  bool header = false;
-  for (const long long nx : {32, 64, 128, 256}) {
-    const Row* r = find_row(rows, "quantum", "float", "R", nx);
-    if (r == nullptr) continue;
-    if (!header) std::printf("  quantum simulator work (float), step + VJP per sample:\n");
-    header = true;
-    std::printf("    Nx = %3lld: %8.0f ns, %6.2f ns per grid point\n", nx, r->result.sim_ns,
-                r->result.sim_ns / static_cast<double>(nx));
-  }
-}
-
-void write_csv(const Settings& settings, const std::vector<Row>& rows, const double peak[2]) {
-  std::string text =
-      "task,scalar,method,nx,steps,params,ms_epoch,gflop_epoch,gflops,peak_gflops,"
-      "fraction_of_peak,threads,ms_epoch_threads,speedup_threads,sim_ns_per_sample_step,"
-      "trajectory_bytes_per_batch,peak_rss_kib\n";
-  char line[512];
-  for (const auto& row : rows) {
-    const RowResult& r = row.result;
-    if (r.ok == 0) continue;
-    const double p = peak[row.scalar == "float" ? 0 : 1];
-    const double gflops = r.gflop / (r.ms_epoch / 1e3);
-    std::snprintf(line, sizeof line,
-                  "%s,%s,%s,%lld,%lld,%lld,%.3f,%.6f,%.3f,%.3f,%.4f,%lld,%.3f,%.3f,%.1f,%.0f,%.0f\n",
-                  row.task.c_str(), row.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
-                  r.params, r.ms_epoch, r.gflop, gflops, p, gflops / p,
-                  static_cast<long long>(settings.threads), r.ms_threads,
-                  r.ms_epoch / r.ms_threads, r.sim_ns, r.trajectory_bytes, r.rss_kib);
-    text += line;
-  }
-  sbptt::write_file_atomically(settings.csv, text);
-  std::printf("\nwrote %s\n", settings.csv.c_str());
 }
 
 }  // namespace

@@ -14,7 +14,8 @@
 #   3. interrupts the runner while it plots (a fake python and plot script that leave a
 #      temporary PNG behind): exit 130, no "no plots" message, no plots/.tmp.* left;
 #   4. (when strace is installed) traces a sweep: every file the runner renames into place was
-#      fsync'ed just before, and its folder just after.
+#      fsync'ed just before, and its folder just after (a file written unnamed, O_TMPFILE, is
+#      fsync'ed through its descriptor and then linked to the name that is renamed).
 cmake_minimum_required(VERSION 3.20)
 foreach(var REPRODUCE WORK_DIR)
   if(NOT DEFINED ${var})
@@ -148,7 +149,7 @@ if(SANITIZED)  # LeakSanitizer aborts a program that runs under ptrace
   message(STATUS "sanitizer build: the fsync order is not checked under strace")
   return()
 endif()
-execute_process(COMMAND "${STRACE}" -f -y -e trace=fsync,rename,renameat,renameat2
+execute_process(COMMAND "${STRACE}" -f -y -e trace=fsync,linkat,rename,renameat,renameat2
                 -o "${WORK_DIR}/trace" "${REPRODUCE}" ${grid} --seeds 1 --out "${WORK_DIR}/traced"
                 RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
 check("the traced sweep exits 0" rc EQUAL 0)
@@ -159,6 +160,8 @@ function last_part(path) { sub(/\/+$/, "", path); sub(/.*\//, "", path); return 
 NR == 1 { runner = $1 }
 $1 != runner || /resumed>/ { next }
 /fsync\(/ {
+  match($0, /fsync\([0-9]+/); fd = substr($0, RSTART + 6, RLENGTH - 6)
+  unnamed_fd = /\(deleted\)\)/ ? fd : ""
   match($0, /<[^>]*>/); synced = last_part(substr($0, RSTART + 1, RLENGTH - 2))
   if (pending != "") {
     if (synced != pending) { print "no fsync of the folder " pending " after renaming into it"; bad = 1 }
@@ -166,12 +169,19 @@ $1 != runner || /resumed>/ { next }
   }
   last = synced; next
 }
+# strace -y shows an unnamed file as "#<inode>", deleted: its name is the one it is linked to.
+/linkat\(/ {
+  split($0, quoted, "\"")
+  named = unnamed_fd != "" && quoted[2] == "/proc/self/fd/" unnamed_fd && !/= -1 /
+  last = named ? last_part(quoted[4]) : ""
+  next
+}
 /rename/ {
   split($0, quoted, "\"")
   from = last_part(quoted[2]); to = quoted[4]
   if (last != from) { print "renamed " from " without an fsync of it first"; bad = 1 }
   sub(/\/[^\/]*$/, "", to); pending = last_part(to); renames++
-  last = ""
+  last = ""; unnamed_fd = ""
 }
 END { print renames " renames checked"; exit bad }
 ]=])

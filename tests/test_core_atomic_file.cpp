@@ -7,6 +7,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -65,6 +67,18 @@ TEST_CASE("atomic file: an existing file keeps its permission bits", "[core]") {
   REQUIRE(::stat((dir / "p.txt").c_str(), &info) == 0);
   CHECK((info.st_mode & 07777) == 0640);
   CHECK(file_text(dir / "p.txt") == "new\n");
+}
+
+TEST_CASE("atomic file: a failed rename names the temporary, the path and the reason",
+          "[core]") {
+  const fs::path dir = fresh_directory("rename");
+  fs::create_directories(dir / "out.csv");  // a directory: a file cannot be renamed over it
+  const std::string path = (dir / "out.csv").string();
+  CHECK_THROWS_WITH(write_file_atomically(path, "new\n"),
+                    Catch::Contains("cannot rename '" + path + ".tmp.") &&
+                        Catch::Contains("' to '" + path + "': ") &&
+                        Catch::Contains(std::strerror(EISDIR)));
+  CHECK(entries(dir) == 1);  // the temporary is gone
 }
 
 namespace {

@@ -175,6 +175,20 @@ TEMPLATE_TEST_CASE("CombinedUpdate is combine, then clip, then the optimizer ste
   CHECK(update.last_agreement() == Scalar(0.75));
 }
 
+TEST_CASE("the logged squared norm of a float update does not overflow where the norm is finite",
+          "[optim][combine]") {
+  // ‖g‖ = 1e20 is a finite float and clipping rescales g correctly (stableNorm); its square,
+  // 1e40, is beyond float's range. A quantum-control run at the published budget logged "inf"
+  // here, and a checkpoint holding that row could not be read back.
+  sbptt::ClippedUpdate<sbptt::Sgd<float>> update(sbptt::Sgd<float>(sbptt::SgdOptions<float>{}),
+                                                 ClipMode::Norm, 1.0F);
+  Vector<float> theta = vec<float>({0.0, 0.0});
+  update.step(theta, vec<float>({6e19, 8e19}));
+  CHECK(std::isfinite(update.last_norm2()));
+  CHECK(update.last_norm2() == Approx(1e40).epsilon(1e-6));
+  CHECK(theta.allFinite());
+}
+
 TEMPLATE_TEST_CASE("ClippedUpdate clips a copy and steps; the caller's gradient is untouched",
                    "[optim][combine]", float, double) {
   using Scalar = TestType;

@@ -9,6 +9,7 @@
 #include <csignal>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
 #include <unistd.h>
 
@@ -204,6 +205,21 @@ TEMPLATE_TEST_CASE("run: a checkpointed run resumed twice ends bit for bit as on
       }
     }
   }
+}
+
+TEST_CASE("checkpoint: an epoch whose squared update norm overflowed reads back", "[train]") {
+  // A double gradient of norm 1e200 is finite and clips correctly; its square is +inf, and the
+  // log says so. The checkpoint written after that epoch must still resume the run.
+  Checkpoint<double> c;
+  c.last = EpochRecord{};
+  c.last->epoch = 7;
+  c.last->update_norm2 = std::numeric_limits<double>::infinity();
+  const Checkpoint<double> back = parse_checkpoint<double>(checkpoint_text(c), "test.checkpoint");
+  REQUIRE(back.last);
+  CHECK(back.last->epoch == 7);
+  CHECK(back.last->update_norm2 == std::numeric_limits<double>::infinity());
+  c.last->update_norm2 = std::numeric_limits<double>::quiet_NaN();  // never a squared norm
+  CHECK_THROWS_AS(parse_checkpoint<double>(checkpoint_text(c), "test.checkpoint"), ParseError);
 }
 
 TEST_CASE("run: a checkpoint of other settings is refused, naming the setting", "[train]") {

@@ -14,7 +14,8 @@
 #include <string_view>
 #include <vector>
 
-#include "durable_files.hpp"
+#include <sbptt/core/atomic_file.hpp>
+
 #include "finished_run.hpp"
 #include "options.hpp"
 
@@ -118,7 +119,7 @@ inline int emit_slurm(const Options& o, const std::vector<Run>& plan, const fs::
     names += run.name() + "\n";
     longest = std::max(longest, finished.expected_seconds(run));
   }
-  write_durably(dir / "runs.txt", names);
+  sbptt::write_file_atomically((dir / "runs.txt").string(), names);
   const long minutes = std::lround(std::ceil((2 * longest + 300) / 60));
   std::vector<std::string> command{self.string()};
   const auto selection = selection_flags(o, bin_dir);
@@ -138,8 +139,8 @@ inline int emit_slurm(const Options& o, const std::vector<Run>& plan, const fs::
       "#SBATCH --job-name=", job, "-merge\n#SBATCH --ntasks=1\n#SBATCH --cpus-per-task=1\n"
       "#SBATCH --time=30\n#SBATCH --output=", dir.string(), "/logs/merge.log\nexec ",
       shell_line(command), o.plot ? "" : " --no-plot", " --merge\n");
-  write_durably(dir / "array.sh", array);
-  write_durably(dir / "merge.sh", merge);
+  sbptt::write_file_atomically((dir / "array.sh").string(), array);
+  sbptt::write_file_atomically((dir / "merge.sh").string(), merge);
   std::printf("reproduce: %zu of %zu planned runs to do; wrote %s/array.sh (--array=0-%zu%%%ld, "
               "%ld CPU(s) and %ld min per task) and %s/merge.sh. Submit with:\n",
               left.size(), plan.size(), dir.c_str(), left.size() - 1, o.jobs, o.threads,

@@ -13,9 +13,9 @@
 #include <tuple>
 #include <vector>
 
+#include <sbptt/core/atomic_file.hpp>
 #include <sbptt/core/error.hpp>
 
-#include "durable_files.hpp"
 #include "grid.hpp"
 #include "locks.hpp"
 #include "run_files.hpp"
@@ -154,7 +154,7 @@ inline FinishedRuns rebuild_summary(const fs::path& out) {
       fs::remove(entry.path());  // of a writer killed while it held the lock
   std::vector<Summary> rows;
   for (const auto& [key, s] : finished.summaries) rows.push_back(s);
-  write_durably(out / "summary.csv", summary_csv(rows));
+  sbptt::write_file_atomically((out / "summary.csv").string(), summary_csv(rows));
   return finished;
 }
 

@@ -24,6 +24,7 @@
 #include <thread>
 #include <vector>
 
+#include <sbptt/core/atomic_file.hpp>
 #include <sbptt/core/instruction_set.hpp>
 #include <sbptt/train/training_log.hpp>
 
@@ -197,7 +198,7 @@ private:
       fs::remove(run_file(runs_, run, ".checkpoint"));
     if (!fs::exists(run_file(runs_, run, ".checkpoint")))
       fs::remove(run_file(runs_, run, ".partial.csv"));
-    write_durably(run_file(runs_, run, ".run"), run.description());
+    sbptt::write_file_atomically(run_file(runs_, run, ".run").string(), run.description());
     const auto argv = command_line(run, bin_dir_, runs_, options_.threads);
     // Like the CSV, the log gets its final name only when the run has finished.
     const fs::path log = run_file(runs_, run, ".partial.log");
@@ -235,8 +236,7 @@ private:
     if (WIFEXITED(status) && (WEXITSTATUS(status) == 0 || WEXITSTATUS(status) == 3)) {
       const int code = WEXITSTATUS(status);
       // Stopped in the first epoch: no row was logged, which is the result.
-      if (code == 3 && !fs::exists(partial))
-        write_durably(partial, std::string(sbptt::TrainingLog::header) + "\n");
+      if (code == 3 && !fs::exists(partial)) sbptt::TrainingLog().save(partial.string());
       try {
         if (!fs::exists(partial))
           throw sbptt::ParseError(concat("exited 0 but wrote no training log ", partial.string()));

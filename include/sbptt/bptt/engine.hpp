@@ -13,9 +13,11 @@
 /// is a positive multiple of K, so no gradient crosses those states.
 ///
 /// Cost and memory: the controller runs once per step on the whole batch (one product per
-/// layer, never per sample); the simulator, the loss and their VJPs run per sample. After the
-/// first call at a batch shape, `forward`, `reverse` and `regular_and_modified` allocate
-/// nothing (every buffer is kept and resized only when the shape changes).
+/// layer, never per sample); a `PackingController` packs its parameters once per rollout
+/// (`forward`, `evaluate`), and the reverse sweeps use the packing of the last rollout. The
+/// simulator, the loss and their VJPs run per sample. After the first call at a batch shape,
+/// `forward`, `reverse` and `regular_and_modified` allocate nothing (every buffer is kept and
+/// resized only when the shape changes).
 ///
 /// Threads (`set_threads`): the per-sample work of a step (simulator step and VJP, loss seeds)
 /// is split over the samples; `regular_and_modified` runs its two sweeps at once; `evaluate`
@@ -151,9 +153,10 @@ public:
     forward_non_finite_.reset();
     trajectory_.states[0] = initial_states;
     note_non_finite(Quantity::State, 0, trajectory_.states[0]);
+    pack_controller();
     for (Index n = 0; n < steps_; ++n) {
       const auto i = static_cast<std::size_t>(n);
-      controller_.forward(trajectory_.states[i], trajectory_.controls[i], trajectory_.workspaces[i]);
+      controller_forward(trajectory_.states[i], trajectory_.controls[i], trajectory_.workspaces[i]);
       note_non_finite(Quantity::Control, n, trajectory_.controls[i]);
       for_samples(batch, forward_scratch_, true, fork_[0], [&](Index b, Scratch& t) {
         t.x = trajectory_.states[i].col(b);
@@ -178,6 +181,7 @@ public:
     if (static_cast<Index>(chunks_.size()) < chunks)
       chunks_.resize(static_cast<std::size_t>(chunks));
     eval_losses_.resize(batch);
+    pack_controller();
     auto task = [&](Index k, Index) {
       const Index first = k * kEvaluateChunk;
       evaluate_chunk(initial_states.middleCols(first, std::min(kEvaluateChunk, batch - first)),
@@ -249,6 +253,40 @@ private:
   using Scratch = detail::SampleScratch<State, Control>;
   using Sweep = detail::SweepBuffers<Scalar, Scratch>;
   using EvalChunk = detail::EvaluationChunk<Scalar, typename Ctrl::Workspace, Scratch>;
+
+  /// `Ctrl::PackedWeights` for a `PackingController`, else nothing.
+  struct NothingPacked {};
+  template <class C, bool = PackingController<C>>
+  struct PackedOf {
+    using Type = NothingPacked;
+  };
+  template <class C>
+  struct PackedOf<C, true> {
+    using Type = typename C::PackedWeights;
+  };
+  using Packed = typename PackedOf<Ctrl>::Type;
+
+  void pack_controller() {
+    if constexpr (PackingController<Ctrl>) controller_.pack(packed_);
+  }
+
+  void controller_forward(const Matrix<Scalar>& x, Matrix<Scalar>& y,
+                          typename Ctrl::Workspace& ws) const {
+    if constexpr (PackingController<Ctrl>) {
+      controller_.forward(x, y, ws, packed_);
+    } else {
+      controller_.forward(x, y, ws);
+    }
+  }
+
+  void controller_backward(const typename Ctrl::Workspace& ws, const Matrix<Scalar>& dy,
+                           Vector<Scalar>& grad, Matrix<Scalar>* dx) const {
+    if constexpr (PackingController<Ctrl>) {
+      controller_.backward(ws, dy, grad, dx, packed_);
+    } else {
+      controller_.backward(ws, dy, grad, dx);
+    }
+  }
 
   [[nodiscard]] Scratch make_scratch() const { return Scratch(sim_.state_dim(), sim_.control_dim()); }
 
@@ -330,8 +368,8 @@ private:
       });
       record_adjoint(s, n + 1);
       if (objective_.control_weight > 0) s.mu.noalias() += control_seed * trajectory_.controls[i];
-      controller_.backward(trajectory_.workspaces[i], s.mu, gradient,
-                           network ? &s.input_adjoint : nullptr);
+      controller_backward(trajectory_.workspaces[i], s.mu, gradient,
+                          network ? &s.input_adjoint : nullptr);
       if (physics) {
         s.lambda.swap(s.propagated);
         if (network) s.lambda += s.input_adjoint;
@@ -361,7 +399,7 @@ private:
     auto losses = eval_losses_.segment(first, batch);
     losses.setZero();
     for (Index n = 0; n < steps_; ++n) {
-      controller_.forward(c.state, c.control, c.workspace);
+      controller_forward(c.state, c.control, c.workspace);
       c.note(Quantity::Control, n, 2 * n, c.control, first);
       for (Index b = 0; b < batch; ++b) {
         t.x = c.state.col(b);
@@ -431,6 +469,7 @@ private:
   Index steps_;
   Index threads_ = 1;
   std::unique_ptr<detail::ThreadPool> pool_;
+  Packed packed_;
 
   Trajectory<Scalar, typename Ctrl::Workspace> trajectory_;
   std::optional<NonFinite> forward_non_finite_;

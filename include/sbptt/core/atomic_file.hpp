@@ -200,8 +200,9 @@ public:
     fd_ = -1;
     if (std::rename(temporary_.c_str(), target_.c_str()) != 0) {
       const int error = errno;
+      const std::string temporary = temporary_;  // discard() forgets it
       discard();
-      throw IoError(detail::concat("cannot rename '", temporary_, "' to '", path_,
+      throw IoError(detail::concat("cannot rename '", temporary, "' to '", path_,
                                    "': ", detail::os_reason(error)));
     }
     temporary_.clear();

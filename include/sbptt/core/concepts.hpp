@@ -129,6 +129,23 @@ template <class C>
 concept Controller = detail::HasControllerSizes<C> && detail::HasControllerParams<C> &&
                      detail::HasControllerForward<C> && detail::HasControllerBackward<C>;
 
+/// A `Controller` that can prepare its parameters once for many calls (`Network` packs its
+/// weights): `using PackedWeights` (default-constructible), `void pack(PackedWeights&) const`
+/// from the current θ, and `forward` / `backward` overloads that take `const PackedWeights&`
+/// as their last argument and give the same results as the plain ones. The engine packs once
+/// per rollout and uses the packed overloads for every step of it.
+template <class C>
+concept PackingController =
+    Controller<C> && std::default_initializable<typename C::PackedWeights> &&
+    requires(const C& c, typename C::PackedWeights& packed, const typename C::PackedWeights& cp,
+             const Matrix<typename C::Scalar>& x, Matrix<typename C::Scalar>& y,
+             typename C::Workspace& ws, const typename C::Workspace& cws,
+             Vector<typename C::Scalar>& grad, Matrix<typename C::Scalar>* dx) {
+      c.pack(packed);
+      c.forward(x, y, ws, cp);
+      c.backward(cws, x, grad, dx, cp);
+    };
+
 /// Compile-time check with a readable message per missing member; returns true.
 template <class S>
 consteval bool static_assert_simulator() {

@@ -20,6 +20,7 @@
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/nn/activation.hpp"
+#include "sbptt/nn/packed_product.hpp"
 
 namespace sbptt {
 
@@ -38,6 +39,8 @@ struct Conv1d {
   [[nodiscard]] Index output_dim() const { return output_length() * out_channels; }
   /// Rows of one im2col column: one window, C_in·K.
   [[nodiscard]] Index window_size() const { return in_channels * kernel; }
+  /// Rows of the weight read as a matrix (out_channels); its columns are weight_count() / this.
+  [[nodiscard]] Index weight_rows() const { return out_channels; }
   [[nodiscard]] Index weight_count() const { return out_channels * window_size(); }
   [[nodiscard]] Index num_params() const { return weight_count() + out_channels; }
 
@@ -83,28 +86,23 @@ struct Conv1d {
   }
 
   /// Y = f(conv(X) + b) for a batch.
-  /// \param params   this layer's slice of the flat vector, num_params() entries
+  /// \param w        W with b, packed (packed_product.hpp; `Network::pack` makes it)
   /// \param x        inputs, (L·C_in) × B, position-major
   /// \param y        outputs, resized to (P·C_out) × B, position-major
   /// \param columns  im2col workspace, resized to (C_in·K) × (P·B); backward needs it
   template <class Scalar>
-  void forward(const Scalar* params, const Matrix<Scalar>& x, Matrix<Scalar>& y,
+  void forward(const PackedMatrix<Scalar>& w, const Matrix<Scalar>& x, Matrix<Scalar>& y,
                Matrix<Scalar>& columns) const {
     im2col(x, columns);
-    const Index batch = x.cols();
-    const detail::ConstRowMajorMap<Scalar> w(params, out_channels, window_size());
-    const Eigen::Map<const Vector<Scalar>> b(params + weight_count(), out_channels);
-    y.resize(output_dim(), batch);
+    y.resize(output_dim(), x.cols());
     // A C_out × (P·B) column-major matrix has exactly the memory of the position-major
-    // (P·C_out) × B output, so the GEMM writes the result in place.
-    detail::MatrixMap<Scalar> z(y.data(), out_channels, output_length() * batch);
-    z.noalias() = w * columns;
-    z.colwise() += b;
+    // (P·C_out) × B output, so the product writes the result in place.
+    w.multiply(columns.data(), window_size(), columns.cols(), y.data(), out_channels);
     activate_in_place(activation, y);
   }
 
   /// Adds the parameter VJP to `grad` and, when `dx` is not null, writes the input VJP.
-  /// \param params   this layer's slice of the flat vector, num_params() entries
+  /// \param wt       Wᵀ, packed (`Network::pack` makes it)
   /// \param columns  the im2col matrix of the forward pass, (C_in·K) × (P·B)
   /// \param delta    adjoint of the pre-activation, (P·C_out) × B position-major, equivalently
   ///                 C_out × (P·B) column-major
@@ -112,8 +110,8 @@ struct Conv1d {
   /// \param dx       null, or storage for ∂L/∂x, (L·C_in) × B position-major; overwritten
   /// \param scratch  grown to hold the (C_in·K) × (P·B) window adjoints when `dx` is set
   template <class Scalar>
-  void backward(const Scalar* params, const Matrix<Scalar>& columns, const Scalar* delta,
-                Scalar* grad, Scalar* dx, Vector<Scalar>& scratch) const {
+  void backward(const PackedMatrix<Scalar>& wt, const Matrix<Scalar>& columns,
+                const Scalar* delta, Scalar* grad, Scalar* dx, Vector<Scalar>& scratch) const {
     const Index positions = output_length();
     const Index window = window_size();
     const Index batch = positions > 0 ? columns.cols() / positions : 0;
@@ -124,9 +122,8 @@ struct Conv1d {
     db.noalias() += d.rowwise().sum();
     if (dx == nullptr) return;
 
-    const detail::ConstRowMajorMap<Scalar> w(params, out_channels, window);
     auto dcols = detail::grow_map(scratch, window, positions * batch);
-    dcols.noalias() = w.transpose() * d;
+    wt.multiply(delta, out_channels, positions * batch, dcols.data(), window);
     // col2im: overlapping windows (K > s) add up; positions past the last window stay zero.
     detail::MatrixMap<Scalar> dxm(dx, input_dim(), batch);
     dxm.setZero();

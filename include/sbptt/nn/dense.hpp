@@ -3,12 +3,14 @@
 ///
 /// Parameter layout inside the flat vector (docs/formats.md, PyTorch `Linear` order): the weight W
 /// (outputs × inputs) row-major, then the bias b (outputs). The layer reads and writes its slice
-/// through `Eigen::Map`s, so the network's single parameter vector is never copied.
+/// through `Eigen::Map`s; the products with W and Wᵀ use copies packed once per parameter
+/// update (packed_product.hpp).
 #include <string>
 
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/nn/activation.hpp"
+#include "sbptt/nn/packed_product.hpp"
 
 namespace sbptt {
 
@@ -20,6 +22,8 @@ struct Dense {
 
   [[nodiscard]] Index input_dim() const { return inputs; }
   [[nodiscard]] Index output_dim() const { return outputs; }
+  /// Rows of the weight read as a matrix (outputs); its columns are weight_count() / this.
+  [[nodiscard]] Index weight_rows() const { return outputs; }
   [[nodiscard]] Index weight_count() const { return outputs * inputs; }
   [[nodiscard]] Index num_params() const { return weight_count() + outputs; }
 
@@ -39,40 +43,34 @@ struct Dense {
   }
 
   /// Y = f(W X + b) for a batch.
-  /// \param params  this layer's slice of the flat vector, num_params() entries
-  /// \param x       inputs, n_in × B
-  /// \param y       outputs, resized to n_out × B (no allocation when already that shape)
+  /// \param w  W with b, packed (packed_product.hpp; `Network::pack` makes it)
+  /// \param x  inputs, n_in × B
+  /// \param y  outputs, resized to n_out × B (no allocation when already that shape)
   template <class Scalar>
-  void forward(const Scalar* params, const Matrix<Scalar>& x, Matrix<Scalar>& y) const {
-    const detail::ConstRowMajorMap<Scalar> w(params, outputs, inputs);
-    const Eigen::Map<const Vector<Scalar>> b(params + weight_count(), outputs);
+  void forward(const PackedMatrix<Scalar>& w, const Matrix<Scalar>& x, Matrix<Scalar>& y) const {
     y.resize(outputs, x.cols());
-    y.noalias() = w * x;
-    y.colwise() += b;
+    w.multiply(x.data(), inputs, x.cols(), y.data(), outputs);
     activate_in_place(activation, y);
   }
 
   /// Adds the parameter VJP to `grad` and, when `dx` is not null, writes the input VJP.
-  /// \param params  this layer's slice of the flat vector, num_params() entries
+  /// \param wt      Wᵀ, packed (`Network::pack` makes it)
   /// \param x       the inputs the forward pass saw, n_in × B
   /// \param delta   adjoint of the pre-activation ∂L/∂(W x + b), n_out × B (column-major)
   /// \param grad    this layer's slice of the gradient, num_params() entries; accumulated
   /// \param dx      null, or storage for ∂L/∂x, n_in × B (column-major); overwritten
   template <class Scalar>
-  void backward(const Scalar* params, const Matrix<Scalar>& x, const Scalar* delta, Scalar* grad,
-                Scalar* dx) const {
+  void backward(const PackedMatrix<Scalar>& wt, const Matrix<Scalar>& x, const Scalar* delta,
+                Scalar* grad, Scalar* dx) const {
     const Index batch = x.cols();
     const detail::ConstMatrixMap<Scalar> d(delta, outputs, batch);
     detail::RowMajorMap<Scalar> dw(grad, outputs, inputs);
     Eigen::Map<Vector<Scalar>> db(grad + weight_count(), outputs);
-    // The batch sum is the inner dimension of this product: one GEMM, no per-sample loop.
+    // The batch sum is the inner dimension of this product: one GEMM, no per-sample loop. (The
+    // packed kernel loses here: it must load and store dW around an inner dimension of B.)
     dw.noalias() += d * x.transpose();
     db.noalias() += d.rowwise().sum();
-    if (dx != nullptr) {
-      const detail::ConstRowMajorMap<Scalar> w(params, outputs, inputs);
-      detail::MatrixMap<Scalar> dxm(dx, inputs, batch);
-      dxm.noalias() = w.transpose() * d;
-    }
+    if (dx != nullptr) wt.multiply(delta, outputs, batch, dx, inputs);
   }
 };
 

@@ -6,6 +6,10 @@
 /// (see dense.hpp and conv1d.hpp for the per-layer layouts). A conv output feeds a dense layer
 /// with no reshape, because samples are stored position-major throughout.
 ///
+/// Products: every layer multiplies by W (forward) and Wᵀ (input VJP) in the packed layout of
+/// packed_product.hpp. `pack` packs them once for as long as θ stays unchanged (the engine does
+/// it once per rollout); the overloads without packed weights pack on every call.
+///
 /// Memory: `forward` keeps what `backward` needs in the caller's `Workspace` (input copy,
 /// every layer's output, the im2col matrices) and resizes those buffers only when the batch
 /// size or the network changes. `backward` takes the workspace `const`, so its own temporaries
@@ -26,6 +30,7 @@
 #include "sbptt/nn/activation.hpp"
 #include "sbptt/nn/conv1d.hpp"
 #include "sbptt/nn/dense.hpp"
+#include "sbptt/nn/packed_product.hpp"
 
 namespace sbptt {
 
@@ -64,6 +69,20 @@ struct NetworkScratch {
   Vector<Scalar> adjoint[2];  ///< input adjoints, alternating so that input and output differ
   Vector<Scalar> columns;     ///< conv window adjoints (im2col shape)
 };
+
+/// Packed W (with b) and Wᵀ of every layer.
+template <class Scalar>
+struct PackedLayers {
+  std::vector<PackedMatrix<Scalar>> weights;
+  std::vector<PackedMatrix<Scalar>> transposed;
+};
+
+/// What the overloads without packed weights pack into, one per thread.
+template <class Scalar>
+[[nodiscard]] PackedLayers<Scalar>& packed_scratch() {
+  thread_local PackedLayers<Scalar> packed;
+  return packed;
+}
 
 template <class Scalar>
 [[nodiscard]] NetworkScratch<Scalar>& network_scratch() {
@@ -105,6 +124,13 @@ public:
     std::vector<Matrix<Scalar>> outputs_;  // per layer, output_dim × B
     std::vector<Matrix<Scalar>> columns_;  // per conv layer the im2col matrix, else empty
     Index batch_ = -1;
+  };
+
+  /// The layers' products packed from θ by `pack`: valid while θ is unchanged.
+  class PackedWeights {
+  private:
+    friend class Network;
+    detail::PackedLayers<Scalar> layers_;
   };
 
   /// A network of the given layers (input to output), parameters zero.
@@ -163,35 +189,29 @@ public:
     return text + detail::concat(" (", num_params(), " parameters)");
   }
 
+  /// Packs W (with b) and Wᵀ of every layer from the current θ (see the file comment). Reuses
+  /// the storage of `packed` when the network is the same.
+  void pack(PackedWeights& packed) const {
+    check_params_size();
+    pack_layers(packed.layers_, true, true);
+  }
+
   /// Y = N(X; θ).
   /// \param x   inputs, input_dim() × B, one sample per column
   /// \param y   outputs, resized to output_dim() × B
   /// \param ws  records what `backward` needs; reused buffers, resized only when B changes
   void forward(const Matrix<Scalar>& x, Matrix<Scalar>& y, Workspace& ws) const {
-    detail::require(x.rows() == input_dim(), "Network::forward: X has ", x.rows(),
-                    " rows, expected input_dim() = ", input_dim(), " (one sample per column)");
     check_params_size();
-    const std::size_t count = layers_.size();
-    if (ws.outputs_.size() != count) {
-      ws.outputs_.resize(count);
-      ws.columns_.resize(count);
-    }
-    ws.input_ = x;
-    ws.batch_ = x.cols();
-    for (std::size_t l = 0; l < count; ++l) {
-      const Matrix<Scalar>& in = l == 0 ? ws.input_ : ws.outputs_[l - 1];
-      const Scalar* theta = params_.data() + offsets_[l];
-      std::visit(
-          [&](const auto& layer) {
-            if constexpr (std::is_same_v<std::decay_t<decltype(layer)>, Conv1d>) {
-              layer.forward(theta, in, ws.outputs_[l], ws.columns_[l]);
-            } else {
-              layer.forward(theta, in, ws.outputs_[l]);
-            }
-          },
-          layers_[l]);
-    }
-    y = ws.outputs_.back();
+    auto& packed = detail::packed_scratch<Scalar>();
+    pack_layers(packed, true, false);
+    forward_packed(x, y, ws, packed);
+  }
+
+  /// The same with θ as packed by `pack` (which must have seen the current θ).
+  void forward(const Matrix<Scalar>& x, Matrix<Scalar>& y, Workspace& ws,
+               const PackedWeights& packed) const {
+    check_packed(packed.layers_.weights, "forward");
+    forward_packed(x, y, ws, packed.layers_);
   }
 
   /// Vector–Jacobian products at the batch recorded in `ws`.
@@ -202,13 +222,55 @@ public:
   ///              (∂N/∂x)ᵀ dY, input_dim() × B; must not alias `dy`
   void backward(const Workspace& ws, const Matrix<Scalar>& dy, Vector<Scalar>& grad,
                 Matrix<Scalar>* dx) const {
+    check_params_size();
+    auto& packed = detail::packed_scratch<Scalar>();
+    pack_layers(packed, false, true);
+    backward_packed(ws, dy, grad, dx, packed);
+  }
+
+  /// The same with θ as packed by `pack` (which must have seen the current θ).
+  void backward(const Workspace& ws, const Matrix<Scalar>& dy, Vector<Scalar>& grad,
+                Matrix<Scalar>* dx, const PackedWeights& packed) const {
+    check_packed(packed.layers_.transposed, "backward");
+    backward_packed(ws, dy, grad, dx, packed.layers_);
+  }
+
+private:
+  void forward_packed(const Matrix<Scalar>& x, Matrix<Scalar>& y, Workspace& ws,
+                      const detail::PackedLayers<Scalar>& packed) const {
+    detail::require(x.rows() == input_dim(), "Network::forward: X has ", x.rows(),
+                    " rows, expected input_dim() = ", input_dim(), " (one sample per column)");
+    const std::size_t count = layers_.size();
+    if (ws.outputs_.size() != count) {
+      ws.outputs_.resize(count);
+      ws.columns_.resize(count);
+    }
+    ws.input_ = x;
+    ws.batch_ = x.cols();
+    for (std::size_t l = 0; l < count; ++l) {
+      const Matrix<Scalar>& in = l == 0 ? ws.input_ : ws.outputs_[l - 1];
+      const PackedMatrix<Scalar>& w = packed.weights[l];
+      std::visit(
+          [&](const auto& layer) {
+            if constexpr (std::is_same_v<std::decay_t<decltype(layer)>, Conv1d>) {
+              layer.forward(w, in, ws.outputs_[l], ws.columns_[l]);
+            } else {
+              layer.forward(w, in, ws.outputs_[l]);
+            }
+          },
+          layers_[l]);
+    }
+    y = ws.outputs_.back();
+  }
+
+  void backward_packed(const Workspace& ws, const Matrix<Scalar>& dy, Vector<Scalar>& grad,
+                       Matrix<Scalar>* dx, const detail::PackedLayers<Scalar>& packed) const {
     check_workspace(ws);
     detail::require(dy.rows() == output_dim() && dy.cols() == ws.batch_,
                     "Network::backward: dY is ", dy.rows(), " × ", dy.cols(), ", expected ",
                     output_dim(), " × ", ws.batch_, " (output_dim() × batch of the forward pass)");
     detail::require(grad.size() == num_params(), "Network::backward: grad has ", grad.size(),
                     " entries, expected num_params() = ", num_params());
-    check_params_size();
 
     auto& scratch = detail::network_scratch<Scalar>();
     const Index batch = ws.batch_;
@@ -235,14 +297,14 @@ public:
         d_in = dx->data();
       }
 
-      const Scalar* theta = params_.data() + offsets_[ul];
+      const PackedMatrix<Scalar>& wt = packed.transposed[ul];
       Scalar* g = grad.data() + offsets_[ul];
       std::visit(
           [&](const auto& spec) {
             if constexpr (std::is_same_v<std::decay_t<decltype(spec)>, Conv1d>) {
-              spec.backward(theta, ws.columns_[ul], delta, g, d_in, scratch.columns);
+              spec.backward(wt, ws.columns_[ul], delta, g, d_in, scratch.columns);
             } else {
-              spec.backward(theta, l == 0 ? ws.input_ : ws.outputs_[ul - 1], delta, g, d_in);
+              spec.backward(wt, l == 0 ? ws.input_ : ws.outputs_[ul - 1], delta, g, d_in);
             }
           },
           layer);
@@ -250,7 +312,29 @@ public:
     }
   }
 
-private:
+  /// Packs W with b (`weights`) and/or Wᵀ (`transposed`) of every layer from θ.
+  void pack_layers(detail::PackedLayers<Scalar>& packed, bool weights, bool transposed) const {
+    packed.weights.resize(layers_.size());
+    packed.transposed.resize(layers_.size());
+    for (std::size_t l = 0; l < layers_.size(); ++l) {
+      const Index rows = std::visit([](const auto& s) { return s.weight_rows(); }, layers_[l]);
+      const Index cols = layer_weight_count(layers_[l]) / rows;
+      const Scalar* theta = params_.data() + offsets_[l];
+      if (weights) packed.weights[l].pack(theta, rows, cols, false, theta + rows * cols);
+      if (transposed) packed.transposed[l].pack(theta, rows, cols, true);
+    }
+  }
+
+  /// Refuses packed weights of another network, or none.
+  void check_packed(const std::vector<PackedMatrix<Scalar>>& packed, const char* caller) const {
+    check_params_size();
+    bool matches = packed.size() == layers_.size();
+    for (std::size_t l = 0; matches && l < layers_.size(); ++l)
+      matches = packed[l].rows() * packed[l].cols() == layer_weight_count(layers_[l]);
+    detail::require(matches, "Network::", caller,
+                    ": the packed weights were not made by pack() of this network");
+  }
+
   void check_chain(std::size_t l) const {
     const Layer& previous = layers_[l - 1];
     const Layer& current = layers_[l];
@@ -294,5 +378,6 @@ private:
 static_assert(static_assert_controller<Network<double>>());
 static_assert(static_assert_controller<Network<float>>());
 static_assert(Controller<Network<double>> && Controller<Network<float>>);
+static_assert(PackingController<Network<double>> && PackingController<Network<float>>);
 
 }  // namespace sbptt

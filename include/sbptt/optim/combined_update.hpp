@@ -96,12 +96,13 @@ public:
   /// and do not need it afterwards (saves a copy of n).
   void step_in_place(Vector<Scalar>& params, Vector<Scalar>& update) {
     const Scalar norm = clip(update, mode_, threshold_);
-    last_norm2_ = norm * norm;
+    // Squared in double: a finite float norm beyond 1.8e19 would overflow to inf.
+    last_norm2_ = static_cast<double>(norm) * static_cast<double>(norm);
     inner_.step(params, update);
   }
 
   /// ‖vector‖² before clipping, of the last step (the reference's logged "update size").
-  [[nodiscard]] Scalar last_norm2() const { return last_norm2_; }
+  [[nodiscard]] double last_norm2() const { return last_norm2_; }
 
   [[nodiscard]] ClipMode clip_mode() const { return mode_; }
   [[nodiscard]] Scalar clip_threshold() const { return threshold_; }
@@ -113,7 +114,7 @@ private:
   ClipMode mode_;
   Scalar threshold_;
   Vector<Scalar> scratch_;
-  Scalar last_norm2_ = 0;
+  double last_norm2_ = 0;
 };
 
 /// combine → clip → `Inner::step`: the paper's C mode, as the reference orders it.
@@ -136,7 +137,7 @@ public:
   }
 
   /// ‖g_C‖² before clipping, of the last step.
-  [[nodiscard]] Scalar last_norm2() const { return clipped_.last_norm2(); }
+  [[nodiscard]] double last_norm2() const { return clipped_.last_norm2(); }
   /// Fraction of components whose signs agreed in the last step (see `sign_agreement`).
   [[nodiscard]] Scalar last_agreement() const { return last_agreement_; }
 

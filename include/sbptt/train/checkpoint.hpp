@@ -26,6 +26,7 @@
 #include <cerrno>
 #include <cstdint>
 #include <cstdio>
+#include <limits>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -154,6 +155,13 @@ inline std::optional<double> optional_field(std::string_view field, const std::s
   return parse_finite<double>(field, where);
 }
 
+/// A squared update norm: finite, or "inf" where a finite norm (up to 1.8e308) squared
+/// overflows; the log writes it so, and the run goes on (clipping uses the norm itself).
+inline double squared_norm_field(std::string_view field, const std::string& where) {
+  if (field == "inf") return std::numeric_limits<double>::infinity();
+  return parse_finite<double>(field, where);
+}
+
 }  // namespace detail
 
 /// The checkpoint as text (see the file comment).
@@ -222,7 +230,7 @@ template <class Scalar>
     r.batch_loss = detail::parse_finite<double>(fields[1], where);
     r.train_loss = detail::optional_field(fields[2], where);
     r.test_loss = detail::optional_field(fields[3], where);
-    r.update_norm2 = detail::parse_finite<double>(fields[4], where);
+    r.update_norm2 = detail::squared_norm_field(fields[4], where);
     r.cos_m_r = detail::optional_field(fields[5], where);
     r.agree_fraction = detail::optional_field(fields[6], where);
     r.seconds = detail::parse_finite<double>(fields[7], where);

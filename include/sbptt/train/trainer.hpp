@@ -271,7 +271,7 @@ private:
                                      : pair_.modified_diagnostics.first_non_finite;
       if (!bad) {
         combined_.step(controller_.params(), pair_.modified, pair_.regular);
-        last_norm2_ = static_cast<double>(combined_.last_norm2());
+        last_norm2_ = combined_.last_norm2();
         last_comparison_ = pair_.comparison;
       }
     } else {
@@ -283,7 +283,7 @@ private:
       }
       if (!bad) {
         clipped_.step_in_place(controller_.params(), gradient_);
-        last_norm2_ = static_cast<double>(clipped_.last_norm2());
+        last_norm2_ = clipped_.last_norm2();
       }
     }
     if (!bad) bad = detail::first_non_finite_component(controller_.params());

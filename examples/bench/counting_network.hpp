@@ -1,0 +1,84 @@
+#pragma once
+/// \file bench's Network wrapper that counts the multiply-adds it executes (the GFLOP column).
+
+#include <atomic>
+#include <type_traits>
+#include <variant>
+
+#include <sbptt/sbptt.hpp>
+
+namespace bench {
+
+using sbptt::Index;
+using sbptt::Matrix;
+using sbptt::Network;
+
+/// A `Network` seen through the Controller concept, counting the multiply-adds it executes.
+template <class S>
+class CountingNetwork {
+public:
+  using Scalar = S;
+  using Workspace = typename Network<S>::Workspace;
+  using PackedWeights = typename Network<S>::PackedWeights;
+
+  explicit CountingNetwork(Network<S>& net) : net_(net) {
+    for (const auto& layer : net.layers()) {
+      const Index macs = std::visit(
+          [](const auto& l) -> Index {
+            if constexpr (std::is_same_v<std::decay_t<decltype(l)>, sbptt::Conv1d>) {
+              return l.output_length() * l.out_channels * l.in_channels * l.kernel;
+            } else {
+              return l.inputs * l.outputs;
+            }
+          },
+          layer);
+      per_sample_ += macs;
+      if (&layer != &net.layers().front()) hidden_input_ += macs;
+    }
+    first_input_ = per_sample_ - hidden_input_;
+  }
+
+  [[nodiscard]] Index input_dim() const { return net_.input_dim(); }
+  [[nodiscard]] Index output_dim() const { return net_.output_dim(); }
+  [[nodiscard]] Index num_params() const { return net_.num_params(); }
+  [[nodiscard]] const sbptt::Vector<S>& params() const { return net_.params(); }
+  [[nodiscard]] sbptt::Vector<S>& params() { return net_.params(); }
+
+  void pack(PackedWeights& packed) const { net_.pack(packed); }
+  void forward(const Matrix<S>& x, Matrix<S>& y, Workspace& ws) const {
+    net_.forward(x, y, ws);
+    macs_.fetch_add(per_sample_ * x.cols(), std::memory_order_relaxed);
+  }
+  void forward(const Matrix<S>& x, Matrix<S>& y, Workspace& ws,
+               const PackedWeights& packed) const {
+    net_.forward(x, y, ws, packed);
+    macs_.fetch_add(per_sample_ * x.cols(), std::memory_order_relaxed);
+  }
+  /// Parameter VJP of every layer, input VJP of every layer but the first, and of the first
+  /// one only when dX is asked for (exactly what `Network::backward` executes).
+  void backward(const Workspace& ws, const Matrix<S>& dy, sbptt::Vector<S>& grad,
+                Matrix<S>* dx) const {
+    net_.backward(ws, dy, grad, dx);
+    count_backward(dy.cols(), dx != nullptr);
+  }
+  void backward(const Workspace& ws, const Matrix<S>& dy, sbptt::Vector<S>& grad, Matrix<S>* dx,
+                const PackedWeights& packed) const {
+    net_.backward(ws, dy, grad, dx, packed);
+    count_backward(dy.cols(), dx != nullptr);
+  }
+
+  [[nodiscard]] long long macs() const { return macs_.load(); }
+  void reset() { macs_ = 0; }
+
+private:
+  void count_backward(Index batch, bool input_vjp) const {
+    const Index per = per_sample_ + hidden_input_ + (input_vjp ? first_input_ : 0);
+    macs_.fetch_add(per * batch, std::memory_order_relaxed);
+  }
+
+  Network<S>& net_;
+  Index per_sample_ = 0, hidden_input_ = 0, first_input_ = 0;
+  mutable std::atomic<long long> macs_{0};
+};
+
+}  // namespace bench

@@ -1,0 +1,250 @@
+#pragma once
+/// \file What bench measures for one row and how it builds each task's row, in a child process.
+
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <exception>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <sbptt/sbptt.hpp>
+
+#include "counting_network.hpp"
+#include "scene_routes.hpp"
+
+namespace bench {
+
+using sbptt::Index;
+using sbptt::Matrix;
+using sbptt::Method;
+using sbptt::Network;
+
+struct Settings {
+  std::string csv;
+  int repeats = 2;
+  Index threads = 2;
+  std::vector<std::string> tasks = {"cartpole1",     "cartpole4",    "cartpole4-auto",
+                                    "cartpole4-ode", "guidance",     "guidance-auto",
+                                    "guidance-ode",  "quantum",      "quantum-nx"};
+  std::vector<std::string> scalars = {"float", "double"};
+  std::string methods = "RMCS";
+};
+
+/// What one row measures (plain data: it crosses a pipe from the child process).
+struct RowResult {
+  long long nx = 0, steps = 0, params = 0;  ///< state size (Nx for quantum), horizon, θ size
+  double ms_epoch = 0, gflop = 0, ms_threads = 0, sim_ns = 0;
+  double trajectory_bytes = 0, rss_kib = 0;
+  int ok = 0;
+  char error[200] = {};
+};
+
+struct Row {
+  std::string task, scalar, method;
+  RowResult result;
+};
+
+inline double now_ms() {
+  return std::chrono::duration<double, std::milli>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+/// Best GFLOP/s of an n×n product on this thread (Eigen without threads: one core).
+template <class S>
+double measure_peak() {
+  double best = 0;
+  for (const Index n : {512, 768, 1024}) {
+    const Matrix<S> a = Matrix<S>::Random(n, n), b = Matrix<S>::Random(n, n);
+    Matrix<S> c(n, n);
+    for (int repeat = 0; repeat < 4; ++repeat) {
+      const double start = now_ms();
+      c.noalias() = a * b;
+      const double ms = now_ms() - start;
+      best = std::max(best, 2.0 * static_cast<double>(n * n) * static_cast<double>(n) / (ms * 1e6));
+    }
+  }
+  return best;
+}
+
+/// ns per sample of `step` + full `vjp` over the stored trajectory of the engine.
+template <class Sim, class Engine>
+double simulator_ns(const Sim& sim, const Engine& engine) {
+  const auto& tr = engine.trajectory();
+  typename Sim::State x(sim.state_dim()), next(sim.state_dim()), lx(sim.state_dim());
+  typename Sim::Control u(sim.control_dim()), lu(sim.control_dim());
+  double best = 1e300;
+  typename Sim::Scalar sum = 0;  // consumed below, so that no call can be optimised away
+  for (int repeat = 0; repeat < 3; ++repeat) {
+    const double start = now_ms();
+    for (Index n = 0; n < tr.steps(); ++n) {
+      const auto i = static_cast<std::size_t>(n);
+      for (Index b = 0; b < tr.batch(); ++b) {
+        x = tr.states[i].col(b);
+        u = tr.controls[i].col(b);
+        sim.step(x, u, next);
+        sim.vjp(x, u, next, &lx, &lu);  // λ = x_{n+1}: any vector does
+        sum += next(0) + lx(0) + lu(0);
+      }
+    }
+    best = std::min(best, now_ms() - start);
+  }
+  volatile double sink = static_cast<double>(sum);
+  (void)sink;
+  return best * 1e6 / static_cast<double>(tr.steps() * tr.batch());
+}
+
+/// One row: warm-up + timed epochs at 1 and at N threads.
+template <class Sim, class Objective>
+RowResult measure(const Settings& settings, const Sim& sim,
+                  const Network<typename Sim::Scalar>& initial, const Objective& objective,
+                  Index steps, const Matrix<typename Sim::Scalar>& train,
+                  const Matrix<typename Sim::Scalar>& test, Method method) {
+  using S = typename Sim::Scalar;
+  RowResult r;
+  for (const Index threads : {Index{1}, settings.threads}) {
+    Network<S> net = initial;
+    CountingNetwork<S> counted(net);
+    sbptt::TrainerOptions options;
+    options.method = method;
+    options.batch = 8;
+    options.threads = threads;
+    sbptt::Trainer trainer(sim, counted, objective, steps,
+                           sbptt::Adam<S>(sbptt::AdamOptions<S>{S(1e-3)}), options);
+    trainer.train_epoch(train, test);  // warm-up: buffers sized, pages touched
+    counted.reset();
+    double best = 1e300;
+    for (int repeat = 0; repeat < settings.repeats; ++repeat) {
+      const double start = now_ms();
+      trainer.train_epoch(train, test);
+      best = std::min(best, now_ms() - start);
+    }
+    if (threads == 1) {
+      r.ms_epoch = best;
+      r.gflop = 2.0 * static_cast<double>(counted.macs()) / settings.repeats / 1e9;
+      r.sim_ns = simulator_ns(sim, trainer.engine());
+      r.trajectory_bytes = static_cast<double>(trainer.engine().trajectory().bytes());
+    } else {
+      r.ms_threads = best;
+    }
+    if (settings.threads == 1) r.ms_threads = r.ms_epoch;
+    if (settings.threads == 1) break;
+  }
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  r.rss_kib = static_cast<double>(usage.ru_maxrss);
+  r.ok = 1;
+  return r;
+}
+
+/// Glorot-uniform MLP 2×100 tanh with the last kernel zeroed (the paper's cart pole/guidance).
+template <class S>
+Network<S> paper_mlp(Index inputs, Index outputs) {
+  auto net = Network<S>::mlp(inputs, {100, 100}, outputs);
+  sbptt::Rng rng(42);
+  sbptt::GlorotOptions options;
+  options.zero_last_kernel = true;
+  sbptt::glorot_uniform(net, rng, options);
+  return net;
+}
+
+/// The paper's quantum CNN, for Nx grid points: conv 2→60 k3 s2 tanh, conv 60→60 k3 s2 tanh,
+/// dense → 1 (Nx = 32: 15 and 7 positions, 11,701 parameters).
+template <class S>
+Network<S> paper_cnn(Index nx) {
+  const sbptt::Conv1d first{nx, 2, 60, 3, 2, sbptt::Activation::Tanh};
+  const sbptt::Conv1d second{first.output_length(), 60, 60, 3, 2, sbptt::Activation::Tanh};
+  Network<S> net({first, second, sbptt::Dense{second.output_dim(), 1}});
+  sbptt::Rng rng(42);
+  sbptt::glorot_uniform(net, rng);
+  return net;
+}
+
+using sbptt::examples::Route;
+
+/// The cart pole's row, its simulator built by route R (data and objective from the shipped one).
+template <class S, int Poles, Route R = Route::Analytic>
+RowResult cartpole_row(const Settings& settings, Method method) {
+  const sbptt::CartPole<S, Poles> shipped;
+  const auto sim = sbptt::examples::cartpole_route<S, Poles, R>();
+  sbptt::Rng rng(42);
+  const Matrix<S> train = sbptt::cartpole_initial_states(shipped, rng, 256);
+  const Matrix<S> test = sbptt::cartpole_initial_states(shipped, rng, 256);
+  const auto net = paper_mlp<S>(sim.state_dim(), 1);
+  RowResult r = measure(settings, sim, net, sbptt::cartpole_objective<S, Poles>(),
+                        shipped.steps(), train, test, method);
+  r.nx = sim.state_dim();
+  r.steps = shipped.steps();
+  r.params = net.num_params();
+  return r;
+}
+
+template <class S, Route R = Route::Analytic>
+RowResult guidance_row(const Settings& settings, Method method) {
+  const sbptt::GuidanceByRepulsion<S, 2, 4> shipped;
+  const auto sim = sbptt::examples::guidance_route<S, R>();
+  sbptt::Rng rng(42);
+  const Matrix<S> train = sbptt::guidance_initial_states(shipped, rng, 256);
+  const Matrix<S> test = sbptt::guidance_initial_states(shipped, rng, 256);
+  const auto net = paper_mlp<S>(sim.state_dim(), sim.control_dim());
+  RowResult r = measure(settings, sim, net, sbptt::guidance_objective(shipped, 0.1),
+                        shipped.steps(), train, test, method);
+  r.nx = sim.state_dim();
+  r.steps = shipped.steps();
+  r.params = net.num_params();
+  return r;
+}
+
+template <class S, int Nx>
+RowResult quantum_row(const Settings& settings, Method method) {
+  const sbptt::Schrodinger1D<S, Nx> sim;
+  sbptt::Rng rng(42);
+  const Matrix<S> train = sim.initial_states(rng, 256);
+  const Matrix<S> test = sim.initial_states(rng, 256);
+  const auto net = paper_cnn<S>(Nx);
+  RowResult r = measure(settings, sim, net, sbptt::quantum_objective(sim, 4), sim.steps(), train,
+                        test, method);
+  r.nx = Nx;
+  r.steps = sim.steps();
+  r.params = net.num_params();
+  return r;
+}
+
+/// Runs `body` in a child process and returns what it wrote into the pipe.
+inline RowResult in_child(const std::function<RowResult()>& body) {
+  int fds[2];
+  if (pipe(fds) != 0) throw sbptt::IoError("bench: pipe() failed");
+  std::fflush(nullptr);
+  const pid_t pid = fork();
+  if (pid < 0) throw sbptt::IoError("bench: fork() failed");
+  if (pid == 0) {
+    close(fds[0]);
+    RowResult r;
+    try {
+      r = body();
+    } catch (const std::exception& e) {
+      std::snprintf(r.error, sizeof r.error, "%s", e.what());
+    }
+    const ssize_t written = write(fds[1], &r, sizeof r);
+    _exit(written == static_cast<ssize_t>(sizeof r) ? 0 : 1);
+  }
+  close(fds[1]);
+  RowResult r;
+  const ssize_t got = read(fds[0], &r, sizeof r);
+  close(fds[0]);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  if (got != static_cast<ssize_t>(sizeof r)) {
+    r = RowResult{};
+    std::snprintf(r.error, sizeof r.error, "child process failed (status %d)", status);
+  }
+  return r;
+}
+
+}  // namespace bench

@@ -1,0 +1,117 @@
+#pragma once
+/// \file bench's verdicts: the speed targets of docs/benchmarks.md, met or MISSED in this run, and
+/// the CSV rows.
+
+#include <cstdio>
+#include <string>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+#include <sbptt/sbptt.hpp>
+
+#include "rows.hpp"
+
+namespace bench {
+
+inline const Row* find_row(const std::vector<Row>& rows, const std::string& task,
+                    const std::string& scalar, const std::string& method, long long nx = 0) {
+  for (const auto& row : rows)
+    if (row.task == task && row.scalar == scalar && row.method == method && row.result.ok != 0 &&
+        (nx == 0 || row.result.nx == nx))
+      return &row;
+  return nullptr;
+}
+
+/// The speed targets (docs/benchmarks.md), measured in this run: one line each, met or MISSED.
+inline void summarize(const std::vector<Row>& rows, const double peak[2], Index threads) {
+  std::printf("\ntargets (%s code; 1 thread unless stated):\n", sbptt::instruction_set());
+  const auto verdict = [](bool met) { return met ? "met" : "MISSED"; };
+  // The paper's grid for quantum control (Nx = 32), not the finer grids of quantum-nx.
+  const auto row_of = [&](const char* task, const char* scalar, const char* method) {
+    return find_row(rows, task, scalar, method, std::string(task) == "quantum" ? 32 : 0);
+  };
+  for (const auto& [task, label, target] :
+       {std::tuple{"cartpole4", "cart pole 4", 0.60}, std::tuple{"guidance", "guidance", 0.60},
+        std::tuple{"quantum", "quantum Nx 32", 0.55}}) {
+    const Row* r = row_of(task, "float", "R");
+    if (r == nullptr) continue;
+    const double fraction = r->result.gflop / (r->result.ms_epoch / 1e3) / peak[0];
+    std::printf("  %-13s float R epoch: %5.1f%% of the float peak %.1f GFLOP/s (target >= %.0f%%): "
+                "%s\n",
+                label, 100 * fraction, peak[0], 100 * target, verdict(fraction >= target));
+  }
+  for (const char* task : {"cartpole4-auto", "cartpole4-ode", "guidance-auto", "guidance-ode"}) {
+    const std::string analytic = std::string(task).substr(0, std::string(task).find('-'));
+    for (const char* scalar : {"float", "double"}) {
+      const Row* a = find_row(rows, analytic, scalar, "R");
+      const Row* r = find_row(rows, task, scalar, "R");
+      if (a == nullptr || r == nullptr) continue;
+      const double ratio = r->result.ms_epoch / a->result.ms_epoch;
+      std::printf("  %-14s %-6s R: epoch %.2fx, simulator %.1fx the analytic one%s\n", task,
+                  scalar, ratio, r->result.sim_ns / a->result.sim_ns,
+                  std::string(task) == "cartpole4-auto"
+                      ? (ratio <= 1.5 ? " (target <= 1.5: met)" : " (target <= 1.5: MISSED)")
+                      : "");
+    }
+  }
+  for (const char* task : {"cartpole1", "cartpole4", "guidance", "quantum"}) {
+    for (const char* scalar : {"float", "double"}) {
+      const Row* c = row_of(task, scalar, "C");
+      const Row* r = row_of(task, scalar, "R");
+      if (c == nullptr || r == nullptr) continue;
+      const double ratio = c->result.ms_epoch / r->result.ms_epoch;
+      std::printf("  %-9s %-6s C/R epoch time %.2f (target <= 1.3): %s\n", task, scalar, ratio,
+                  verdict(ratio <= 1.3));
+    }
+  }
+  if (threads == 2) {
+    for (const char* task : {"cartpole4", "quantum"}) {
+      for (const auto& [method, target] : {std::pair{"C", 1.7}, std::pair{"R", 1.35}}) {
+        const Row* r = row_of(task, "float", method);
+        if (r == nullptr) continue;
+        const double speedup = r->result.ms_epoch / r->result.ms_threads;
+        std::printf("  %-9s float %s: 2 threads %.2fx faster than 1 (target >= %.2f): %s\n",
+                    task, method, speedup, target, verdict(speedup >= target));
+      }
+    }
+  } else {
+    std::printf("  (the 2-thread targets need --threads 2)\n");
+  }
+  bool header = false;
+  for (const long long nx : {32, 64, 128, 256}) {
+    const Row* r = find_row(rows, "quantum", "float", "R", nx);
+    if (r == nullptr) continue;
+    if (!header) std::printf("  quantum simulator work (float), step + VJP per sample:\n");
+    header = true;
+    std::printf("    Nx = %3lld: %8.0f ns, %6.2f ns per grid point\n", nx, r->result.sim_ns,
+                r->result.sim_ns / static_cast<double>(nx));
+  }
+}
+
+inline void write_csv(const Settings& settings, const std::vector<Row>& rows,
+                      const double peak[2]) {
+  std::string text =
+      "task,scalar,method,nx,steps,params,ms_epoch,gflop_epoch,gflops,peak_gflops,"
+      "fraction_of_peak,threads,ms_epoch_threads,speedup_threads,sim_ns_per_sample_step,"
+      "trajectory_bytes_per_batch,peak_rss_kib\n";
+  char line[512];
+  for (const auto& row : rows) {
+    const RowResult& r = row.result;
+    if (r.ok == 0) continue;
+    const double p = peak[row.scalar == "float" ? 0 : 1];
+    const double gflops = r.gflop / (r.ms_epoch / 1e3);
+    std::snprintf(line, sizeof line,
+                  "%s,%s,%s,%lld,%lld,%lld,%.3f,%.6f,%.3f,%.3f,%.4f,%lld,%.3f,%.3f,%.1f,%.0f,"
+                  "%.0f\n",
+                  row.task.c_str(), row.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
+                  r.params, r.ms_epoch, r.gflop, gflops, p, gflops / p,
+                  static_cast<long long>(settings.threads), r.ms_threads,
+                  r.ms_epoch / r.ms_threads, r.sim_ns, r.trajectory_bytes, r.rss_kib);
+    text += line;
+  }
+  sbptt::write_file_atomically(settings.csv, text);
+  std::printf("\nwrote %s\n", settings.csv.c_str());
+}
+
+}  // namespace bench

@@ -1,0 +1,120 @@
+#pragma once
+/// \file Y = A X (+ b) with A packed once and reused: the products of a network layer.
+///
+/// A rollout multiplies the same weight by a small batch (8 samples in the paper) at every one
+/// of its steps. A general matrix product packs its left operand on every call, and at 8
+/// columns that packing and the zeroing of the destination cost as much as the multiply-adds
+/// (docs/benchmarks.md). Packing the weight once per parameter update and keeping it turns
+/// each step's product into the loop below, which runs at the core's FMA peak.
+///
+/// Layout: A (rows × cols) is cut into panels of `kLanes` rows (one SIMD register); a panel
+/// stores its columns one after another, each as kLanes contiguous scalars, and the last
+/// panel is padded with zero rows. The bias is padded the same way.
+///
+/// Every entry of Y is computed as ((b_i + a_i0 x_0j) + a_i1 x_1j) + … in column order,
+/// whatever the number of columns of X and whichever block a column falls in, so a sample's
+/// result does not depend on the batch it is evaluated with.
+#include <algorithm>
+
+#include <Eigen/Core>
+
+#include "sbptt/core/types.hpp"
+
+namespace sbptt {
+
+/// A matrix in the panel layout of the file comment, with an optional bias.
+template <class Scalar>
+class PackedMatrix {
+public:
+  using Packet = typename Eigen::internal::packet_traits<Scalar>::type;
+  /// Rows per panel: the scalars in one SIMD register of the build's instruction set.
+  static constexpr Index kLanes = Eigen::internal::unpacket_traits<Packet>::size;
+
+  [[nodiscard]] Index rows() const { return rows_; }
+  [[nodiscard]] Index cols() const { return cols_; }
+
+  /// Packs the row-major `rows × cols` matrix at `row_major` (or its transpose, `cols × rows`,
+  /// when `transpose`), with `bias` (rows() entries) or none. Reuses the storage when the
+  /// shape is unchanged.
+  void pack(const Scalar* row_major, Index rows, Index cols, bool transpose,
+            const Scalar* bias = nullptr) {
+    rows_ = transpose ? cols : rows;
+    cols_ = transpose ? rows : cols;
+    const Index panels = (rows_ + kLanes - 1) / kLanes;
+    data_.setZero(panels * kLanes * cols_);
+    bias_.setZero(panels * kLanes);
+    for (Index i = 0; i < rows_; ++i) {
+      Scalar* panel = data_.data() + (i / kLanes) * kLanes * cols_ + i % kLanes;
+      for (Index c = 0; c < cols_; ++c)
+        panel[c * kLanes] = transpose ? row_major[c * cols + i] : row_major[i * cols + c];
+    }
+    if (bias != nullptr) bias_.head(rows_) = Eigen::Map<const Vector<Scalar>>(bias, rows_);
+  }
+
+  /// Y = A X + b: `x` is cols() × n column-major with leading dimension `ldx`, `y` rows() × n
+  /// column-major with leading dimension `ldy` (overwritten; it must not overlap `x`).
+  void multiply(const Scalar* x, Index ldx, Index n, Scalar* y, Index ldy) const {
+    const Index panels = (rows_ + kLanes - 1) / kLanes;
+    const Index full_panels = rows_ / kLanes;
+    Index j = 0;
+    for (; j + kColumnBlock <= n; j += kColumnBlock) {
+      Index p = 0;
+      for (; p + 2 <= full_panels; p += 2)
+        block<2, kColumnBlock>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+      for (; p < panels; ++p) block<1, kColumnBlock>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+    }
+    for (; j < n; ++j)
+      for (Index p = 0; p < panels; ++p) block<1, 1>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+  }
+
+private:
+  // Accumulators of a 2-panel block, plus the two weight registers and a broadcast, must fit
+  // in the register file (32 registers with AVX-512, 16 with SSE/AVX).
+  static constexpr Index kColumnBlock = EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS >= 32 ? 8 : 4;
+
+  /// Rows p·kLanes … (p + Panels)·kLanes − 1 of Y, columns 0 … Columns − 1.
+  template <int Panels, int Columns>
+  void block(Index p, const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
+    using Eigen::internal::pmadd;
+    using Eigen::internal::pset1;
+    using Eigen::internal::ploadu;
+    Packet acc[Panels][Columns];
+    const Scalar* a[Panels];
+    for (int q = 0; q < Panels; ++q) {
+      const Packet b = ploadu<Packet>(bias_.data() + (p + q) * kLanes);
+      for (int c = 0; c < Columns; ++c) acc[q][c] = b;
+      a[q] = data_.data() + (p + q) * kLanes * cols_;
+    }
+    for (Index k = 0; k < cols_; ++k) {
+      Packet w[Panels];
+      for (int q = 0; q < Panels; ++q) w[q] = ploadu<Packet>(a[q] + k * kLanes);
+      for (int c = 0; c < Columns; ++c) {
+        const Packet xk = pset1<Packet>(x[k + c * ldx]);
+        for (int q = 0; q < Panels; ++q) acc[q][c] = pmadd(w[q], xk, acc[q][c]);
+      }
+    }
+    for (int q = 0; q < Panels; ++q) {
+      const Index first = (p + q) * kLanes;
+      const Index count = std::min(kLanes, rows_ - first);
+      for (int c = 0; c < Columns; ++c) store_rows(y + c * ldy + first, count, acc[q][c]);
+    }
+  }
+
+  /// The first `count` lanes of `value` to `to`: only a panel's real rows go out.
+  static void store_rows(Scalar* to, Index count, const Packet& value) {
+    if (count == kLanes) {
+      Eigen::internal::pstoreu(to, value);
+      return;
+    }
+    alignas(64) Scalar lanes[kLanes];
+    Eigen::internal::pstoreu(lanes, value);
+    std::copy(lanes, lanes + count, to);
+  }
+
+  Index rows_ = 0;
+  Index cols_ = 0;
+  Vector<Scalar> data_;
+  Vector<Scalar> bias_;
+};
+
+}  // namespace sbptt

@@ -1,0 +1,128 @@
+// The packed product of the layers: against a long-double product with the standard
+// floating-point error bound, a sample's result independent of its batch, untouched padding,
+// and Network's packed overloads equal to the plain ones bit for bit.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <limits>
+#include <tuple>
+
+#include "support/test_data.hpp"
+#include "sbptt/nn/network.hpp"
+#include "sbptt/nn/packed_product.hpp"
+
+using sbptt::Index;
+using sbptt::Matrix;
+using sbptt::PackedMatrix;
+using sbptt::testing::random_matrix;
+using Catch::Matchers::Contains;
+
+TEMPLATE_TEST_CASE("packed product equals a long-double product within the rounding bound",
+                   "[nn][packed]", float, double) {
+  using S = TestType;
+  const S eps = std::numeric_limits<S>::epsilon();
+  std::uint64_t seed = 1;
+  for (const auto& [rows, cols] : {std::pair<Index, Index>{1, 1}, {3, 5}, {16, 7}, {17, 33},
+                                   {100, 100}, {60, 180}, {33, 2}, {1, 100}}) {
+    for (const bool transpose : {false, true}) {
+      for (const bool with_bias : {false, true}) {
+        for (const Index n : {1, 7, 8, 9, 17, 33}) {
+          // The source is row-major `rows × cols`; transposed, A is cols × rows.
+          const Matrix<S> source = random_matrix<S>(rows * cols, 1, ++seed, 1.0);
+          const Index a_rows = transpose ? cols : rows, a_cols = transpose ? rows : cols;
+          const Matrix<S> bias = random_matrix<S>(a_rows, 1, ++seed, 1.0);
+          const Matrix<S> x = random_matrix<S>(a_cols, n, ++seed, 1.0);
+          PackedMatrix<S> a;
+          a.pack(source.data(), rows, cols, transpose, with_bias ? bias.data() : nullptr);
+          REQUIRE(a.rows() == a_rows);
+          REQUIRE(a.cols() == a_cols);
+          Matrix<S> y(a_rows, n);
+          a.multiply(x.data(), a_cols, n, y.data(), a_rows);
+          for (Index j = 0; j < n; ++j) {
+            for (Index i = 0; i < a_rows; ++i) {
+              long double exact = with_bias ? bias(i) : 0.0L, magnitude = std::abs(exact);
+              for (Index k = 0; k < a_cols; ++k) {
+                const S entry = transpose ? source(k * cols + i) : source(i * cols + k);
+                exact += static_cast<long double>(entry) * x(k, j);
+                magnitude += std::abs(static_cast<long double>(entry) * x(k, j));
+              }
+              // |fl(Σ) − Σ| ≤ γ_(k+1) Σ|terms| for any order of k fused or unfused additions.
+              const long double bound = (a_cols + 1) * eps * magnitude * 1.01L;
+              INFO("rows " << rows << " cols " << cols << " transpose " << transpose << " n "
+                           << n << " entry (" << i << ", " << j << ")");
+              REQUIRE(std::abs(static_cast<long double>(y(i, j)) - exact) <= bound);
+            }
+          }
+        }
+      }
+    }
+  }
+}
+
+TEMPLATE_TEST_CASE("a column's result does not depend on the batch around it", "[nn][packed]",
+                   float, double) {
+  using S = TestType;
+  const Matrix<S> w = random_matrix<S>(Index{100} * 37, 1, 5, 1.0);
+  const Matrix<S> b = random_matrix<S>(100, 1, 6, 1.0);
+  PackedMatrix<S> a;
+  a.pack(w.data(), 100, 37, false, b.data());
+  const Matrix<S> x = random_matrix<S>(37, 19, 7, 1.0);
+  Matrix<S> batch(100, 19), single(100, 1);
+  a.multiply(x.data(), 37, 19, batch.data(), 100);
+  for (Index j = 0; j < 19; ++j) {
+    a.multiply(x.col(j).data(), 37, 1, single.data(), 100);
+    REQUIRE((single.col(0).array() == batch.col(j).array()).all());
+  }
+}
+
+TEST_CASE("the product writes the real rows only, at the given leading dimensions",
+          "[nn][packed]") {
+  // 19 rows: the last panel is padded; ldy = 23 leaves 4 rows of every column untouched.
+  const Matrix<double> w = random_matrix<double>(Index{19} * 5, 1, 8, 1.0);
+  PackedMatrix<double> a;
+  a.pack(w.data(), 19, 5, false);
+  const Matrix<double> x = random_matrix<double>(9, 11, 9, 1.0);  // ldx 9 > cols 5
+  Matrix<double> y = Matrix<double>::Constant(23, 11, 7.25);
+  a.multiply(x.data(), 9, 11, y.data(), 23);
+  const Eigen::Map<const sbptt::RowMajorMatrix<double>> wm(w.data(), 19, 5);
+  const Matrix<double> expected = wm * x.topRows(5);
+  REQUIRE((y.topRows(19) - expected).cwiseAbs().maxCoeff() <= 1e-14);
+  REQUIRE((y.bottomRows(4).array() == 7.25).all());
+}
+
+TEMPLATE_TEST_CASE("Network's packed overloads equal the plain ones bit for bit", "[nn][packed]",
+                   float, double) {
+  using S = TestType;
+  using sbptt::Activation;
+  sbptt::Network<S> net({sbptt::Conv1d{32, 2, 20, 3, 2, Activation::Tanh},
+                         sbptt::Conv1d{15, 20, 12, 3, 2, Activation::Tanh},
+                         sbptt::Dense{84, 17, Activation::Tanh}, sbptt::Dense{17, 3}});
+  sbptt::testing::randomize(net, 11, 0.5);
+  const Matrix<S> x = random_matrix<S>(64, 9, 12, 1.0), dy = random_matrix<S>(3, 9, 13, 1.0);
+  typename sbptt::Network<S>::PackedWeights packed;
+  net.pack(packed);
+  typename sbptt::Network<S>::Workspace plain_ws, packed_ws;
+  Matrix<S> plain_y, packed_y, plain_dx, packed_dx;
+  net.forward(x, plain_y, plain_ws);
+  net.forward(x, packed_y, packed_ws, packed);
+  REQUIRE((plain_y.array() == packed_y.array()).all());
+  sbptt::Vector<S> plain_grad = sbptt::Vector<S>::Zero(net.num_params());
+  sbptt::Vector<S> packed_grad = plain_grad;
+  net.backward(plain_ws, dy, plain_grad, &plain_dx);
+  net.backward(packed_ws, dy, packed_grad, &packed_dx, packed);
+  REQUIRE((plain_grad.array() == packed_grad.array()).all());
+  REQUIRE((plain_dx.array() == packed_dx.array()).all());
+}
+
+TEST_CASE("packed weights of another network are refused", "[nn][packed]") {
+  const auto small = sbptt::Network<double>::mlp(3, {4}, 2);
+  const auto large = sbptt::Network<double>::mlp(3, {5}, 2);
+  sbptt::Network<double>::PackedWeights packed, none;
+  large.pack(packed);
+  sbptt::Network<double>::Workspace ws;
+  Matrix<double> y;
+  REQUIRE_THROWS_WITH(small.forward(Matrix<double>::Zero(3, 2), y, ws, packed),
+                      Contains("not made by pack() of this network"));
+  REQUIRE_THROWS_WITH(small.forward(Matrix<double>::Zero(3, 2), y, ws, none),
+                      Contains("not made by pack() of this network"));
+}

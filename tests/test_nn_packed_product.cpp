@@ -47,7 +47,8 @@ TEMPLATE_TEST_CASE("packed product equals a long-double product within the round
                 magnitude += std::abs(static_cast<long double>(entry) * x(k, j));
               }
               // |fl(Σ) − Σ| ≤ γ_(k+1) Σ|terms| for any order of k fused or unfused additions.
-              const long double bound = (a_cols + 1) * eps * magnitude * 1.01L;
+              const long double bound = static_cast<long double>(a_cols + 1) *
+                                        static_cast<long double>(eps) * magnitude * 1.01L;
               INFO("rows " << rows << " cols " << cols << " transpose " << transpose << " n "
                            << n << " entry (" << i << ", " << j << ")");
               REQUIRE(std::abs(static_cast<long double>(y(i, j)) - exact) <= bound);

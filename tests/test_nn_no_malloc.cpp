@@ -66,6 +66,30 @@ TEMPLATE_TEST_CASE("the quantum CNN does not allocate after warm-up", "[nn][mall
   REQUIRE_NOTHROW(check_no_allocation(net, 8));
 }
 
+TEST_CASE("two networks of different shapes in turn on one thread do not allocate",
+          "[nn][malloc]") {
+  // The calls without packed weights pack into one per-thread scratch; it must keep the
+  // largest shape it has seen instead of being resized to each network in turn.
+  auto large = Network<float>::mlp(24, {100, 100}, 4);
+  auto small = Network<float>::mlp(24, {64}, 4);
+  const sbptt::Matrix<float> x = sbptt::Matrix<float>::Random(24, 8);
+  const sbptt::Matrix<float> dy = sbptt::Matrix<float>::Random(4, 8);
+  sbptt::Matrix<float> y, dx;
+  sbptt::Vector<float> large_grad = sbptt::Vector<float>::Zero(large.num_params());
+  sbptt::Vector<float> small_grad = sbptt::Vector<float>::Zero(small.num_params());
+  Network<float>::Workspace large_ws, small_ws;
+  const auto both = [&] {
+    large.forward(x, y, large_ws);
+    large.backward(large_ws, dy, large_grad, &dx);
+    small.forward(x, y, small_ws);
+    small.backward(small_ws, dy, small_grad, &dx);
+  };
+  both();  // warm-up: every buffer sized for both
+  MallocGuard guard;
+  REQUIRE_NOTHROW(both());
+  REQUIRE_NOTHROW(both());
+}
+
 TEST_CASE("the malloc check itself fires", "[nn][malloc]") {
   MallocGuard guard;
   REQUIRE_THROWS(sbptt::Matrix<double>(10, 10));

@@ -91,6 +91,8 @@ TEST_CASE("the product writes the real rows only, at the given leading dimension
   REQUIRE((y.bottomRows(4).array() == 7.25).all());
 }
 
+// The engine calls the packed overloads, the finite-difference tests the plain ones: this ties
+// the two (a stale or mis-indexed packing, a dropped bias would show here).
 TEMPLATE_TEST_CASE("Network's packed overloads equal the plain ones bit for bit", "[nn][packed]",
                    float, double) {
   using S = TestType;
@@ -115,15 +117,24 @@ TEMPLATE_TEST_CASE("Network's packed overloads equal the plain ones bit for bit"
   REQUIRE((plain_dx.array() == packed_dx.array()).all());
 }
 
-TEST_CASE("packed weights of another network are refused", "[nn][packed]") {
+TEST_CASE("packed weights of another shape are refused before any product", "[nn][packed]") {
   const auto small = sbptt::Network<double>::mlp(3, {4}, 2);
   const auto large = sbptt::Network<double>::mlp(3, {5}, 2);
-  sbptt::Network<double>::PackedWeights packed, none;
+  // Same number of weights (24), transposed shapes: a count check would let the product
+  // write 6 rows into a 4-row output.
+  const sbptt::Network<double> wide({sbptt::Dense{4, 6}}), tall({sbptt::Dense{6, 4}});
+  sbptt::Network<double>::PackedWeights packed, none, packed_wide;
   large.pack(packed);
+  wide.pack(packed_wide);
   sbptt::Network<double>::Workspace ws;
   Matrix<double> y;
-  REQUIRE_THROWS_WITH(small.forward(Matrix<double>::Zero(3, 2), y, ws, packed),
-                      Contains("not made by pack() of this network"));
-  REQUIRE_THROWS_WITH(small.forward(Matrix<double>::Zero(3, 2), y, ws, none),
-                      Contains("not made by pack() of this network"));
+  const auto refused = Contains("expected weights packed by pack() of this network");
+  REQUIRE_THROWS_WITH(small.forward(Matrix<double>::Zero(3, 2), y, ws, packed), refused);
+  REQUIRE_THROWS_WITH(small.forward(Matrix<double>::Zero(3, 2), y, ws, none), refused);
+  REQUIRE_THROWS_WITH(tall.forward(Matrix<double>::Zero(6, 2), y, ws, packed_wide), refused);
+  tall.forward(Matrix<double>::Zero(6, 2), y, ws);
+  sbptt::Vector<double> grad = sbptt::Vector<double>::Zero(tall.num_params());
+  Matrix<double> dx;
+  REQUIRE_THROWS_WITH(tall.backward(ws, Matrix<double>::Zero(4, 2), grad, &dx, packed_wide),
+                      refused);
 }

@@ -14,7 +14,7 @@
 ///
 /// Cost and memory: the controller runs once per step on the whole batch (one product per
 /// layer, never per sample); a `PackingController` packs its parameters once per rollout
-/// (`forward`, `evaluate`), and the reverse sweeps use the packing of the last rollout. The
+/// (`forward`, `evaluate`), and the reverse sweeps use the packing of the last of those. The
 /// simulator, the loss and their VJPs run per sample. After the first call at a batch shape,
 /// `forward`, `reverse` and `regular_and_modified` allocate nothing (every buffer is kept and
 /// resized only when the shape changes).

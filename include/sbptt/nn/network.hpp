@@ -70,9 +70,11 @@ struct NetworkScratch {
   Vector<Scalar> columns;     ///< conv window adjoints (im2col shape)
 };
 
-/// Packed W (with b) and Wᵀ of every layer.
+/// Packed W (with b) and Wᵀ of the first `count` layers. The vectors only grow, so that the
+/// per-thread scratch serves networks of several shapes in turn without allocating.
 template <class Scalar>
 struct PackedLayers {
+  std::size_t count = 0;
   std::vector<PackedMatrix<Scalar>> weights;
   std::vector<PackedMatrix<Scalar>> transposed;
 };
@@ -210,7 +212,7 @@ public:
   /// The same with θ as packed by `pack` (which must have seen the current θ).
   void forward(const Matrix<Scalar>& x, Matrix<Scalar>& y, Workspace& ws,
                const PackedWeights& packed) const {
-    check_packed(packed.layers_.weights, "forward");
+    check_packed(packed.layers_, false, "forward");
     forward_packed(x, y, ws, packed.layers_);
   }
 
@@ -231,7 +233,7 @@ public:
   /// The same with θ as packed by `pack` (which must have seen the current θ).
   void backward(const Workspace& ws, const Matrix<Scalar>& dy, Vector<Scalar>& grad,
                 Matrix<Scalar>* dx, const PackedWeights& packed) const {
-    check_packed(packed.layers_.transposed, "backward");
+    check_packed(packed.layers_, true, "backward");
     backward_packed(ws, dy, grad, dx, packed.layers_);
   }
 
@@ -314,10 +316,13 @@ private:
 
   /// Packs W with b (`weights`) and/or Wᵀ (`transposed`) of every layer from θ.
   void pack_layers(detail::PackedLayers<Scalar>& packed, bool weights, bool transposed) const {
-    packed.weights.resize(layers_.size());
-    packed.transposed.resize(layers_.size());
+    packed.count = layers_.size();
+    if (packed.weights.size() < packed.count) {
+      packed.weights.resize(packed.count);
+      packed.transposed.resize(packed.count);
+    }
     for (std::size_t l = 0; l < layers_.size(); ++l) {
-      const Index rows = std::visit([](const auto& s) { return s.weight_rows(); }, layers_[l]);
+      const Index rows = weight_rows(l);
       const Index cols = layer_weight_count(layers_[l]) / rows;
       const Scalar* theta = params_.data() + offsets_[l];
       if (weights) packed.weights[l].pack(theta, rows, cols, false, theta + rows * cols);
@@ -325,14 +330,26 @@ private:
     }
   }
 
-  /// Refuses packed weights of another network, or none.
-  void check_packed(const std::vector<PackedMatrix<Scalar>>& packed, const char* caller) const {
+  /// Refuses packed weights whose shapes are not this network's (those of another network,
+  /// or none), before a product could read or write past a buffer. Weights packed from
+  /// another network of the same shapes cannot be told apart: that is the caller's contract.
+  void check_packed(const detail::PackedLayers<Scalar>& packed, bool transposed,
+                    const char* caller) const {
     check_params_size();
-    bool matches = packed.size() == layers_.size();
-    for (std::size_t l = 0; matches && l < layers_.size(); ++l)
-      matches = packed[l].rows() * packed[l].cols() == layer_weight_count(layers_[l]);
-    detail::require(matches, "Network::", caller,
-                    ": the packed weights were not made by pack() of this network");
+    bool matches = packed.count == layers_.size();
+    for (std::size_t l = 0; matches && l < layers_.size(); ++l) {
+      const Index rows = weight_rows(l);
+      const Index cols = layer_weight_count(layers_[l]) / rows;
+      const PackedMatrix<Scalar>& m = transposed ? packed.transposed[l] : packed.weights[l];
+      matches = transposed ? m.rows() == cols && m.cols() == rows
+                           : m.rows() == rows && m.cols() == cols;
+    }
+    detail::require(matches, "Network::", caller, ": the packed weights do not fit this ",
+                    "network's layers; expected weights packed by pack() of this network");
+  }
+
+  [[nodiscard]] Index weight_rows(std::size_t l) const {
+    return std::visit([](const auto& layer) { return layer.weight_rows(); }, layers_[l]);
   }
 
   void check_chain(std::size_t l) const {

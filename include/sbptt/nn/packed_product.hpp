@@ -5,13 +5,14 @@
 /// of its steps. A general matrix product packs its left operand on every call, and at 8
 /// columns that packing and the zeroing of the destination cost as much as the multiply-adds
 /// (docs/benchmarks.md). Packing the weight once per parameter update and keeping it turns
-/// each step's product into the loop below, which runs at the core's FMA peak.
+/// each step's product into the loop below, which runs at the core's multiply-add peak.
 ///
 /// Layout: A (rows × cols) is cut into panels of `kLanes` rows (one SIMD register); a panel
 /// stores its columns one after another, each as kLanes contiguous scalars, and the last
 /// panel is padded with zero rows. The bias is padded the same way.
 ///
-/// Every entry of Y is computed as ((b_i + a_i0 x_0j) + a_i1 x_1j) + … in column order,
+/// Every entry of Y is computed as ((b_i + a_i0 x_0j) + a_i1 x_1j) + … in column order (fused
+/// multiply-adds where the instruction set has them),
 /// whatever the number of columns of X and whichever block a column falls in, so a sample's
 /// result does not depend on the batch it is evaluated with.
 #include <algorithm>
@@ -34,15 +35,15 @@ public:
   [[nodiscard]] Index cols() const { return cols_; }
 
   /// Packs the row-major `rows × cols` matrix at `row_major` (or its transpose, `cols × rows`,
-  /// when `transpose`), with `bias` (rows() entries) or none. Reuses the storage when the
-  /// shape is unchanged.
+  /// when `transpose`), with `bias` (rows() entries) or none. The storage only grows, so that
+  /// packing matrices of several shapes in turn allocates nothing once the largest was seen.
   void pack(const Scalar* row_major, Index rows, Index cols, bool transpose,
             const Scalar* bias = nullptr) {
     rows_ = transpose ? cols : rows;
     cols_ = transpose ? rows : cols;
     const Index panels = (rows_ + kLanes - 1) / kLanes;
-    data_.setZero(panels * kLanes * cols_);
-    bias_.setZero(panels * kLanes);
+    grow_and_zero(data_, panels * kLanes * cols_);
+    grow_and_zero(bias_, panels * kLanes);
     for (Index i = 0; i < rows_; ++i) {
       Scalar* panel = data_.data() + (i / kLanes) * kLanes * cols_ + i % kLanes;
       for (Index c = 0; c < cols_; ++c)
@@ -69,7 +70,7 @@ public:
 
 private:
   // Accumulators of a 2-panel block, plus the two weight registers and a broadcast, must fit
-  // in the register file (32 registers with AVX-512, 16 with SSE/AVX).
+  // in the register file (32 registers with AVX-512, 16 with SSE/AVX on x86-64).
   static constexpr Index kColumnBlock = EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS >= 32 ? 8 : 4;
 
   /// Rows p·kLanes … (p + Panels)·kLanes − 1 of Y, columns 0 … Columns − 1.
@@ -98,6 +99,11 @@ private:
       const Index count = std::min(kLanes, rows_ - first);
       for (int c = 0; c < Columns; ++c) store_rows(y + c * ldy + first, count, acc[q][c]);
     }
+  }
+
+  static void grow_and_zero(Vector<Scalar>& storage, Index size) {
+    if (storage.size() < size) storage.resize(size);
+    storage.head(size).setZero();
   }
 
   /// The first `count` lanes of `value` to `to`: only a panel's real rows go out.

@@ -153,16 +153,27 @@ template <SimulatorWithJacobians Sim>
                   relative_error<Scalar>(bt, Matrix<Scalar>(b).transpose()));
 }
 
-/// Result of `check_controller`: worst relative errors of the two vector–Jacobian products.
+/// Result of `check_controller`: worst relative errors of the two vector–Jacobian products,
+/// and for a `PackingController` of the overloads the engine calls (packed weights).
 template <class Scalar>
 struct ControllerCheck {
   Scalar param_vjp_error = 0;  ///< backward's parameter product against finite differences
   Scalar input_vjp_error = 0;  ///< backward's input product against finite differences
-  [[nodiscard]] Scalar worst() const { return std::max(param_vjp_error, input_vjp_error); }
+  bool has_packed = false;     ///< the controller packs its weights; the fields below are set
+  Scalar packed_forward_error = 0;    ///< forward with packed weights against plain forward
+  Scalar packed_param_vjp_error = 0;  ///< packed backward's parameter product against FD
+  Scalar packed_input_vjp_error = 0;  ///< packed backward's input product against FD
+  [[nodiscard]] Scalar worst() const {
+    return std::max({param_vjp_error, input_vjp_error, packed_forward_error,
+                     packed_param_vjp_error, packed_input_vjp_error});
+  }
 };
 
 /// Checks `ctrl.backward` at the batch `inputs` (input_dim × B): both products are compared
 /// with central differences of s = ⟨dY, N(X; θ)⟩ for a seeded random output adjoint dY.
+/// A `PackingController` is checked a second time through its packed overloads, because those
+/// are what the engine runs: a user's packed path that disagrees with the plain one would
+/// otherwise train on a wrong gradient that every plain check passes.
 /// The parameters are perturbed in place and restored.
 template <Controller Ctrl>
 [[nodiscard]] ControllerCheck<typename Ctrl::Scalar> check_controller(
@@ -206,8 +217,24 @@ template <Controller Ctrl>
 
   ControllerCheck<Scalar> result;
   result.param_vjp_error = relative_error<Scalar>(grad, fd_params);
-  const Matrix<Scalar> flat_input_adjoint = input_adjoint.reshaped();
-  result.input_vjp_error = relative_error<Scalar>(flat_input_adjoint, fd_inputs);
+  result.input_vjp_error =
+      relative_error<Scalar>(Matrix<Scalar>(input_adjoint.reshaped()), fd_inputs);
+
+  if constexpr (PackingController<Ctrl>) {
+    result.has_packed = true;
+    typename Ctrl::PackedWeights packed;
+    ctrl.pack(packed);
+    typename Ctrl::Workspace packed_ws;
+    Matrix<Scalar> packed_outputs;
+    ctrl.forward(inputs, packed_outputs, packed_ws, packed);
+    result.packed_forward_error = relative_error<Scalar>(packed_outputs, outputs);
+    Vector<Scalar> packed_grad = Vector<Scalar>::Zero(ctrl.num_params());
+    Matrix<Scalar> packed_input_adjoint;
+    ctrl.backward(packed_ws, adjoint, packed_grad, &packed_input_adjoint, packed);
+    result.packed_param_vjp_error = relative_error<Scalar>(packed_grad, fd_params);
+    result.packed_input_vjp_error =
+        relative_error<Scalar>(Matrix<Scalar>(packed_input_adjoint.reshaped()), fd_inputs);
+  }
   return result;
 }
 

@@ -138,29 +138,49 @@ public:
   [[nodiscard]] const Vector<S>& params() const { return net_.params(); }
   [[nodiscard]] Vector<S>& params() { return net_.params(); }
 
-  void forward(const Matrix<S>& x, Matrix<S>& y, Workspace& ws) const {
-    ws.input.resize(64, x.cols());
-    const S scale = std::sqrt(static_cast<S>(ratio_));
-    for (Index i = 0; i < 32; ++i) ws.input.middleRows(2 * i, 2) = scale * x.middleRows(row(i), 2);
-    net_.forward(ws.input, y, ws.inner);
-  }
+  /// Packs like the network it wraps, so that the engine times the products it would use.
+  using PackedWeights = typename Network<S>::PackedWeights;
+  void pack(PackedWeights& packed) const { net_.pack(packed); }
 
+  void forward(const Matrix<S>& x, Matrix<S>& y, Workspace& ws) const { forward_with(x, y, ws); }
+  void forward(const Matrix<S>& x, Matrix<S>& y, Workspace& ws,
+               const PackedWeights& packed) const {
+    forward_with(x, y, ws, packed);
+  }
   void backward(const Workspace& ws, const Matrix<S>& dy, Vector<S>& grad, Matrix<S>* dx) const {
-    Matrix<S> sub;
-    net_.backward(ws.inner, dy, grad, dx != nullptr ? &sub : nullptr);
-    if (dx == nullptr) return;
-    const S scale = std::sqrt(static_cast<S>(ratio_));
-    dx->setZero(input_dim(), dy.cols());
-    for (Index i = 0; i < 32; ++i) dx->middleRows(row(i), 2) = scale * sub.middleRows(2 * i, 2);
+    backward_with(ws, dy, grad, dx);
+  }
+  void backward(const Workspace& ws, const Matrix<S>& dy, Vector<S>& grad, Matrix<S>* dx,
+                const PackedWeights& packed) const {
+    backward_with(ws, dy, grad, dx, packed);
   }
 
   /// First row of coarse point i (0-based) in the fine state: fine point r·(i+1) − 1.
   [[nodiscard]] Index row(Index i) const { return 2 * (ratio_ * (i + 1) - 1); }
 
 private:
+  void forward_with(const Matrix<S>& x, Matrix<S>& y, Workspace& ws,
+                    const auto&... packed) const {
+    ws.input.resize(64, x.cols());
+    const S scale = std::sqrt(static_cast<S>(ratio_));
+    for (Index i = 0; i < 32; ++i) ws.input.middleRows(2 * i, 2) = scale * x.middleRows(row(i), 2);
+    net_.forward(ws.input, y, ws.inner, packed...);
+  }
+
+  void backward_with(const Workspace& ws, const Matrix<S>& dy, Vector<S>& grad, Matrix<S>* dx,
+                     const auto&... packed) const {
+    Matrix<S> sub;
+    net_.backward(ws.inner, dy, grad, dx != nullptr ? &sub : nullptr, packed...);
+    if (dx == nullptr) return;
+    const S scale = std::sqrt(static_cast<S>(ratio_));
+    dx->setZero(input_dim(), dy.cols());
+    for (Index i = 0; i < 32; ++i) dx->middleRows(row(i), 2) = scale * sub.middleRows(2 * i, 2);
+  }
+
   Network<S>& net_;
   Index ratio_;
 };
+static_assert(sbptt::PackingController<GridAdapter<double>>);
 
 /// What one run of an engine gives: final states (state_dim × B), g_R, loss, milliseconds.
 struct Outcome {

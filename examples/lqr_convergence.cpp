@@ -85,12 +85,20 @@ Vec engine_field(const Scene& s, FlowMode mode, const Vec& flat) {
 
 struct Row {
   long epoch;
-  double distance, gap;
+  double distance, gap;                   ///< to K̄* and J(K̄*)
+  double riccati_distance, riccati_gap;   ///< to the Riccati first gain K_0 and J_ric
 };
 
-/// Trains from K = 0 and records ‖K − K̄*‖ and the relative loss gap at `report_epochs`.
+/// The Riccati references of a setting: the first gain of the optimal sequence and its loss.
+struct Riccati {
+  Mat first_gain;
+  double loss;
+};
+
+/// Trains from K = 0 and records the distances and relative loss gaps to both references at
+/// `report_epochs`.
 std::vector<Row> train(const Scene& s, Method method, const lqr::ConstantGainOptimum& best,
-                       Mat* final_gain, bool* stopped) {
+                       const Riccati& riccati, Mat* final_gain, bool* stopped) {
   const Sim sim = simulator(s);
   Feedback feedback(2, 1);
   TrainerOptions options;
@@ -107,7 +115,8 @@ std::vector<Row> train(const Scene& s, Method method, const lqr::ConstantGainOpt
       continue;
     const Mat gain = feedback.gain();
     const double loss = lqr::constant_gain_loss(s.problem, gain, s.second_moment);
-    rows.push_back({epoch, (gain - best.gain).norm(), (loss - best.loss) / best.loss});
+    rows.push_back({epoch, (gain - best.gain).norm(), (loss - best.loss) / best.loss,
+                    (gain - riccati.first_gain).norm(), (loss - riccati.loss) / riccati.loss});
   }
   *final_gain = feedback.gain();
   return rows;
@@ -147,16 +156,18 @@ std::string study(double radius, int steps) {
               "= %.4f; |g_M| = %.1e)\n",
               fixed_m(0, 0), fixed_m(0, 1), fixed_m_loss, fixed_m_loss / best.loss - 1,
               (fixed_m - best.gain).norm(), m_residual);
-  std::printf("method | %s\n", "epoch: |K - K*|  (J - J*)/J*");
+  std::printf("method | %s\n", "epoch: |K - K*|  (J - J*)/J*  [|K - K_0|  (J - J_ric)/J_ric]");
   char head[32];
   std::snprintf(head, sizeof head, "| %.1f | %d |", radius, steps);
   std::string summary = head;
   for (Method method : {Method::Regular, Method::Modified, Method::Combined}) {
     Mat final_gain;
     bool stopped = false;
-    const auto rows = train(s, method, best, &final_gain, &stopped);
+    const auto rows = train(s, method, best, {ric.gains[0], ric_loss}, &final_gain, &stopped);
     std::printf("%-6s |", std::string(label(method)).c_str());
-    for (const Row& r : rows) std::printf(" %ld: %.2e %.2e |", r.epoch, r.distance, r.gap);
+    for (const Row& r : rows)
+      std::printf(" %ld: %.2e %.2e [%.2e %.2e] |", r.epoch, r.distance, r.gap, r.riccati_distance,
+                  r.riccati_gap);
     if (stopped) std::printf(" stopped on a non-finite value");
     std::printf(" final |K - K_0| = %.2e, |K - K_M| = %.2e", (final_gain - ric.gains[0]).norm(),
                 (final_gain - fixed_m).norm());

@@ -1,11 +1,13 @@
 // Threads change the speed, never the numbers: the loss, g_R, g_M, every diagnostic, the
 // evaluation of a set, its non-finite report, and the parameters after a few Trainer epochs
 // are bitwise identical for 1, 2 and 3 threads (cart pole with an MLP, guidance, and quantum
-// control with a CNN; batches and sets whose sizes do not divide evenly).
+// control with a CNN; batches and sets whose sizes do not divide evenly), whether the
+// per-sample loops are split or a lone sweep hands its parameter products to a second thread.
 #include <catch2/catch.hpp>
 
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 #include <utility>
 #include <vector>
 
@@ -49,9 +51,13 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
   std::vector<GradientPair<S>> pairs;
   std::vector<Vector<S>> full, physics, stopped, trained_r, trained_c;
   std::vector<S> evaluations;
-  // 1 thread, then 2 and 3 threads with every per-sample loop split (threshold 0) and with
-  // the default threshold (cheap loops stay on one thread).
-  const std::vector<std::pair<Index, double>> settings = {{1, 4000}, {2, 0}, {3, 0}, {2, 4000}};
+  std::vector<bool> overlapped;
+  // 1 thread, then 2 and 3 threads with every per-sample loop split (threshold 0), with the
+  // default threshold (cheap loops stay on one thread), and with no loop ever split, which
+  // makes every lone sweep after the first hand its parameter products to a second thread.
+  const double never = std::numeric_limits<double>::max();
+  const std::vector<std::pair<Index, double>> settings = {
+      {1, 4000}, {2, 0}, {3, 0}, {2, 4000}, {2, never}, {3, never}};
   for (const auto& [threads, split] : settings) {
     Net net = initial;
     Engine engine(sim, net, objective, steps);
@@ -66,7 +72,7 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
     full.push_back(g);
     engine.reverse(FlowMode::PhysicsOnly, g, steps / 3);  // truncated, for variety
     physics.push_back(g);
-    engine.reverse(FlowMode::Stopped, g);
+    overlapped.push_back(engine.reverse(FlowMode::Stopped, g).params_overlapped);
     stopped.push_back(g);
     evaluations.push_back(engine.evaluate(test));
 
@@ -102,7 +108,10 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
     CHECK(evaluations[t] == evaluations[0]);
     CHECK(trained_r[t] == trained_r[0]);
     CHECK(trained_c[t] == trained_c[0]);
+    if (settings[t].second == never) CHECK(overlapped[t]);  // so the hand-off was compared
+    if (settings[t].second == 0) CHECK_FALSE(overlapped[t]);
   }
+  CHECK_FALSE(overlapped[0]);
   // The sweeps of the pair equal the single sweeps, and training moved the parameters.
   CHECK(pairs[0].regular == full[0]);
   CHECK(trained_r[0] != initial.params());
@@ -195,4 +204,39 @@ TEST_CASE("threads: bad settings are rejected with a clear message", "[bptt][thr
   CHECK_THROWS_WITH((Trainer(sim, copy, cartpole_objective<double, 1>(), 10,
                              Adam<double>(AdamOptions<double>{1e-3}), options)),
                     Catch::Contains("threads = -2"));
+}
+
+TEST_CASE("threads: a sweep that throws while handing off its parameter products stops both "
+          "threads, and the engine sweeps correctly afterwards", "[bptt][threads]") {
+  /// The cart pole, whose VJP throws while `fail` is set.
+  struct Failing : CartPole<double, 2> {
+    bool* fail;
+    explicit Failing(bool* f) : fail(f) {}
+    void vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
+             Control* lambda_u) const {
+      if (*fail) throw std::runtime_error("planted VJP failure");
+      CartPole<double, 2>::vjp(x, u, lambda, lambda_x, lambda_u);
+    }
+  };
+  bool fail = false;
+  const Failing sim(&fail);
+  Rng rng(45);
+  const Matrix<double> x0 = cartpole_initial_states(sim, rng, 6);
+  const auto net = seeded_mlp<double>(sim.state_dim(), 1, 9);
+  Engine alone(sim, net, cartpole_objective<double, 2>(), 25);
+  Vector<double> expected;
+  alone.forward(x0);
+  alone.reverse(FlowMode::Full, expected);
+
+  Engine engine(sim, net, cartpole_objective<double, 2>(), 25);
+  engine.set_threads(2, std::numeric_limits<double>::max());
+  Vector<double> g;
+  engine.forward(x0);
+  CHECK_FALSE(engine.reverse(FlowMode::Full, g).params_overlapped);  // the loops are timed
+  REQUIRE(engine.reverse(FlowMode::Full, g).params_overlapped);
+  fail = true;
+  CHECK_THROWS_WITH(engine.reverse(FlowMode::Full, g), "planted VJP failure");
+  fail = false;
+  CHECK(engine.reverse(FlowMode::Full, g).params_overlapped);
+  CHECK(g == expected);
 }

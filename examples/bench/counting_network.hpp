@@ -20,6 +20,7 @@ public:
   using Scalar = S;
   using Workspace = typename Network<S>::Workspace;
   using PackedWeights = typename Network<S>::PackedWeights;
+  using LayerAdjoints = typename Network<S>::LayerAdjoints;
 
   explicit CountingNetwork(Network<S>& net) : net_(net) {
     for (const auto& layer : net.layers()) {
@@ -67,6 +68,19 @@ public:
     count_backward(dy.cols(), dx != nullptr);
   }
 
+  /// The two halves of the packed `backward`, counted as they split its products.
+  void backward_inputs(const Workspace& ws, const Matrix<S>& dy, Matrix<S>* dx,
+                       const PackedWeights& packed, LayerAdjoints& adjoints) const {
+    net_.backward_inputs(ws, dy, dx, packed, adjoints);
+    macs_.fetch_add((hidden_input_ + (dx != nullptr ? first_input_ : 0)) * dy.cols(),
+                    std::memory_order_relaxed);
+  }
+  void add_param_gradient(const Workspace& ws, const LayerAdjoints& adjoints,
+                          sbptt::Vector<S>& grad) const {
+    net_.add_param_gradient(ws, adjoints, grad);
+    macs_.fetch_add(per_sample_ * ws.batch_size(), std::memory_order_relaxed);
+  }
+
   [[nodiscard]] long long macs() const { return macs_.load(); }
   void reset() { macs_ = 0; }
 
@@ -80,5 +94,8 @@ private:
   Index per_sample_ = 0, hidden_input_ = 0, first_input_ = 0;
   mutable std::atomic<long long> macs_{0};
 };
+
+static_assert(sbptt::SplitBackwardController<CountingNetwork<float>>,
+              "bench must time the engine's split backward, as a Network gets it");
 
 }  // namespace bench

@@ -38,6 +38,7 @@ struct SweepDiagnostics {
   double grad_norm2 = 0;                    ///< ‖g‖²
   std::vector<double> adjoint_norms;        ///< ‖λ_n‖_F of the batch adjoint, n = 0..m
   std::optional<NonFinite> first_non_finite;  ///< first NaN/Inf of the sweep, if any
+  bool params_overlapped = false;  ///< parameter products ran on a second thread (speed only)
 };
 
 /// Diagnostics comparing the modified vector g_M with the regular gradient g_R.

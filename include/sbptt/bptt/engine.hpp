@@ -21,11 +21,16 @@
 ///
 /// Threads (`set_threads`): the per-sample work of a step (simulator step and VJP, loss seeds)
 /// is split over the samples; `regular_and_modified` runs its two sweeps at once; `evaluate`
-/// rolls out fixed chunks of `kEvaluateChunk` samples independently. Every sample is computed
+/// rolls out fixed chunks of `kEvaluateChunk` samples independently. A lone sweep (`reverse`)
+/// whose per-sample loops are too cheap to split hands the parameter products of a
+/// `SplitBackwardController` to a second thread instead, step by step, and adds them in step
+/// order (engine_buffers.hpp, `ParamHandoff`). Every sample is computed
 /// by the same operations whatever the thread count, and every batch sum is taken in a fixed
 /// order, so all results are bitwise identical for any number of threads. With more than one
-/// thread the controller's `backward` must be safe to call concurrently on one workspace
-/// (`Network`'s is) and the loss functor must be thread-safe (a `const` pure function).
+/// thread the controller's `backward` must be safe to call concurrently on one workspace, a
+/// `SplitBackwardController`'s `add_param_gradient` concurrently with `backward_inputs` of
+/// another step (`Network`'s are), and the loss functor must be thread-safe (a `const` pure
+/// function).
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -136,6 +141,8 @@ public:
     detail::require(split_above_ns >= 0, "Engine::set_threads: split_above_ns = ",
                     split_above_ns, "; expected a number of nanoseconds >= 0");
     pool_ = threads > 1 ? std::make_unique<detail::ThreadPool>(threads) : nullptr;
+    if constexpr (SplitBackwardController<Ctrl>)
+      handoff_ = pool_ ? std::make_unique<Handoff>() : nullptr;
     threads_ = threads;
     for (auto& decision : fork_) decision = detail::ForkDecision(split_above_ns);
     const auto slots = static_cast<std::size_t>(threads);
@@ -212,6 +219,25 @@ public:
   const SweepDiagnostics& reverse(const FlowSchedule& schedule, Vector<Scalar>& gradient,
                                   Index truncation = 0) {
     check_sweep(schedule, truncation);
+    if constexpr (SplitBackwardController<Ctrl>) {
+      // Only once the simulator's loops have been found too cheap to split: the second
+      // thread then has nothing better to do than the parameter products.
+      if (handoff_ && !fork_[1].probing() && !fork_[1].fork()) {
+        Handoff& h = *handoff_;
+        h.reset();
+        auto add = [&](std::size_t slot) { add_params(h, slot, gradient); };
+        auto adder = [&](Index, Index) { h.keep_adding(steps_, add); };
+        pool_->run_beside(1, adder, [&] {
+          try {
+            sweep(sweeps_[0], schedule, gradient, truncation, false, &h);
+          } catch (...) {
+            h.abandoned.store(true, std::memory_order_release);
+            throw;
+          }
+        });
+        return sweeps_[0].diagnostics;
+      }
+    }
     sweep(sweeps_[0], schedule, gradient, truncation, true);
     return sweeps_[0].diagnostics;
   }
@@ -265,6 +291,24 @@ private:
     using Type = typename C::PackedWeights;
   };
   using Packed = typename PackedOf<Ctrl>::Type;
+
+  /// `ParamHandoff` of `Ctrl::LayerAdjoints` for a `SplitBackwardController`, else nothing.
+  template <class C, bool = SplitBackwardController<C>>
+  struct HandoffOf {
+    using Type = NothingPacked;
+  };
+  template <class C>
+  struct HandoffOf<C, true> {
+    using Type = detail::ParamHandoff<typename C::LayerAdjoints>;
+  };
+  using Handoff = typename HandoffOf<Ctrl>::Type;
+
+  /// Adds the parameter products recorded in `slot` of the hand-off to `gradient`.
+  void add_params(Handoff& h, std::size_t slot, Vector<Scalar>& gradient) const {
+    if constexpr (SplitBackwardController<Ctrl>)
+      controller_.add_param_gradient(trajectory_.workspaces[static_cast<std::size_t>(h.steps[slot])],
+                                     h.ring[slot], gradient);
+  }
 
   void pack_controller() {
     if constexpr (PackingController<Ctrl>) controller_.pack(packed_);
@@ -332,8 +376,9 @@ private:
 
   /// The reverse sweep of the file comment into `s` and `gradient`. The loss seed of x_{n+1}
   /// is added in the same per-sample pass as the VJPs of step n.
+  /// With `handoff` the parameter products go through it (`reverse`), else they are done here.
   void sweep(Sweep& s, const FlowSchedule& schedule, Vector<Scalar>& gradient, Index truncation,
-             bool parallel) {
+             bool parallel, Handoff* handoff = nullptr) {
     const Index batch = trajectory_.batch();
     gradient.setZero(controller_.num_params());
     s.lambda.setZero(sim_.state_dim(), batch);
@@ -341,6 +386,8 @@ private:
     s.propagated.resize(sim_.state_dim(), batch);
     s.diagnostics.adjoint_norms.assign(static_cast<std::size_t>(steps_ + 1), 0.0);
     s.diagnostics.first_non_finite.reset();
+    s.diagnostics.params_overlapped = handoff != nullptr;
+    auto add = [&](std::size_t slot) { add_params(*handoff, slot, gradient); };
     const Scalar seed_scale =
         static_cast<Scalar>(objective_.step_weight / static_cast<double>(batch));
     const Scalar control_seed =
@@ -368,8 +415,19 @@ private:
       });
       record_adjoint(s, n + 1);
       if (objective_.control_weight > 0) s.mu.noalias() += control_seed * trajectory_.controls[i];
-      controller_backward(trajectory_.workspaces[i], s.mu, gradient,
-                          network ? &s.input_adjoint : nullptr);
+      Matrix<Scalar>* input_adjoint = network ? &s.input_adjoint : nullptr;
+      if constexpr (SplitBackwardController<Ctrl>) {
+        if (handoff != nullptr) {
+          const Index k = steps_ - 1 - n;  // recordings so far
+          const std::size_t slot = handoff->slot_for(k, add);
+          controller_.backward_inputs(trajectory_.workspaces[i], s.mu, input_adjoint, packed_,
+                                      handoff->ring[slot]);
+          handoff->steps[slot] = n;
+          handoff->recorded.store(k + 1, std::memory_order_release);
+        }
+      }
+      if (handoff == nullptr)
+        controller_backward(trajectory_.workspaces[i], s.mu, gradient, input_adjoint);
       if (physics) {
         s.lambda.swap(s.propagated);
         if (network) s.lambda += s.input_adjoint;
@@ -380,6 +438,9 @@ private:
       }
     }
     record_adjoint(s, 0);
+    if constexpr (SplitBackwardController<Ctrl>) {
+      if (handoff != nullptr) handoff->wait_added(steps_, add);
+    }
     s.diagnostics.grad_norm2 = static_cast<double>(gradient.squaredNorm());
     if (!s.diagnostics.first_non_finite)
       s.diagnostics.first_non_finite = detail::first_non_finite_component(gradient);
@@ -469,6 +530,7 @@ private:
   Index steps_;
   Index threads_ = 1;
   std::unique_ptr<detail::ThreadPool> pool_;
+  std::unique_ptr<Handoff> handoff_;  ///< with a pool and a SplitBackwardController
   Packed packed_;
 
   Trajectory<Scalar, typename Ctrl::Workspace> trajectory_;

@@ -2,12 +2,15 @@
 /// \file The engine's reusable buffers (per thread, per sweep, per evaluation chunk) and its
 /// scan for the first non-finite value. Implementation details of `sbptt::Engine`.
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <mutex>
 #include <optional>
 #include <vector>
 
 #include "sbptt/bptt/diagnostics.hpp"
 #include "sbptt/core/non_finite.hpp"
+#include "sbptt/core/parallel.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt::detail {
@@ -33,6 +36,74 @@ struct SweepBuffers {
   Matrix<Scalar> lambda, propagated, mu, input_adjoint;
   SweepDiagnostics diagnostics;
   std::vector<Scratch> scratch;
+};
+
+/// The hand-off of a sweep whose parameter products run on a second thread. The sweeping
+/// thread records each step's layer adjoints into a ring slot and counts it in `recorded`;
+/// whoever holds `lock` adds recorded slots to the gradient in recording order and counts
+/// them in `added`: the other thread while it keeps up, the sweeping thread itself when it
+/// finds the lock free while it waits for a slot, and at the end. So the gradient is summed in
+/// one fixed order, the same as on one thread, and the sweep never waits for a thread that may
+/// not have started (the adder runs beside it, `ThreadPool::run_beside`, and stops once every
+/// slot is added or the sweep has thrown). Nobody sleeps on the lock (`try_lock`, then `pause`): a step takes a
+/// few microseconds, less than waking a sleeping thread.
+template <class Adjoints>
+struct ParamHandoff {
+  static constexpr Index ring_size = 16;
+  std::vector<Adjoints> ring = std::vector<Adjoints>(ring_size);
+  std::vector<Index> steps = std::vector<Index>(ring_size);  ///< time step of each slot
+  std::atomic<Index> recorded{0}, added{0};
+  std::atomic<bool> abandoned{false};  ///< the sweep threw: the adder stops
+  std::mutex lock;
+
+  void reset() {
+    recorded.store(0, std::memory_order_relaxed);
+    added.store(0, std::memory_order_relaxed);
+    abandoned.store(false, std::memory_order_relaxed);
+  }
+
+  /// Adds the recorded slots not yet added if the lock is free; `add(slot)` adds one.
+  template <class Add>
+  void try_adding(Add& add) {
+    const std::unique_lock<std::mutex> guard(lock, std::try_to_lock);
+    if (!guard.owns_lock()) return;
+    for (Index k = added.load(std::memory_order_relaxed);
+         k < recorded.load(std::memory_order_acquire); ++k) {
+      add(static_cast<std::size_t>(k % ring_size));
+      added.store(k + 1, std::memory_order_release);
+    }
+  }
+
+  /// Returns once at least `count` recordings are added, adding them itself when it can.
+  template <class Add>
+  void wait_added(Index count, Add& add) {
+    while (added.load(std::memory_order_acquire) < count) {
+      try_adding(add);
+      cpu_relax();
+    }
+  }
+
+  /// The slot for recording number `k`, once its previous content has been added.
+  template <class Add>
+  [[nodiscard]] std::size_t slot_for(Index k, Add& add) {
+    wait_added(k - ring_size + 1, add);
+    return static_cast<std::size_t>(k % ring_size);
+  }
+
+  /// The second thread's part: adds slots as they are recorded until all `total` are added
+  /// (or the sweep gave up).
+  template <class Add>
+  void keep_adding(Index total, Add& add) {
+    while (!abandoned.load(std::memory_order_acquire)) {
+      const Index done = added.load(std::memory_order_acquire);
+      if (done == total) return;
+      if (recorded.load(std::memory_order_acquire) > done) {
+        try_adding(add);
+      } else {
+        cpu_relax();
+      }
+    }
+  }
 };
 
 /// One independently rolled-out chunk of `Engine::evaluate`: its states, controls, controller

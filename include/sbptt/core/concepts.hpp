@@ -146,6 +146,23 @@ concept PackingController =
       c.backward(cws, x, grad, dx, cp);
     };
 
+/// A `PackingController` whose backward splits into two halves, as `Network`'s does:
+/// `using LayerAdjoints` (default-constructible), `void backward_inputs(ws, dY, dX, packed,
+/// adjoints) const`, which does what the packed `backward` does to `dX` and records what the
+/// parameter products need in `adjoints`, and `void add_param_gradient(ws, adjoints, grad)
+/// const`, which adds what the packed `backward` adds to `grad`. The engine then runs the
+/// parameter half of one step on a second thread while the next step's input half proceeds.
+template <class C>
+concept SplitBackwardController =
+    PackingController<C> && std::default_initializable<typename C::LayerAdjoints> &&
+    requires(const C& c, const typename C::Workspace& ws, const Matrix<typename C::Scalar>& dy,
+             Matrix<typename C::Scalar>* dx, const typename C::PackedWeights& packed,
+             typename C::LayerAdjoints& adjoints, const typename C::LayerAdjoints& recorded,
+             Vector<typename C::Scalar>& grad) {
+      c.backward_inputs(ws, dy, dx, packed, adjoints);
+      c.add_param_gradient(ws, recorded, grad);
+    };
+
 /// Compile-time check with a readable message per missing member; returns true.
 template <class S>
 consteval bool static_assert_simulator() {

@@ -66,6 +66,45 @@ public:
       for (Index i = 0; i < count; ++i) task(i, 0);
       return;
     }
+    start(count, task);
+    finish(count);
+  }
+
+  /// Offers the items of `task` to the other threads while the calling thread runs
+  /// `foreground()`; then the caller takes any item still unclaimed and returns when all are
+  /// done. So an item never runs on the calling thread while `foreground` does, and `foreground`
+  /// always runs on the calling thread (its thread-local buffers are the caller's). An item
+  /// that waits for `foreground` must therefore stop waiting once `foreground` has returned or
+  /// thrown. The first exception, `foreground`'s before any item's, is rethrown here after
+  /// every item has been attempted.
+  template <class Task, class Foreground>
+  void run_beside(Index count, Task& task, Foreground&& foreground) {
+    std::exception_ptr failure;
+    auto keep_first = [&](auto&& work) {
+      try {
+        work();
+      } catch (...) {
+        if (!failure) failure = std::current_exception();
+      }
+    };
+    const bool beside = count > 0 && !workers_.empty();
+    if (beside) start(count, task);
+    keep_first(foreground);
+    if (beside) {
+      keep_first([&] { finish(count); });  // items may read what `foreground` left: wait first
+    } else {
+      for (Index i = 0; i < count; ++i) keep_first([&] { task(i, 0); });
+    }
+    if (failure) std::rethrow_exception(failure);
+  }
+
+private:
+  static constexpr int kIndexBits = 32;
+  static constexpr std::uint64_t kIndexMask = (std::uint64_t{1} << kIndexBits) - 1;
+
+  /// Publishes the items [0, count) of `task` as a new run.
+  template <class Task>
+  void start(Index count, Task& task) {
     call_.store([](void* context, Index item, Index worker) {
       (*static_cast<Task*>(context))(item, worker);
     }, std::memory_order_relaxed);
@@ -74,14 +113,15 @@ public:
     done_.store(0, std::memory_order_relaxed);
     error_ = nullptr;
     publish();
+  }
+
+  /// Takes the run's unclaimed items on the calling thread (worker 0), waits for all `count`,
+  /// and rethrows the first exception of an item.
+  void finish(Index count) {
     drain(0);
     wait_until([&] { return done_.load(std::memory_order_acquire) == count; });
     if (error_) std::rethrow_exception(error_);
   }
-
-private:
-  static constexpr int kIndexBits = 32;
-  static constexpr std::uint64_t kIndexMask = (std::uint64_t{1} << kIndexBits) - 1;
 
   /// Starts a new run (item 0 of a new generation) and wakes sleepers, if any.
   void publish() {

@@ -101,27 +101,28 @@ struct Conv1d {
     activate_in_place(activation, y);
   }
 
-  /// Adds the parameter VJP to `grad` and, when `dx` is not null, writes the input VJP.
-  /// \param wt       Wᵀ, packed (`Network::pack` makes it)
+  /// Adds the parameter VJP of a batch to `grad`.
   /// \param columns  the im2col matrix of the forward pass, (C_in·K) × (P·B)
   /// \param delta    adjoint of the pre-activation, (P·C_out) × B position-major, equivalently
   ///                 C_out × (P·B) column-major
   /// \param grad     this layer's slice of the gradient, num_params() entries; accumulated
-  /// \param dx       null, or storage for ∂L/∂x, (L·C_in) × B position-major; overwritten
-  /// \param scratch  grown to hold the (C_in·K) × (P·B) window adjoints when `dx` is set
   template <class Scalar>
-  void backward(const PackedMatrix<Scalar>& wt, const Matrix<Scalar>& columns,
-                const Scalar* delta, Scalar* grad, Scalar* dx, Vector<Scalar>& scratch) const {
-    const Index positions = output_length();
-    const Index window = window_size();
-    const Index batch = positions > 0 ? columns.cols() / positions : 0;
-    const detail::ConstMatrixMap<Scalar> d(delta, out_channels, positions * batch);
-    detail::RowMajorMap<Scalar> dw(grad, out_channels, window);
+  void param_vjp(const Matrix<Scalar>& columns, const Scalar* delta, Scalar* grad) const {
+    const detail::ConstMatrixMap<Scalar> d(delta, out_channels, columns.cols());
+    detail::RowMajorMap<Scalar> dw(grad, out_channels, window_size());
     Eigen::Map<Vector<Scalar>> db(grad + weight_count(), out_channels);
     dw.noalias() += d * columns.transpose();
     db.noalias() += d.rowwise().sum();
-    if (dx == nullptr) return;
+  }
 
+  /// Writes the input VJP ∂L/∂x, (L·C_in) × B position-major, into `dx`.
+  /// \param wt       Wᵀ, packed (`Network::pack` makes it)
+  /// \param scratch  grown to hold the (C_in·K) × (P·B) window adjoints
+  template <class Scalar>
+  void input_vjp(const PackedMatrix<Scalar>& wt, const Scalar* delta, Index batch, Scalar* dx,
+                 Vector<Scalar>& scratch) const {
+    const Index positions = output_length();
+    const Index window = window_size();
     auto dcols = detail::grow_map(scratch, window, positions * batch);
     wt.multiply(delta, out_channels, positions * batch, dcols.data(), window);
     // col2im: overlapping windows (K > s) add up; positions past the last window stay zero.

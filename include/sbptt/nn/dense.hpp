@@ -53,24 +53,27 @@ struct Dense {
     activate_in_place(activation, y);
   }
 
-  /// Adds the parameter VJP to `grad` and, when `dx` is not null, writes the input VJP.
-  /// \param wt      Wᵀ, packed (`Network::pack` makes it)
-  /// \param x       the inputs the forward pass saw, n_in × B
-  /// \param delta   adjoint of the pre-activation ∂L/∂(W x + b), n_out × B (column-major)
-  /// \param grad    this layer's slice of the gradient, num_params() entries; accumulated
-  /// \param dx      null, or storage for ∂L/∂x, n_in × B (column-major); overwritten
+  /// Adds the parameter VJP of a batch to `grad`.
+  /// \param x      the inputs the forward pass saw, n_in × B
+  /// \param delta  adjoint of the pre-activation ∂L/∂(W x + b), n_out × B (column-major)
+  /// \param grad   this layer's slice of the gradient, num_params() entries; accumulated
   template <class Scalar>
-  void backward(const PackedMatrix<Scalar>& wt, const Matrix<Scalar>& x, const Scalar* delta,
-                Scalar* grad, Scalar* dx) const {
-    const Index batch = x.cols();
-    const detail::ConstMatrixMap<Scalar> d(delta, outputs, batch);
+  void param_vjp(const Matrix<Scalar>& x, const Scalar* delta, Scalar* grad) const {
+    const detail::ConstMatrixMap<Scalar> d(delta, outputs, x.cols());
     detail::RowMajorMap<Scalar> dw(grad, outputs, inputs);
     Eigen::Map<Vector<Scalar>> db(grad + weight_count(), outputs);
     // The batch sum is the inner dimension of this product: one GEMM, no per-sample loop. (The
     // packed kernel loses here: it must load and store dW around an inner dimension of B.)
     dw.noalias() += d * x.transpose();
     db.noalias() += d.rowwise().sum();
-    if (dx != nullptr) wt.multiply(delta, outputs, batch, dx, inputs);
+  }
+
+  /// Writes the input VJP ∂L/∂x = Wᵀ Δ, n_in × B (column-major), into `dx`.
+  /// \param wt  Wᵀ, packed (`Network::pack` makes it)
+  template <class Scalar>
+  void input_vjp(const PackedMatrix<Scalar>& wt, const Scalar* delta, Index batch,
+                 Scalar* dx) const {
+    wt.multiply(delta, outputs, batch, dx, inputs);
   }
 };
 

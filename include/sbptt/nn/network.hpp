@@ -65,9 +65,9 @@ namespace detail {
 /// Per-thread temporaries of `Network::backward` (see the file comment for why).
 template <class Scalar>
 struct NetworkScratch {
-  Vector<Scalar> delta;       ///< pre-activation adjoint of the current layer
-  Vector<Scalar> adjoint[2];  ///< input adjoints, alternating so that input and output differ
-  Vector<Scalar> columns;     ///< conv window adjoints (im2col shape)
+  Vector<Scalar> adjoint;  ///< input adjoint of a layer with an activation, before f'
+  Vector<Scalar> columns;  ///< conv window adjoints (im2col shape)
+  std::vector<Vector<Scalar>> deltas;  ///< Δ of every layer, for the plain `backward`
 };
 
 /// Packed W (with b) and Wᵀ of the first `count` layers. The vectors only grow, so that the
@@ -126,6 +126,14 @@ public:
     std::vector<Matrix<Scalar>> outputs_;  // per layer, output_dim × B
     std::vector<Matrix<Scalar>> columns_;  // per conv layer the im2col matrix, else empty
     Index batch_ = -1;
+  };
+
+  /// The pre-activation adjoints Δ_l of every layer at one batch, as `backward_inputs`
+  /// records them for `add_param_gradient`. Default-constructible; buffers only grow.
+  class LayerAdjoints {
+  private:
+    friend class Network;
+    std::vector<Vector<Scalar>> deltas_;
   };
 
   /// The layers' products packed from θ by `pack`: valid while θ is unchanged.
@@ -227,14 +235,44 @@ public:
     check_params_size();
     auto& packed = detail::packed_scratch<Scalar>();
     pack_layers(packed, false, true);
-    backward_packed(ws, dy, grad, dx, packed);
+    check_grad_size(grad);
+    auto& deltas = detail::network_scratch<Scalar>().deltas;
+    inputs_packed(ws, dy, dx, packed, deltas);
+    params_from(ws, deltas, grad);
   }
 
   /// The same with θ as packed by `pack` (which must have seen the current θ).
   void backward(const Workspace& ws, const Matrix<Scalar>& dy, Vector<Scalar>& grad,
                 Matrix<Scalar>* dx, const PackedWeights& packed) const {
     check_packed(packed.layers_, true, "backward");
-    backward_packed(ws, dy, grad, dx, packed.layers_);
+    check_grad_size(grad);
+    auto& deltas = detail::network_scratch<Scalar>().deltas;
+    inputs_packed(ws, dy, dx, packed.layers_, deltas);
+    params_from(ws, deltas, grad);
+  }
+
+  /// The first half of `backward`: sets dX as `backward` does and records every layer's Δ in
+  /// `adjoints`, leaving the parameter products to `add_param_gradient`. The halves touch
+  /// disjoint data, so the engine runs the parameter products of one step on a second thread
+  /// while this half of the next step proceeds; the sum is `backward`'s, bit for bit.
+  void backward_inputs(const Workspace& ws, const Matrix<Scalar>& dy, Matrix<Scalar>* dx,
+                       const PackedWeights& packed, LayerAdjoints& adjoints) const {
+    check_packed(packed.layers_, true, "backward_inputs");
+    inputs_packed(ws, dy, dx, packed.layers_, adjoints.deltas_);
+  }
+
+  /// The second half: **adds** (∂N/∂θ)ᵀ dY to `grad` from what `backward_inputs` recorded
+  /// for the forward pass in `ws`.
+  void add_param_gradient(const Workspace& ws, const LayerAdjoints& adjoints,
+                          Vector<Scalar>& grad) const {
+    check_workspace(ws);
+    check_grad_size(grad);
+    bool recorded = adjoints.deltas_.size() >= layers_.size();
+    for (std::size_t l = 0; recorded && l < layers_.size(); ++l)
+      recorded = adjoints.deltas_[l].size() >= layer_output_dim(layers_[l]) * ws.batch_;
+    detail::require(recorded, "Network::add_param_gradient: the adjoints do not cover this ",
+                    "workspace's batch; expected them recorded by backward_inputs at it");
+    params_from(ws, adjoints.deltas_, grad);
   }
 
 private:
@@ -265,15 +303,15 @@ private:
     y = ws.outputs_.back();
   }
 
-  void backward_packed(const Workspace& ws, const Matrix<Scalar>& dy, Vector<Scalar>& grad,
-                       Matrix<Scalar>* dx, const detail::PackedLayers<Scalar>& packed) const {
+  /// Δ_l of every layer into `deltas` (grown, never shrunk) and, when `dx` is set, dX.
+  void inputs_packed(const Workspace& ws, const Matrix<Scalar>& dy, Matrix<Scalar>* dx,
+                     const detail::PackedLayers<Scalar>& packed,
+                     std::vector<Vector<Scalar>>& deltas) const {
     check_workspace(ws);
     detail::require(dy.rows() == output_dim() && dy.cols() == ws.batch_,
                     "Network::backward: dY is ", dy.rows(), " × ", dy.cols(), ", expected ",
                     output_dim(), " × ", ws.batch_, " (output_dim() × batch of the forward pass)");
-    detail::require(grad.size() == num_params(), "Network::backward: grad has ", grad.size(),
-                    " entries, expected num_params() = ", num_params());
-
+    if (deltas.size() < layers_.size()) deltas.resize(layers_.size());
     auto& scratch = detail::network_scratch<Scalar>();
     const Index batch = ws.batch_;
     const Scalar* upstream = dy.data();  // ∂L/∂(output of layer l)
@@ -281,37 +319,63 @@ private:
       const auto ul = static_cast<std::size_t>(l);
       const Layer& layer = layers_[ul];
       const Matrix<Scalar>& out = ws.outputs_[ul];
-
-      const Scalar* delta = upstream;  // identity: ∂L/∂z = ∂L/∂y, no copy
+      auto delta = detail::grow_map(deltas[ul], out.rows(), batch);
       if (layer_activation(layer) != Activation::Identity) {
-        auto d = detail::grow_map(scratch.delta, out.rows(), batch);
         activation_backward(layer_activation(layer), out,
-                            detail::ConstMatrixMap<Scalar>(upstream, out.rows(), batch), d);
-        delta = d.data();
+                            detail::ConstMatrixMap<Scalar>(upstream, out.rows(), batch), delta);
+      } else if (upstream != delta.data()) {
+        delta = detail::ConstMatrixMap<Scalar>(upstream, out.rows(), batch);
       }
 
-      // The input adjoint of layer 0 is dX; skipping it is what stops the gradient.
+      // The input adjoint of layer 0 is dX; skipping it is what stops the gradient. Below
+      // layer 0 it is the next layer's Δ itself when that layer is linear (no copy).
       Scalar* d_in = nullptr;
       if (l > 0) {
-        d_in = detail::grow_map(scratch.adjoint[ul % 2], layer_input_dim(layer), batch).data();
+        const Layer& below = layers_[ul - 1];
+        const Index rows = layer_output_dim(below);
+        d_in = layer_activation(below) == Activation::Identity
+                   ? detail::grow_map(deltas[ul - 1], rows, batch).data()
+                   : detail::grow_map(scratch.adjoint, rows, batch).data();
       } else if (dx != nullptr) {
         dx->resize(input_dim(), batch);
         d_in = dx->data();
       }
+      if (d_in == nullptr) break;
 
       const PackedMatrix<Scalar>& wt = packed.transposed[ul];
-      Scalar* g = grad.data() + offsets_[ul];
       std::visit(
           [&](const auto& spec) {
             if constexpr (std::is_same_v<std::decay_t<decltype(spec)>, Conv1d>) {
-              spec.backward(wt, ws.columns_[ul], delta, g, d_in, scratch.columns);
+              spec.input_vjp(wt, delta.data(), batch, d_in, scratch.columns);
             } else {
-              spec.backward(wt, l == 0 ? ws.input_ : ws.outputs_[ul - 1], delta, g, d_in);
+              spec.input_vjp(wt, delta.data(), batch, d_in);
             }
           },
           layer);
       upstream = d_in;
     }
+  }
+
+  /// grad += the parameter products of every layer from the recorded Δ_l.
+  void params_from(const Workspace& ws, const std::vector<Vector<Scalar>>& deltas,
+                   Vector<Scalar>& grad) const {
+    for (std::size_t l = 0; l < layers_.size(); ++l) {
+      Scalar* g = grad.data() + offsets_[l];
+      std::visit(
+          [&](const auto& spec) {
+            if constexpr (std::is_same_v<std::decay_t<decltype(spec)>, Conv1d>) {
+              spec.param_vjp(ws.columns_[l], deltas[l].data(), g);
+            } else {
+              spec.param_vjp(l == 0 ? ws.input_ : ws.outputs_[l - 1], deltas[l].data(), g);
+            }
+          },
+          layers_[l]);
+    }
+  }
+
+  void check_grad_size(const Vector<Scalar>& grad) const {
+    detail::require(grad.size() == num_params(), "Network::backward: grad has ", grad.size(),
+                    " entries, expected num_params() = ", num_params());
   }
 
   /// Packs W with b (`weights`) and/or Wᵀ (`transposed`) of every layer from θ.
@@ -396,5 +460,7 @@ static_assert(static_assert_controller<Network<double>>());
 static_assert(static_assert_controller<Network<float>>());
 static_assert(Controller<Network<double>> && Controller<Network<float>>);
 static_assert(PackingController<Network<double>> && PackingController<Network<float>>);
+static_assert(SplitBackwardController<Network<double>> &&
+              SplitBackwardController<Network<float>>);
 
 }  // namespace sbptt

@@ -207,7 +207,7 @@ inline void require_float_range(const char* flag, double value) {
   cli.flag("--float", "compute in float (default: double)", [&] { o.use_float = true; });
   cli.flag("--double", "compute in double (the default)", [&] { o.use_float = false; });
   cli.integer("--threads", o.threads, 1, limits::max_threads,
-              "threads over the samples of a batch");
+              "threads over the samples of a batch (and a sweep's parameter products)");
   cli.path("--csv", o.csv, "training log, one row per epoch (docs/formats.md)");
   cli.path("--save-params", o.save_params, "write the trained parameters (docs/formats.md)");
   cli.path("--init-params", o.init_params, "start from these parameters (docs/formats.md)");

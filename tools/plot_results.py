@@ -21,7 +21,9 @@ OUT_DIR/runs/<run>.csv it names (docs/formats.md), and draws into OUT_DIR/plots/
   standard deviation (mean ± std of log10).
 
 Colours are fixed per method (R red, M blue, C green, S grey, N purple) and line styles per
-clip mode (norm solid, value dashed, none dotted) in every figure. Every PNG is written to a
+clip mode (norm solid, value dashed, none dotted) in every figure. A run that stopped on a
+non-finite value (status "stopped") is marked with a cross at its last epoch, on its own
+curve, and counted in the title: the mean after that epoch covers the other seeds only. Every PNG is written to a
 temporary file and renamed, so a reader never sees half a picture.
 """
 import argparse
@@ -103,7 +105,7 @@ def mean_std(curves):
         return np.nanmean(stacked, axis=0), np.nanstd(stacked, axis=0)
 
 
-def save(fig, path):
+def save(fig, path, stops=0):
     directory = os.path.dirname(path)
     fd, temporary = tempfile.mkstemp(prefix=".tmp.", suffix=".png", dir=directory)
     os.close(fd)
@@ -117,7 +119,8 @@ def save(fig, path):
         plt.close(fig)
         if os.path.exists(temporary):
             os.unlink(temporary)
-    print(f"plot_results: wrote {path}")
+    marked = f" ({stops} run(s) stopped on a non-finite value, marked ×)" if stops else ""
+    print(f"plot_results: wrote {path}{marked}")
 
 
 def grid_shape(n):
@@ -145,13 +148,34 @@ def finish_figure(fig, title, handles):
     fig.tight_layout()
 
 
-def legend_handles(methods, clips):
+def legend_handles(methods, clips, stops=0):
     handles = [Line2D([], [], color=METHOD_COLOURS[m], lw=2, label=METHOD_NAMES[m])
                for m in METHOD_ORDER if m in methods]
     if len(clips) > 1 or clips != {"norm"}:
         handles += [Line2D([], [], color="black", ls=CLIP_STYLES[c], label=f"clip {c}")
                     for c in CLIP_ORDER if c in clips]
+    if stops:
+        handles.append(Line2D([], [], color="black", ls="none", marker="x",
+                              label="run stopped on a non-finite value"))
     return handles
+
+
+def mark_stops(ax, members, curve_of, colour):
+    """A cross at the last epoch of every member run that stopped, on that run's own curve;
+    returns how many."""
+    count = 0
+    for m in members:
+        if m["status"] != "stopped":
+            continue
+        x, y = curve_of(m)
+        if len(y) and np.isfinite(y[-1]):
+            ax.plot([x[-1]], [y[-1]], marker="x", ms=7, mew=1.6, color=colour, ls="none")
+        count += 1
+    return count
+
+
+def stops_text(stops):
+    return f"; {stops} run(s) stopped on a non-finite value (×)" if stops else ""
 
 
 def sort_complexities(task, values):
@@ -219,6 +243,7 @@ def curve_figure(runs, task, window, against_time):
     complexities = sort_complexities(task, {r["complexity"] for r in runs if r["task"] == task})
     fig, axes = panels(*grid_shape(len(complexities)))
     methods, clips, seeds = set(), set(), set()
+    stops = 0
     for ax, complexity in zip(axes.flat, complexities):
         lines = []
         for (method, clip), members in groups(runs, task, complexity):
@@ -233,6 +258,13 @@ def curve_figure(runs, task, window, against_time):
                 x = np.arange(1, len(mean) + 1)
             lines.append((x, mean, std, METHOD_COLOURS.get(method, "black"),
                           CLIP_STYLES.get(clip, "-.")))
+
+            def own_curve(m):
+                y = trailing_average(m["log"]["test_loss"], window)
+                x = np.cumsum(m["log"]["seconds"]) if against_time else np.arange(1, len(y) + 1)
+                return x, y
+
+            stops += mark_stops(ax, members, own_curve, METHOD_COLOURS.get(method, "black"))
         floor = positive_floor([line[1] for line in lines])
         for x, mean, std, colour, style in lines:
             band(ax, x, mean, std, colour, floor)
@@ -246,9 +278,9 @@ def curve_figure(runs, task, window, against_time):
         ax.set_visible(False)
     seeds_text = (f"{min(seeds)}" if min(seeds) == max(seeds) else f"{min(seeds)}–{max(seeds)}")
     what = "against training time" if against_time else "against epoch"
-    finish_figure(fig, f"{task}: test loss {what}, mean ± std over {seeds_text} seed(s)",
-                  legend_handles(methods, clips))
-    return fig
+    finish_figure(fig, f"{task}: test loss {what}, mean ± std over {seeds_text} seed(s)"
+                  + stops_text(stops), legend_handles(methods, clips, stops))
+    return fig, stops
 
 
 def hardest(runs, task):
@@ -259,6 +291,7 @@ def hardest(runs, task):
 def update_norm_figure(runs, tasks):
     fig, axes = panels(1, len(tasks))
     methods, clips = set(), set()
+    stops = 0
     for ax, task in zip(axes.flat, tasks):
         complexity = hardest(runs, task)
         lines = []
@@ -272,6 +305,10 @@ def update_norm_figure(runs, tasks):
             mean, std = mean_std(logs)
             lines.append((mean, std, METHOD_COLOURS.get(method, "black"),
                           CLIP_STYLES.get(clip, "-.")))
+            stops += mark_stops(ax, members,
+                                lambda m: (np.arange(1, len(m["log"]["update_norm2"]) + 1),
+                                           m["log"]["update_norm2"]),
+                                METHOD_COLOURS.get(method, "black"))
         for mean, std, colour, style in lines:
             x = np.arange(1, len(mean) + 1)
             if not np.all(np.nan_to_num(std) == 0):
@@ -284,8 +321,9 @@ def update_norm_figure(runs, tasks):
         ax.set_ylabel("update size ‖update‖² before clipping")
         finish_axes(ax, True)
     finish_figure(fig, "Update size (update_norm2) at the hardest setting: geometric mean ×/÷ "
-                  "geometric std over seeds", legend_handles(methods, clips))
-    return fig
+                  "geometric std over seeds" + stops_text(stops),
+                  legend_handles(methods, clips, stops))
+    return fig, stops
 
 
 def speed_figure(runs, tasks):
@@ -336,12 +374,13 @@ def main():
     os.makedirs(plots, exist_ok=True)
     tasks = [t for t in TASK_ORDER if any(r["task"] == t for r in runs)]
     for task in tasks:
-        save(curve_figure(runs, task, args.window, False),
-             os.path.join(plots, f"{task}_test_loss.png"))
-        save(curve_figure(runs, task, args.window, True),
-             os.path.join(plots, f"{task}_loss_vs_time.png"))
+        fig, stops = curve_figure(runs, task, args.window, False)
+        save(fig, os.path.join(plots, f"{task}_test_loss.png"), stops)
+        fig, stops = curve_figure(runs, task, args.window, True)
+        save(fig, os.path.join(plots, f"{task}_loss_vs_time.png"), stops)
     save(speed_figure(runs, tasks), os.path.join(plots, "speed_vs_error.png"))
-    save(update_norm_figure(runs, tasks), os.path.join(plots, "update_norm.png"))
+    fig, stops = update_norm_figure(runs, tasks)
+    save(fig, os.path.join(plots, "update_norm.png"), stops)
 
 
 if __name__ == "__main__":

@@ -73,3 +73,28 @@ TEST_CASE("run_beside: the foreground's exception comes back after the items hav
     CHECK(plain == 1);
   }
 }
+
+TEST_CASE("runs of different sizes in quick succession run every item exactly once",
+          "[core][parallel]") {
+  // A worker that has just finished the last item of a run may look at the pool again while
+  // the caller is already writing the next run's size: it must never claim an item of the old
+  // run with the new run's size or task (that ran an item twice, or let a run return before
+  // its items were done). Small runs followed by larger ones make that window as wide as it
+  // gets; ThreadSanitizer sees the race whether or not the count goes wrong.
+  ThreadPool pool(2);
+  std::vector<int> small(1), large(5);
+  auto count_small = [&](Index i, Index) { ++small[static_cast<std::size_t>(i)]; };
+  auto count_large = [&](Index i, Index) { ++large[static_cast<std::size_t>(i)]; };
+  for (int round = 0; round < 20000; ++round) {
+    small.assign(small.size(), 0);
+    large.assign(large.size(), 0);
+    pool.run_beside(1, count_small, [] {});
+    pool.run(5, count_large);
+    // Each item writes only its own counter; `run` returns after all of them.
+    bool once = small[0] == 1;
+    for (const int c : large) once = once && c == 1;
+    if (!once) FAIL("round " << round << ": an item ran " << (small[0] == 1 ? "" : "in the "
+                               "small run ") << "other than exactly once");
+  }
+  SUCCEED("20000 rounds");
+}

@@ -103,13 +103,23 @@ private:
   static constexpr std::uint64_t kIndexMask = (std::uint64_t{1} << kIndexBits) - 1;
 
   /// Publishes the items [0, count) of `task` as a new run.
+  ///
+  /// The finished run is closed first (a generation of its own whose next item is past any
+  /// count). A worker that has just done its last item may still hold the old state and be
+  /// about to read the run's size: without the close it could read the new size, still claim
+  /// an item with the old state, and run the new task before it is published (an item run
+  /// twice, a run counted done too early). With it, the old state is gone before any new
+  /// parameter is written, and a worker that reads one (acquire, against these release
+  /// stores) is ordered after the close, so its claim fails.
   template <class Task>
   void start(Index count, Task& task) {
+    const std::uint64_t closed = (state_.load(std::memory_order_relaxed) >> kIndexBits) + 1;
+    state_.store((closed << kIndexBits) | kIndexMask, std::memory_order_seq_cst);
     call_.store([](void* context, Index item, Index worker) {
       (*static_cast<Task*>(context))(item, worker);
-    }, std::memory_order_relaxed);
-    context_.store(&task, std::memory_order_relaxed);
-    count_.store(count, std::memory_order_relaxed);
+    }, std::memory_order_release);
+    context_.store(&task, std::memory_order_release);
+    count_.store(count, std::memory_order_release);
     done_.store(0, std::memory_order_relaxed);
     error_ = nullptr;
     publish();
@@ -158,10 +168,11 @@ private:
     for (;;) {
       const auto item = static_cast<Index>(seen & kIndexMask);
       // Read before claiming: a successful claim proves the run had not ended, so these
-      // belong to it (the release sequence of `publish` orders them).
-      const auto count = count_.load(std::memory_order_relaxed);
-      const auto call = call_.load(std::memory_order_relaxed);
-      void* const context = context_.load(std::memory_order_relaxed);
+      // belong to it (`publish` orders them before the state; `start` closes the old state
+      // before it overwrites them).
+      const auto count = count_.load(std::memory_order_acquire);
+      const auto call = call_.load(std::memory_order_acquire);
+      void* const context = context_.load(std::memory_order_acquire);
       if (item >= count) return;
       if (!state_.compare_exchange_weak(seen, seen + 1, std::memory_order_acq_rel,
                                         std::memory_order_acquire))

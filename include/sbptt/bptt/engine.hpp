@@ -529,7 +529,6 @@ private:
   Objective<Loss> objective_;
   Index steps_;
   Index threads_ = 1;
-  std::unique_ptr<detail::ThreadPool> pool_;
   std::unique_ptr<Handoff> handoff_;  ///< with a pool and a SplitBackwardController
   Packed packed_;
 
@@ -540,6 +539,8 @@ private:
   Sweep sweeps_[2];
   std::vector<EvalChunk> chunks_;
   Vector<Scalar> eval_losses_;
+  // Last, so that it is destroyed first: its workers stop before the buffers they work on go.
+  std::unique_ptr<detail::ThreadPool> pool_;
 };
 
 }  // namespace sbptt

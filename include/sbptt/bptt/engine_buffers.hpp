@@ -6,6 +6,7 @@
 #include <cmath>
 #include <mutex>
 #include <optional>
+#include <thread>
 #include <vector>
 
 #include "sbptt/bptt/diagnostics.hpp"
@@ -62,24 +63,37 @@ struct ParamHandoff {
     abandoned.store(false, std::memory_order_relaxed);
   }
 
-  /// Adds the recorded slots not yet added if the lock is free; `add(slot)` adds one.
+  /// Adds the recorded slots not yet added if the lock is free; `add(slot)` adds one. False
+  /// if another thread held the lock.
   template <class Add>
-  void try_adding(Add& add) {
+  bool try_adding(Add& add) {
     const std::unique_lock<std::mutex> guard(lock, std::try_to_lock);
-    if (!guard.owns_lock()) return;
+    if (!guard.owns_lock()) return false;
     for (Index k = added.load(std::memory_order_relaxed);
          k < recorded.load(std::memory_order_acquire); ++k) {
       add(static_cast<std::size_t>(k % ring_size));
       added.store(k + 1, std::memory_order_release);
+    }
+    return true;
+  }
+
+  /// One turn of a wait: `pause` at first, then yield the core, because on a machine with
+  /// fewer free cores than threads the thread waited for may have been preempted.
+  static void back_off(int& turns) {
+    if (++turns < 2048) {
+      cpu_relax();
+    } else {
+      std::this_thread::yield();
     }
   }
 
   /// Returns once at least `count` recordings are added, adding them itself when it can.
   template <class Add>
   void wait_added(Index count, Add& add) {
+    int turns = 0;
     while (added.load(std::memory_order_acquire) < count) {
       try_adding(add);
-      cpu_relax();
+      back_off(turns);
     }
   }
 
@@ -94,13 +108,14 @@ struct ParamHandoff {
   /// (or the sweep gave up).
   template <class Add>
   void keep_adding(Index total, Add& add) {
+    int turns = 0;
     while (!abandoned.load(std::memory_order_acquire)) {
       const Index done = added.load(std::memory_order_acquire);
       if (done == total) return;
-      if (recorded.load(std::memory_order_acquire) > done) {
-        try_adding(add);
+      if (recorded.load(std::memory_order_acquire) > done && try_adding(add)) {
+        turns = 0;
       } else {
-        cpu_relax();
+        back_off(turns);
       }
     }
   }

@@ -49,6 +49,9 @@ public:
 
   ~ThreadPool() {
     stop_.store(true, std::memory_order_relaxed);
+    // The wake-up is a new generation: with the last run's size left in place, a worker still
+    // in `drain` would claim its items again and call a task whose captures may be gone.
+    count_.store(0, std::memory_order_release);
     publish();
     for (auto& worker : workers_) worker.join();
   }

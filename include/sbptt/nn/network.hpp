@@ -304,7 +304,10 @@ private:
   }
 
   /// Δ_l of every layer into `deltas` (grown, never shrunk) and, when `dx` is set, dX.
-  void inputs_packed(const Workspace& ws, const Matrix<Scalar>& dy, Matrix<Scalar>* dx,
+  /// Never inlined, like `params_from`: `backward` and the split halves must run the same
+  /// machine code, or the compiler's contraction of a·b + c into FMA could differ between
+  /// the inlined copies and the engine's results between thread counts.
+  [[gnu::noinline]] void inputs_packed(const Workspace& ws, const Matrix<Scalar>& dy, Matrix<Scalar>* dx,
                      const detail::PackedLayers<Scalar>& packed,
                      std::vector<Vector<Scalar>>& deltas) const {
     check_workspace(ws);
@@ -357,7 +360,7 @@ private:
   }
 
   /// grad += the parameter products of every layer from the recorded Δ_l.
-  void params_from(const Workspace& ws, const std::vector<Vector<Scalar>>& deltas,
+  [[gnu::noinline]] void params_from(const Workspace& ws, const std::vector<Vector<Scalar>>& deltas,
                    Vector<Scalar>& grad) const {
     for (std::size_t l = 0; l < layers_.size(); ++l) {
       Scalar* g = grad.data() + offsets_[l];

@@ -46,8 +46,9 @@ struct SweepBuffers {
 /// finds the lock free while it waits for a slot, and at the end. So the gradient is summed in
 /// one fixed order, the same as on one thread, and the sweep never waits for a thread that may
 /// not have started (the adder runs beside it, `ThreadPool::run_beside`, and stops once every
-/// slot is added or the sweep has thrown). Nobody sleeps on the lock (`try_lock`, then `pause`): a step takes a
-/// few microseconds, less than waking a sleeping thread.
+/// slot is added or the sweep has thrown). Nobody sleeps on the lock (`try_lock`, then
+/// `pause`, and `yield` once a wait has lasted 2048 turns): a step takes a few microseconds,
+/// less than waking a sleeping thread.
 template <class Adjoints>
 struct ParamHandoff {
   static constexpr Index ring_size = 16;

@@ -305,9 +305,10 @@ private:
 
   /// Adds the parameter products recorded in `slot` of the hand-off to `gradient`.
   void add_params(Handoff& h, std::size_t slot, Vector<Scalar>& gradient) const {
-    if constexpr (SplitBackwardController<Ctrl>)
-      controller_.add_param_gradient(trajectory_.workspaces[static_cast<std::size_t>(h.steps[slot])],
-                                     h.ring[slot], gradient);
+    if constexpr (SplitBackwardController<Ctrl>) {
+      const auto step = static_cast<std::size_t>(h.steps[slot]);
+      controller_.add_param_gradient(trajectory_.workspaces[step], h.ring[slot], gradient);
+    }
   }
 
   void pack_controller() {

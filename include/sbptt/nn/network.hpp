@@ -307,9 +307,10 @@ private:
   /// Never inlined, like `params_from`: `backward` and the split halves must run the same
   /// machine code, or the compiler's contraction of a·b + c into FMA could differ between
   /// the inlined copies and the engine's results between thread counts.
-  [[gnu::noinline]] void inputs_packed(const Workspace& ws, const Matrix<Scalar>& dy, Matrix<Scalar>* dx,
-                     const detail::PackedLayers<Scalar>& packed,
-                     std::vector<Vector<Scalar>>& deltas) const {
+  [[gnu::noinline]] void inputs_packed(const Workspace& ws, const Matrix<Scalar>& dy,
+                                       Matrix<Scalar>* dx,
+                                       const detail::PackedLayers<Scalar>& packed,
+                                       std::vector<Vector<Scalar>>& deltas) const {
     check_workspace(ws);
     detail::require(dy.rows() == output_dim() && dy.cols() == ws.batch_,
                     "Network::backward: dY is ", dy.rows(), " × ", dy.cols(), ", expected ",
@@ -360,8 +361,9 @@ private:
   }
 
   /// grad += the parameter products of every layer from the recorded Δ_l.
-  [[gnu::noinline]] void params_from(const Workspace& ws, const std::vector<Vector<Scalar>>& deltas,
-                   Vector<Scalar>& grad) const {
+  [[gnu::noinline]] void params_from(const Workspace& ws,
+                                     const std::vector<Vector<Scalar>>& deltas,
+                                     Vector<Scalar>& grad) const {
     for (std::size_t l = 0; l < layers_.size(); ++l) {
       Scalar* g = grad.data() + offsets_[l];
       std::visit(

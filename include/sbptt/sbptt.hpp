@@ -23,6 +23,7 @@
 #include "sbptt/nn/activation.hpp"
 #include "sbptt/nn/conv1d.hpp"
 #include "sbptt/nn/dense.hpp"
+#include "sbptt/nn/layer.hpp"
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"
 #include "sbptt/nn/parameters_io.hpp"

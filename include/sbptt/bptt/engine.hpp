@@ -44,6 +44,7 @@
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/bptt/engine_buffers.hpp"
+#include "sbptt/bptt/packed_controller.hpp"
 #include "sbptt/core/parallel.hpp"
 
 namespace sbptt {
@@ -160,10 +161,11 @@ public:
     forward_non_finite_.reset();
     trajectory_.states[0] = initial_states;
     note_non_finite(Quantity::State, 0, trajectory_.states[0]);
-    pack_controller();
+    packed_controller_.pack();
     for (Index n = 0; n < steps_; ++n) {
       const auto i = static_cast<std::size_t>(n);
-      controller_forward(trajectory_.states[i], trajectory_.controls[i], trajectory_.workspaces[i]);
+      packed_controller_.forward(trajectory_.states[i], trajectory_.controls[i],
+                                 trajectory_.workspaces[i]);
       note_non_finite(Quantity::Control, n, trajectory_.controls[i]);
       for_samples(batch, forward_scratch_, true, fork_[0], [&](Index b, Scratch& t) {
         t.x = trajectory_.states[i].col(b);
@@ -188,7 +190,7 @@ public:
     if (static_cast<Index>(chunks_.size()) < chunks)
       chunks_.resize(static_cast<std::size_t>(chunks));
     eval_losses_.resize(batch);
-    pack_controller();
+    packed_controller_.pack();
     auto task = [&](Index k, Index) {
       const Index first = k * kEvaluateChunk;
       evaluate_chunk(initial_states.middleCols(first, std::min(kEvaluateChunk, batch - first)),
@@ -280,56 +282,13 @@ private:
   using Sweep = detail::SweepBuffers<Scalar, Scratch>;
   using EvalChunk = detail::EvaluationChunk<Scalar, typename Ctrl::Workspace, Scratch>;
 
-  /// `Ctrl::PackedWeights` for a `PackingController`, else nothing.
-  struct NothingPacked {};
-  template <class C, bool = PackingController<C>>
-  struct PackedOf {
-    using Type = NothingPacked;
-  };
-  template <class C>
-  struct PackedOf<C, true> {
-    using Type = typename C::PackedWeights;
-  };
-  using Packed = typename PackedOf<Ctrl>::Type;
-
-  /// `ParamHandoff` of `Ctrl::LayerAdjoints` for a `SplitBackwardController`, else nothing.
-  template <class C, bool = SplitBackwardController<C>>
-  struct HandoffOf {
-    using Type = NothingPacked;
-  };
-  template <class C>
-  struct HandoffOf<C, true> {
-    using Type = detail::ParamHandoff<typename C::LayerAdjoints>;
-  };
-  using Handoff = typename HandoffOf<Ctrl>::Type;
+  using Handoff = typename detail::ParamHandoffOf<Ctrl>::Type;
 
   /// Adds the parameter products recorded in `slot` of the hand-off to `gradient`.
   void add_params(Handoff& h, std::size_t slot, Vector<Scalar>& gradient) const {
     if constexpr (SplitBackwardController<Ctrl>) {
       const auto step = static_cast<std::size_t>(h.steps[slot]);
       controller_.add_param_gradient(trajectory_.workspaces[step], h.ring[slot], gradient);
-    }
-  }
-
-  void pack_controller() {
-    if constexpr (PackingController<Ctrl>) controller_.pack(packed_);
-  }
-
-  void controller_forward(const Matrix<Scalar>& x, Matrix<Scalar>& y,
-                          typename Ctrl::Workspace& ws) const {
-    if constexpr (PackingController<Ctrl>) {
-      controller_.forward(x, y, ws, packed_);
-    } else {
-      controller_.forward(x, y, ws);
-    }
-  }
-
-  void controller_backward(const typename Ctrl::Workspace& ws, const Matrix<Scalar>& dy,
-                           Vector<Scalar>& grad, Matrix<Scalar>* dx) const {
-    if constexpr (PackingController<Ctrl>) {
-      controller_.backward(ws, dy, grad, dx, packed_);
-    } else {
-      controller_.backward(ws, dy, grad, dx);
     }
   }
 
@@ -421,14 +380,14 @@ private:
         if (handoff != nullptr) {
           const Index k = steps_ - 1 - n;  // recordings so far
           const std::size_t slot = handoff->slot_for(k, add);
-          controller_.backward_inputs(trajectory_.workspaces[i], s.mu, input_adjoint, packed_,
-                                      handoff->ring[slot]);
+          packed_controller_.backward_inputs(trajectory_.workspaces[i], s.mu, input_adjoint,
+                                 handoff->ring[slot]);
           handoff->steps[slot] = n;
           handoff->recorded.store(k + 1, std::memory_order_release);
         }
       }
       if (handoff == nullptr)
-        controller_backward(trajectory_.workspaces[i], s.mu, gradient, input_adjoint);
+        packed_controller_.backward(trajectory_.workspaces[i], s.mu, gradient, input_adjoint);
       if (physics) {
         s.lambda.swap(s.propagated);
         if (network) s.lambda += s.input_adjoint;
@@ -461,7 +420,7 @@ private:
     auto losses = eval_losses_.segment(first, batch);
     losses.setZero();
     for (Index n = 0; n < steps_; ++n) {
-      controller_forward(c.state, c.control, c.workspace);
+      packed_controller_.forward(c.state, c.control, c.workspace);
       c.note(Quantity::Control, n, 2 * n, c.control, first);
       for (Index b = 0; b < batch; ++b) {
         t.x = c.state.col(b);
@@ -531,7 +490,7 @@ private:
   Index steps_;
   Index threads_ = 1;
   std::unique_ptr<Handoff> handoff_;  ///< with a pool and a SplitBackwardController
-  Packed packed_;
+  detail::PackedController<Ctrl> packed_controller_{controller_};
 
   Trajectory<Scalar, typename Ctrl::Workspace> trajectory_;
   std::optional<NonFinite> forward_non_finite_;

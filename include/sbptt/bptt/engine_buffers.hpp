@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "sbptt/bptt/diagnostics.hpp"
+#include "sbptt/bptt/packed_controller.hpp"
 #include "sbptt/core/non_finite.hpp"
 #include "sbptt/core/parallel.hpp"
 #include "sbptt/core/types.hpp"
@@ -120,6 +121,16 @@ struct ParamHandoff {
       }
     }
   }
+};
+
+/// `ParamHandoff` of `C::LayerAdjoints` for a `SplitBackwardController`, else `Absent`.
+template <class C, bool = SplitBackwardController<C>>
+struct ParamHandoffOf {
+  using Type = Absent;
+};
+template <class C>
+struct ParamHandoffOf<C, true> {
+  using Type = ParamHandoff<typename C::LayerAdjoints>;
 };
 
 /// One independently rolled-out chunk of `Engine::evaluate`: its states, controls, controller

@@ -28,37 +28,10 @@
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/nn/activation.hpp"
-#include "sbptt/nn/conv1d.hpp"
-#include "sbptt/nn/dense.hpp"
+#include "sbptt/nn/layer.hpp"
 #include "sbptt/nn/packed_product.hpp"
 
 namespace sbptt {
-
-/// One layer of a `Network`.
-using Layer = std::variant<Dense, Conv1d>;
-
-/// Size of the layer's input column (one sample).
-[[nodiscard]] inline Index layer_input_dim(const Layer& layer) {
-  return std::visit([](const auto& l) { return l.input_dim(); }, layer);
-}
-/// Size of the layer's output column (one sample).
-[[nodiscard]] inline Index layer_output_dim(const Layer& layer) {
-  return std::visit([](const auto& l) { return l.output_dim(); }, layer);
-}
-/// Number of entries of the layer's slice of the flat parameter vector.
-[[nodiscard]] inline Index layer_num_params(const Layer& layer) {
-  return std::visit([](const auto& l) { return l.num_params(); }, layer);
-}
-/// Number of weight (kernel) entries; the bias follows them in the layer's slice.
-[[nodiscard]] inline Index layer_weight_count(const Layer& layer) {
-  return std::visit([](const auto& l) { return l.weight_count(); }, layer);
-}
-[[nodiscard]] inline Activation layer_activation(const Layer& layer) {
-  return std::visit([](const auto& l) { return l.activation; }, layer);
-}
-[[nodiscard]] inline std::string layer_describe(const Layer& layer) {
-  return std::visit([](const auto& l) { return l.describe(); }, layer);
-}
 
 namespace detail {
 
@@ -235,20 +208,14 @@ public:
     check_params_size();
     auto& packed = detail::packed_scratch<Scalar>();
     pack_layers(packed, false, true);
-    check_grad_size(grad);
-    auto& deltas = detail::network_scratch<Scalar>().deltas;
-    inputs_packed(ws, dy, dx, packed, deltas);
-    params_from(ws, deltas, grad);
+    backward_packed(ws, dy, grad, dx, packed);
   }
 
   /// The same with θ as packed by `pack` (which must have seen the current θ).
   void backward(const Workspace& ws, const Matrix<Scalar>& dy, Vector<Scalar>& grad,
                 Matrix<Scalar>* dx, const PackedWeights& packed) const {
     check_packed(packed.layers_, true, "backward");
-    check_grad_size(grad);
-    auto& deltas = detail::network_scratch<Scalar>().deltas;
-    inputs_packed(ws, dy, dx, packed.layers_, deltas);
-    params_from(ws, deltas, grad);
+    backward_packed(ws, dy, grad, dx, packed.layers_);
   }
 
   /// The first half of `backward`: sets dX as `backward` does and records every layer's Δ in
@@ -301,6 +268,15 @@ private:
           layers_[l]);
     }
     y = ws.outputs_.back();
+  }
+
+  /// Both halves, the layer adjoints kept in this thread's scratch.
+  void backward_packed(const Workspace& ws, const Matrix<Scalar>& dy, Vector<Scalar>& grad,
+                       Matrix<Scalar>* dx, const detail::PackedLayers<Scalar>& packed) const {
+    check_grad_size(grad);
+    auto& deltas = detail::network_scratch<Scalar>().deltas;
+    inputs_packed(ws, dy, dx, packed, deltas);
+    params_from(ws, deltas, grad);
   }
 
   /// Δ_l of every layer into `deltas` (grown, never shrunk) and, when `dx` is set, dX.

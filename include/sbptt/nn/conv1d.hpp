@@ -20,6 +20,7 @@
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/nn/activation.hpp"
+#include "sbptt/nn/outer_product.hpp"
 #include "sbptt/nn/packed_product.hpp"
 
 namespace sbptt {
@@ -108,11 +109,10 @@ struct Conv1d {
   /// \param grad     this layer's slice of the gradient, num_params() entries; accumulated
   template <class Scalar>
   void param_vjp(const Matrix<Scalar>& columns, const Scalar* delta, Scalar* grad) const {
-    const detail::ConstMatrixMap<Scalar> d(delta, out_channels, columns.cols());
-    detail::RowMajorMap<Scalar> dw(grad, out_channels, window_size());
+    add_outer_products(grad, out_channels, window_size(), delta, columns.data(), columns.cols());
     Eigen::Map<Vector<Scalar>> db(grad + weight_count(), out_channels);
-    dw.noalias() += d * columns.transpose();
-    db.noalias() += d.rowwise().sum();
+    db.noalias() +=
+        detail::ConstMatrixMap<Scalar>(delta, out_channels, columns.cols()).rowwise().sum();
   }
 
   /// Writes the input VJP ∂L/∂x, (L·C_in) × B position-major, into `dx`.

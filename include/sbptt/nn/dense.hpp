@@ -4,12 +4,13 @@
 /// Parameter layout inside the flat vector (docs/formats.md, PyTorch `Linear` order): the weight W
 /// (outputs × inputs) row-major, then the bias b (outputs). The layer reads and writes its slice
 /// through `Eigen::Map`s; the products with W and Wᵀ use copies packed once per parameter
-/// update (packed_product.hpp).
+/// update (packed_product.hpp), the product for dW a register-blocked kernel (outer_product.hpp).
 #include <string>
 
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/nn/activation.hpp"
+#include "sbptt/nn/outer_product.hpp"
 #include "sbptt/nn/packed_product.hpp"
 
 namespace sbptt {
@@ -59,13 +60,10 @@ struct Dense {
   /// \param grad   this layer's slice of the gradient, num_params() entries; accumulated
   template <class Scalar>
   void param_vjp(const Matrix<Scalar>& x, const Scalar* delta, Scalar* grad) const {
-    const detail::ConstMatrixMap<Scalar> d(delta, outputs, x.cols());
-    detail::RowMajorMap<Scalar> dw(grad, outputs, inputs);
+    // The batch sum is the inner dimension of this product (outer_product.hpp).
+    add_outer_products(grad, outputs, inputs, delta, x.data(), x.cols());
     Eigen::Map<Vector<Scalar>> db(grad + weight_count(), outputs);
-    // The batch sum is the inner dimension of this product: one GEMM, no per-sample loop. (The
-    // packed kernel loses here: it must load and store dW around an inner dimension of B.)
-    dw.noalias() += d * x.transpose();
-    db.noalias() += d.rowwise().sum();
+    db.noalias() += detail::ConstMatrixMap<Scalar>(delta, outputs, x.cols()).rowwise().sum();
   }
 
   /// Writes the input VJP ∂L/∂x = Wᵀ Δ, n_in × B (column-major), into `dx`.

@@ -1,0 +1,166 @@
+#pragma once
+/// \file dW += D Xᵀ: the parameter product of a layer, summed over the batch.
+///
+/// A dense layer's parameter VJP (and a convolution's, over its im2col matrix) adds the outer
+/// product of each sample's pre-activation adjoint d_k and input x_k to the row-major weight
+/// gradient: dW += Σ_k d_k x_kᵀ. At the paper's batch of 8 the inner dimension is 8, and a
+/// general matrix product packs both operands and then loads and stores all of dW around
+/// those 8 multiply-adds: Eigen runs the 100 × 100 × 8 product at about 120 GFLOP/s on an
+/// AVX-512 core that peaks near 200 (docs/benchmarks.md). The kernel below keeps a block of X
+/// (3 column panels × 8 samples) in registers and streams the rows of dW past it, which runs
+/// at about 230.
+///
+/// It needs 32 vector registers and masked loads and stores for the rows' last panel, so it is
+/// compiled for AVX-512 only, and used when a row of dW fills at least one register. Other
+/// builds, and narrower rows, use Eigen's product (with AVX2's 16 registers the same scheme,
+/// holding 8 × 1 panels, measured slower than Eigen).
+///
+/// In the kernel every entry is ((dW_ij + d_i0 x_j0) + d_i1 x_j1) + … in sample order with
+/// fused multiply-adds, whatever the shapes; Eigen's product has an order of its own. Either
+/// way the order depends only on the shapes, so results do not depend on the thread count.
+#include <type_traits>
+#include <utility>
+
+#include <Eigen/Core>
+
+#include "sbptt/core/types.hpp"
+
+#if defined(EIGEN_VECTORIZE_AVX512)
+#include <immintrin.h>
+#endif
+
+namespace sbptt {
+namespace detail {
+
+#if defined(EIGEN_VECTORIZE_AVX512)
+/// The register-blocked kernel of the file comment; `Scalar` is float or double.
+template <class Scalar>
+class OuterProductKernel {
+public:
+  using Packet = typename Eigen::internal::packet_traits<Scalar>::type;
+  static constexpr Index kLanes = Eigen::internal::unpacket_traits<Packet>::size;
+
+  /// dW (rows × cols, row-major) += D (rows × n, column-major) Xᵀ (X: cols × n, column-major).
+  static void run(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
+                  Index n) {
+    Index k = 0;
+    for (; k + kSamples <= n; k += kSamples)
+      samples<kSamples>(dw, rows, cols, d + k * rows, x + k * cols);
+    last_samples(n - k, dw, rows, cols, d + k * rows, x + k * cols,
+                 std::make_index_sequence<kSamples - 1>{});
+  }
+
+private:
+  // X's block (kPanels × kSamples registers), kRows × kPanels accumulators and a broadcast:
+  // 24 + 6 + 1 of the 32 registers.
+  static constexpr int kSamples = 8;
+  static constexpr int kPanels = 3;
+  static constexpr int kRows = 2;
+
+  /// The 1 … kSamples − 1 samples after the last full group, by a kernel of that width.
+  template <std::size_t... Counts>
+  static void last_samples(Index count, Scalar* dw, Index rows, Index cols, const Scalar* d,
+                           const Scalar* x, std::index_sequence<Counts...> /*widths*/) {
+    ((count == static_cast<Index>(Counts) + 1
+          ? samples<static_cast<int>(Counts) + 1>(dw, rows, cols, d, x)
+          : void()),
+     ...);
+  }
+
+  /// One pass over dW adding `Samples` samples' outer products.
+  template <int Samples>
+  static void samples(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x) {
+    const Index full_panels = cols / kLanes;
+    Index p = 0;
+    for (; p + kPanels <= full_panels; p += kPanels)
+      columns<Samples, kPanels, false>(dw, rows, cols, d, x, p * kLanes);
+    for (; p < full_panels; ++p) columns<Samples, 1, false>(dw, rows, cols, d, x, p * kLanes);
+    if (full_panels * kLanes < cols)
+      columns<Samples, 1, true>(dw, rows, cols, d, x, full_panels * kLanes);
+  }
+
+  /// Columns first … first + Panels·kLanes − 1 of every row (up to cols when `Masked`).
+  template <int Samples, int Panels, bool Masked>
+  static void columns(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
+                      Index first) {
+    const Index lanes = Masked ? cols - first : kLanes;
+    Packet xs[Panels][Samples];
+    for (int p = 0; p < Panels; ++p)
+      for (int k = 0; k < Samples; ++k)
+        xs[p][k] = load<Masked>(x + k * cols + first + p * kLanes, lanes);
+    Index i = 0;
+    for (; i + kRows <= rows; i += kRows)
+      update_rows<Samples, Panels, kRows, Masked>(dw + i * cols + first, cols, d + i, rows, xs,
+                                                  lanes);
+    for (; i < rows; ++i)
+      update_rows<Samples, Panels, 1, Masked>(dw + i * cols + first, cols, d + i, rows, xs,
+                                              lanes);
+  }
+
+  template <int Samples, int Panels, int Rows, bool Masked>
+  EIGEN_ALWAYS_INLINE static void update_rows(Scalar* dw, Index ldw, const Scalar* d, Index ldd,
+                                              const Packet (&xs)[Panels][Samples],
+                                              Index lanes) {
+    Packet acc[Rows][Panels];
+    for (int r = 0; r < Rows; ++r)
+      for (int p = 0; p < Panels; ++p) acc[r][p] = load<Masked>(dw + r * ldw + p * kLanes, lanes);
+    for (int k = 0; k < Samples; ++k)
+      for (int r = 0; r < Rows; ++r) {
+        const Packet dk = Eigen::internal::pset1<Packet>(d[r + k * ldd]);
+        for (int p = 0; p < Panels; ++p)
+          acc[r][p] = Eigen::internal::pmadd(xs[p][k], dk, acc[r][p]);
+      }
+    for (int r = 0; r < Rows; ++r)
+      for (int p = 0; p < Panels; ++p) store<Masked>(dw + r * ldw + p * kLanes, acc[r][p], lanes);
+  }
+
+  template <bool Masked>
+  EIGEN_ALWAYS_INLINE static Packet load(const Scalar* from, Index lanes) {
+    if constexpr (!Masked) {
+      return Eigen::internal::ploadu<Packet>(from);
+    } else if constexpr (std::is_same_v<Scalar, float>) {
+      return _mm512_maskz_loadu_ps(first_lanes<__mmask16>(lanes), from);
+    } else {
+      return _mm512_maskz_loadu_pd(first_lanes<__mmask8>(lanes), from);
+    }
+  }
+
+  template <bool Masked>
+  EIGEN_ALWAYS_INLINE static void store(Scalar* to, const Packet& value, Index lanes) {
+    if constexpr (!Masked) {
+      Eigen::internal::pstoreu(to, value);
+    } else if constexpr (std::is_same_v<Scalar, float>) {
+      _mm512_mask_storeu_ps(to, first_lanes<__mmask16>(lanes), value);
+    } else {
+      _mm512_mask_storeu_pd(to, first_lanes<__mmask8>(lanes), value);
+    }
+  }
+
+  template <class Mask>
+  static Mask first_lanes(Index lanes) {
+    return static_cast<Mask>((1U << static_cast<unsigned>(lanes)) - 1U);
+  }
+};
+#endif
+
+}  // namespace detail
+
+/// dW += D Xᵀ. \param dw  rows × cols, row-major (a weight gradient), accumulated
+/// \param d  rows × n, column-major \param x  cols × n, column-major; n is the batch sum.
+template <class Scalar>
+void add_outer_products(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
+                        Index n) {
+#if defined(EIGEN_VECTORIZE_AVX512)
+  if constexpr (std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>) {
+    if (cols >= detail::OuterProductKernel<Scalar>::kLanes) {
+      detail::OuterProductKernel<Scalar>::run(dw, rows, cols, d, x, n);
+      return;
+    }
+  }
+#endif
+  Eigen::Map<RowMajorMatrix<Scalar>>(dw, rows, cols).noalias() +=
+      Eigen::Map<const Matrix<Scalar>>(d, rows, n) *
+      Eigen::Map<const Matrix<Scalar>>(x, cols, n).transpose();
+}
+
+}  // namespace sbptt

@@ -1,0 +1,57 @@
+// dW += D Xᵀ, the layers' parameter product: against a long-double product with the standard
+// floating-point error bound, over shapes that reach every branch of the AVX-512 kernel (full
+// and masked column panels, row and sample remainders), and nothing written outside dW.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <limits>
+#include <tuple>
+
+#include "support/test_data.hpp"
+#include "sbptt/nn/outer_product.hpp"
+
+using sbptt::Index;
+using sbptt::Matrix;
+using sbptt::testing::random_matrix;
+
+TEMPLATE_TEST_CASE("dW += D X^T within the rounding bound, nothing written outside dW",
+                   "[nn][outer]", float, double) {
+  using S = TestType;
+  const S eps = std::numeric_limits<S>::epsilon();
+  constexpr Index kGuard = 64;  // sentinels before and after dW: a masked store must stop at its end
+  constexpr S kSentinel = S(-7.5);
+  std::uint64_t seed = 100;
+  // cols: below one register, one register of either type, 3 full float panels and a masked
+  // one, 100 (6 float panels + 4), the convolution's 180; rows: 1, 2, odd, the paper's 100.
+  for (const auto& [rows, cols] :
+       {std::pair<Index, Index>{1, 100}, {2, 100}, {3, 10}, {5, 8}, {7, 16}, {100, 100},
+        {100, 24}, {60, 180}, {17, 53}, {33, 64}}) {
+    for (const Index n : {1, 3, 7, 8, 9, 16, 21, 56}) {
+      const Matrix<S> d = random_matrix<S>(rows, n, ++seed, 1.0);
+      const Matrix<S> x = random_matrix<S>(cols, n, ++seed, 1.0);
+      const Matrix<S> start = random_matrix<S>(rows * cols, 1, ++seed, 1.0);
+      sbptt::Vector<S> buffer = sbptt::Vector<S>::Constant(rows * cols + 2 * kGuard, kSentinel);
+      buffer.segment(kGuard, rows * cols) = start;
+      sbptt::add_outer_products(buffer.data() + kGuard, rows, cols, d.data(), x.data(), n);
+      INFO("rows " << rows << " cols " << cols << " n " << n);
+      REQUIRE((buffer.head(kGuard).array() == kSentinel).all());
+      REQUIRE((buffer.tail(kGuard).array() == kSentinel).all());
+      for (Index i = 0; i < rows; ++i) {
+        for (Index j = 0; j < cols; ++j) {
+          long double exact = start(i * cols + j), magnitude = std::abs(exact);
+          for (Index k = 0; k < n; ++k) {
+            const long double term = static_cast<long double>(d(i, k)) * x(j, k);
+            exact += term;
+            magnitude += std::abs(term);
+          }
+          // |fl(Σ) − Σ| ≤ γ_(n+1) Σ|terms| for any order of n fused or unfused additions.
+          const long double bound =
+              static_cast<long double>(n + 1) * static_cast<long double>(eps) * magnitude * 1.01L;
+          INFO("entry (" << i << ", " << j << ")");
+          REQUIRE(std::abs(static_cast<long double>(buffer(kGuard + i * cols + j)) - exact) <=
+                  bound);
+        }
+      }
+    }
+  }
+}

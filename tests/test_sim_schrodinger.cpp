@@ -474,3 +474,21 @@ TEST_CASE("schrodinger: bad input is rejected with a message", "[sim][quantum]")
   CHECK_THROWS_WITH(sim.step(wrong, u, out), Catch::Contains("expected 12"));
   CHECK_THROWS_AS(sbptt::quantum_objective(sim, 7), sbptt::InvalidArgument);
 }
+
+TEST_CASE("tridiagonal: the pivots' reciprocal against complex division, tiny to huge pivots",
+          "[sim][quantum]") {
+  // In float |z|² underflows below |z| ≈ 1e-19 and overflows above 1e19: there the inline
+  // conj(z)/|z|² must give way to the library's scaled division.
+  for (const double scale : {1e-30, 1e-20, 1e-3, 1.0, 7.5, 1e3, 1e18, 1e25}) {
+    for (const auto& [re, im] : {std::pair{1.0, 0.0}, {0.0, -1.0}, {0.6, 0.8}, {-3.0, 2.0}}) {
+      const std::complex<float> z(static_cast<float>(re * scale), static_cast<float>(im * scale));
+      const std::complex<double> exact = 1.0 / std::complex<double>(z);
+      const std::complex<float> got = sbptt::detail::reciprocal(z);
+      INFO("z = " << z);
+      REQUIRE(std::isfinite(got.real()));
+      REQUIRE(std::isfinite(got.imag()));
+      CHECK(std::abs(std::complex<double>(got) - exact) <= 4e-7 * std::abs(exact));
+    }
+  }
+  CHECK(sbptt::detail::reciprocal(4.0) == 0.25);
+}

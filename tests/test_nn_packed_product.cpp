@@ -1,5 +1,6 @@
 // The packed product of the layers: against a long-double product with the standard
-// floating-point error bound, a sample's result independent of its batch, untouched padding,
+// floating-point error bound (short matrices, 1-3 rows, take the dot-product path), a sample's
+// result independent of its batch, untouched padding,
 // and Network's packed overloads equal to the plain ones bit for bit.
 #include <catch2/catch.hpp>
 
@@ -63,16 +64,19 @@ TEMPLATE_TEST_CASE("packed product equals a long-double product within the round
 TEMPLATE_TEST_CASE("a column's result does not depend on the batch around it", "[nn][packed]",
                    float, double) {
   using S = TestType;
-  const Matrix<S> w = random_matrix<S>(Index{100} * 37, 1, 5, 1.0);
-  const Matrix<S> b = random_matrix<S>(100, 1, 6, 1.0);
-  PackedMatrix<S> a;
-  a.pack(w.data(), 100, 37, false, b.data());
-  const Matrix<S> x = random_matrix<S>(37, 19, 7, 1.0);
-  Matrix<S> batch(100, 19), single(100, 1);
-  a.multiply(x.data(), 37, 19, batch.data(), 100);
-  for (Index j = 0; j < 19; ++j) {
-    a.multiply(x.col(j).data(), 37, 1, single.data(), 100);
-    REQUIRE((single.col(0).array() == batch.col(j).array()).all());
+  // 100 rows use the panels, 1 and 2 rows the short-matrix dot products (file comment).
+  for (const Index rows : {100, 2, 1}) {
+    const Matrix<S> w = random_matrix<S>(rows * 37, 1, 5, 1.0);
+    const Matrix<S> b = random_matrix<S>(rows, 1, 6, 1.0);
+    PackedMatrix<S> a;
+    a.pack(w.data(), rows, 37, false, b.data());
+    const Matrix<S> x = random_matrix<S>(37, 19, 7, 1.0);
+    Matrix<S> batch(rows, 19), single(rows, 1);
+    a.multiply(x.data(), 37, 19, batch.data(), rows);
+    for (Index j = 0; j < 19; ++j) {
+      a.multiply(x.col(j).data(), 37, 1, single.data(), rows);
+      REQUIRE((single.col(0).array() == batch.col(j).array()).all());
+    }
   }
 }
 
@@ -89,6 +93,13 @@ TEST_CASE("the product writes the real rows only, at the given leading dimension
   const Matrix<double> expected = wm * x.topRows(5);
   REQUIRE((y.topRows(19) - expected).cwiseAbs().maxCoeff() <= 1e-14);
   REQUIRE((y.bottomRows(4).array() == 7.25).all());
+  // A short matrix (1 row, dot products) at ldy 3: rows 1 and 2 of every column untouched.
+  PackedMatrix<double> row;
+  row.pack(w.data(), 1, 5, false);
+  Matrix<double> y1 = Matrix<double>::Constant(3, 11, 7.25);
+  row.multiply(x.data(), 9, 11, y1.data(), 3);
+  REQUIRE((y1.row(0) - wm.row(0) * x.topRows(5)).cwiseAbs().maxCoeff() <= 1e-14);
+  REQUIRE((y1.bottomRows(2).array() == 7.25).all());
 }
 
 // The engine calls the packed overloads, the finite-difference tests the plain ones: this ties

@@ -15,7 +15,14 @@
 /// multiply-adds where the instruction set has them),
 /// whatever the number of columns of X and whichever block a column falls in, so a sample's
 /// result does not depend on the batch it is evaluated with.
+///
+/// A short matrix (at most a quarter of a register's rows: a network's output layer, 1 row for
+/// the cart pole, 4 for guidance) would leave most lanes of its one panel idle. It is kept
+/// row-major instead, and each entry is a dot product along the row: lane-wise partial sums
+/// over whole registers of a_i· and x_·j, reduced by Eigen's `predux`, added to b_i, then the
+/// remaining cols mod kLanes terms in order. That order, too, depends on the shapes only.
 #include <algorithm>
+#include <cmath>
 
 #include <Eigen/Core>
 
@@ -41,13 +48,16 @@ public:
             const Scalar* bias = nullptr) {
     rows_ = transpose ? cols : rows;
     cols_ = transpose ? rows : cols;
+    by_rows_ = 4 * rows_ <= kLanes;
     const Index panels = (rows_ + kLanes - 1) / kLanes;
-    grow_and_zero(data_, panels * kLanes * cols_);
+    grow_and_zero(data_, by_rows_ ? rows_ * cols_ : panels * kLanes * cols_);
     grow_and_zero(bias_, panels * kLanes);
     for (Index i = 0; i < rows_; ++i) {
-      Scalar* panel = data_.data() + (i / kLanes) * kLanes * cols_ + i % kLanes;
+      Scalar* entry = by_rows_ ? data_.data() + i * cols_
+                               : data_.data() + (i / kLanes) * kLanes * cols_ + i % kLanes;
+      const Index step = by_rows_ ? 1 : kLanes;
       for (Index c = 0; c < cols_; ++c)
-        panel[c * kLanes] = transpose ? row_major[c * cols + i] : row_major[i * cols + c];
+        entry[c * step] = transpose ? row_major[c * cols + i] : row_major[i * cols + c];
     }
     if (bias != nullptr) bias_.head(rows_) = Eigen::Map<const Vector<Scalar>>(bias, rows_);
   }
@@ -55,6 +65,11 @@ public:
   /// Y = A X + b: `x` is cols() × n column-major with leading dimension `ldx`, `y` rows() × n
   /// column-major with leading dimension `ldy` (overwritten; it must not overlap `x`).
   void multiply(const Scalar* x, Index ldx, Index n, Scalar* y, Index ldy) const {
+    if (by_rows_) {
+      for (Index j = 0; j < n; ++j)
+        for (Index i = 0; i < rows_; ++i) y[i + j * ldy] = row_dot(i, x + j * ldx);
+      return;
+    }
     const Index panels = (rows_ + kLanes - 1) / kLanes;
     const Index full_panels = rows_ / kLanes;
     Index j = 0;
@@ -101,6 +116,33 @@ private:
     }
   }
 
+  /// b_i + a_i· x in the order of the file comment (short matrices).
+  [[nodiscard]] Scalar row_dot(Index i, const Scalar* x) const {
+    using Eigen::internal::pmadd;
+    using Eigen::internal::ploadu;
+    const Scalar* a = data_.data() + i * cols_;
+    const Index whole = cols_ / kLanes * kLanes;
+    Scalar sum = bias_(i);
+    if (whole > 0) {
+      Packet acc = Eigen::internal::pset1<Packet>(Scalar(0));
+      for (Index k = 0; k < whole; k += kLanes)
+        acc = pmadd(ploadu<Packet>(a + k), ploadu<Packet>(x + k), acc);
+      sum += Eigen::internal::predux(acc);
+    }
+    // std::fma where FMA exists: a plain a·x + sum may be contracted in one inlined copy of
+    // this loop and not in another, and a column would depend on its batch.
+    for (Index k = whole; k < cols_; ++k) sum = fused_multiply_add(a[k], x[k], sum);
+    return sum;
+  }
+
+  static Scalar fused_multiply_add(Scalar a, Scalar b, Scalar c) {
+#if defined(EIGEN_VECTORIZE_FMA)
+    return std::fma(a, b, c);
+#else
+    return a * b + c;
+#endif
+  }
+
   static void grow_and_zero(Vector<Scalar>& storage, Index size) {
     if (storage.size() < size) storage.resize(size);
     storage.head(size).setZero();
@@ -119,6 +161,7 @@ private:
 
   Index rows_ = 0;
   Index cols_ = 0;
+  bool by_rows_ = false;  // the short-matrix layout of the file comment
   Vector<Scalar> data_;
   Vector<Scalar> bias_;
 };

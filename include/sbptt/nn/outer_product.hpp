@@ -67,14 +67,17 @@ private:
      ...);
   }
 
-  /// One pass over dW adding `Samples` samples' outer products.
+  /// One pass over dW adding `Samples` samples' outer products: blocks of kPanels column
+  /// panels, the remaining whole panels in one more block, and a row's partial last panel on
+  /// its own: inside the block of a whole panel it measured 2.4 times slower (100 × 24 × 8).
   template <int Samples>
   static void samples(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x) {
     const Index full_panels = cols / kLanes;
     Index p = 0;
     for (; p + kPanels <= full_panels; p += kPanels)
       columns<Samples, kPanels, false>(dw, rows, cols, d, x, p * kLanes);
-    for (; p < full_panels; ++p) columns<Samples, 1, false>(dw, rows, cols, d, x, p * kLanes);
+    if (full_panels - p == 2) columns<Samples, 2, false>(dw, rows, cols, d, x, p * kLanes);
+    if (full_panels - p == 1) columns<Samples, 1, false>(dw, rows, cols, d, x, p * kLanes);
     if (full_panels * kLanes < cols)
       columns<Samples, 1, true>(dw, rows, cols, d, x, full_panels * kLanes);
   }

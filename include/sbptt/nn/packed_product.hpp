@@ -52,12 +52,27 @@ public:
     const Index panels = (rows_ + kLanes - 1) / kLanes;
     grow_and_zero(data_, by_rows_ ? rows_ * cols_ : panels * kLanes * cols_);
     grow_and_zero(bias_, panels * kLanes);
-    for (Index i = 0; i < rows_; ++i) {
-      Scalar* entry = by_rows_ ? data_.data() + i * cols_
-                               : data_.data() + (i / kLanes) * kLanes * cols_ + i % kLanes;
-      const Index step = by_rows_ ? 1 : kLanes;
-      for (Index c = 0; c < cols_; ++c)
-        entry[c * step] = transpose ? row_major[c * cols + i] : row_major[i * cols + c];
+    // Loops ordered so that the transposed case (Wᵀ, packed at every parameter update along
+    // with W) copies contiguous runs of a source row.
+    if (by_rows_) {
+      for (Index i = 0; i < rows_; ++i)
+        for (Index c = 0; c < cols_; ++c)
+          data_(i * cols_ + c) = transpose ? row_major[c * cols + i] : row_major[i * cols + c];
+    } else if (transpose) {
+      for (Index p = 0; p < panels; ++p) {
+        const Index lanes = std::min(kLanes, rows_ - p * kLanes);
+        for (Index c = 0; c < cols_; ++c)
+          std::copy_n(row_major + c * cols + p * kLanes, lanes,
+                      data_.data() + (p * cols_ + c) * kLanes);
+      }
+    } else {
+      for (Index p = 0; p < panels; ++p) {
+        const Index lanes = std::min(kLanes, rows_ - p * kLanes);
+        Scalar* panel = data_.data() + p * kLanes * cols_;
+        const Scalar* source = row_major + p * kLanes * cols;
+        for (Index c = 0; c < cols_; ++c)
+          for (Index l = 0; l < lanes; ++l) panel[c * kLanes + l] = source[l * cols + c];
+      }
     }
     if (bias != nullptr) bias_.head(rows_) = Eigen::Map<const Vector<Scalar>>(bias, rows_);
   }

@@ -18,7 +18,8 @@ TEMPLATE_TEST_CASE("dW += D X^T within the rounding bound, nothing written outsi
                    "[nn][outer]", float, double) {
   using S = TestType;
   const S eps = std::numeric_limits<S>::epsilon();
-  constexpr Index kGuard = 64;  // sentinels before and after dW: a masked store must stop at its end
+  // Sentinels before and after dW: a masked store must stop at the end of the row.
+  constexpr Index kGuard = 64;
   constexpr S kSentinel = S(-7.5);
   std::uint64_t seed = 100;
   // cols (float panels of 16): below one register, one register of either type, 3 panels and

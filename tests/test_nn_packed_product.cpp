@@ -1,9 +1,10 @@
 // The packed product of the layers: against a long-double product with the standard
-// floating-point error bound (short matrices, 1-3 rows, take the dot-product path), a sample's
-// result independent of its batch, untouched padding,
+// floating-point error bound (matrices of at most kLanes/4 rows take the dot-product path; the
+// shapes have 1, 2 and 3 rows), a sample's result independent of its batch, untouched padding,
 // and Network's packed overloads equal to the plain ones bit for bit.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <tuple>
@@ -64,8 +65,10 @@ TEMPLATE_TEST_CASE("packed product equals a long-double product within the round
 TEMPLATE_TEST_CASE("a column's result does not depend on the batch around it", "[nn][packed]",
                    float, double) {
   using S = TestType;
-  // 100 rows use the panels, 1 and 2 rows the short-matrix dot products (file comment).
-  for (const Index rows : {100, 2, 1}) {
+  // 100 rows use the panels, kLanes/4 rows (if a register has 4 lanes or more) and 1 row the
+  // short-matrix dot products (file comment).
+  const Index short_rows = std::max<Index>(1, PackedMatrix<S>::kLanes / 4);
+  for (const Index rows : {Index{100}, short_rows, Index{1}}) {
     const Matrix<S> w = random_matrix<S>(rows * 37, 1, 5, 1.0);
     const Matrix<S> b = random_matrix<S>(rows, 1, 6, 1.0);
     PackedMatrix<S> a;

@@ -16,9 +16,9 @@
 /// whatever the number of columns of X and whichever block a column falls in, so a sample's
 /// result does not depend on the batch it is evaluated with.
 ///
-/// A short matrix (at most a quarter of a register's rows: a network's output layer, 1 row for
-/// the cart pole, 4 for guidance) would leave most lanes of its one panel idle. It is kept
-/// row-major instead, and each entry is a dot product along the row: lane-wise partial sums
+/// A short matrix (W or Wᵀ with at most a quarter of a register's rows: a network's output
+/// layer, 1 row for the cart pole, 4 for guidance, with float and AVX-512) would leave most
+/// lanes of its one panel idle. It is kept row-major instead, and each entry is a dot product along the row: lane-wise partial sums
 /// over whole registers of a_i· and x_·j, reduced by Eigen's `predux`, added to b_i, then the
 /// remaining cols mod kLanes terms in order. That order, too, depends on the shapes only.
 #include <algorithm>
@@ -150,8 +150,11 @@ private:
     return sum;
   }
 
+  // Any target with a hardware FMA (x86 with FMA, ARM, POWER): where there is none, the
+  // compiler cannot contract either, and std::fma would be a slow library call.
   static Scalar fused_multiply_add(Scalar a, Scalar b, Scalar c) {
-#if defined(EIGEN_VECTORIZE_FMA)
+#if defined(EIGEN_VECTORIZE_FMA) || defined(__FP_FAST_FMA) || defined(__FP_FAST_FMAF) || \
+    defined(__ARM_FEATURE_FMA)
     return std::fma(a, b, c);
 #else
     return a * b + c;

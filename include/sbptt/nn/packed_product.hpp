@@ -18,9 +18,10 @@
 ///
 /// A short matrix (W or Wᵀ with at most a quarter of a register's rows: a network's output
 /// layer, 1 row for the cart pole, 4 for guidance, with float and AVX-512) would leave most
-/// lanes of its one panel idle. It is kept row-major instead, and each entry is a dot product along the row: lane-wise partial sums
-/// over whole registers of a_i· and x_·j, reduced by Eigen's `predux`, added to b_i, then the
-/// remaining cols mod kLanes terms in order. That order, too, depends on the shapes only.
+/// lanes of its one panel idle. It is kept row-major instead, and each entry is a dot product
+/// along the row: lane-wise partial sums over whole registers of a_i· and x_·j, reduced by
+/// Eigen's `predux`, added to b_i, then the remaining cols mod kLanes terms in order. That
+/// order, too, depends on the shapes only.
 #include <algorithm>
 #include <cmath>
 

@@ -160,14 +160,13 @@ def legend_handles(methods, clips, stops=0):
     return handles
 
 
-def mark_stops(ax, members, curve_of, colour):
-    """A cross at the last epoch of every member run that stopped, on that run's own curve;
-    returns how many."""
+def mark_stops(ax, members, curves, colour):
+    """A cross at the last epoch of every member run that stopped, on that run's own curve
+    (curves[i] = (x, y) of members[i]); returns how many."""
     count = 0
-    for m in members:
+    for m, (x, y) in zip(members, curves):
         if m["status"] != "stopped":
             continue
-        x, y = curve_of(m)
         if len(y) and np.isfinite(y[-1]):
             ax.plot([x[-1]], [y[-1]], marker="x", ms=7, mew=1.6, color=colour, ls="none")
         count += 1
@@ -244,27 +243,27 @@ def curve_figure(runs, task, window, against_time):
     fig, axes = panels(*grid_shape(len(complexities)))
     methods, clips, seeds = set(), set(), set()
     stops = 0
+
+    def own_curve(m):
+        y = trailing_average(m["log"]["test_loss"], window)
+        x = np.cumsum(m["log"]["seconds"]) if against_time else np.arange(1, len(y) + 1)
+        return x, y
+
     for ax, complexity in zip(axes.flat, complexities):
         lines = []
         for (method, clip), members in groups(runs, task, complexity):
             methods.add(method)
             clips.add(clip)
             seeds.add(len(members))
-            mean, std = mean_std([trailing_average(m["log"]["test_loss"], window)
-                                  for m in members])
+            curves = [own_curve(m) for m in members]
+            mean, std = mean_std([y for _, y in curves])
             if against_time:
-                x, _ = mean_std([np.cumsum(m["log"]["seconds"]) for m in members])
+                x, _ = mean_std([x for x, _ in curves])
             else:
                 x = np.arange(1, len(mean) + 1)
             lines.append((x, mean, std, METHOD_COLOURS.get(method, "black"),
                           CLIP_STYLES.get(clip, "-.")))
-
-            def own_curve(m):
-                y = trailing_average(m["log"]["test_loss"], window)
-                x = np.cumsum(m["log"]["seconds"]) if against_time else np.arange(1, len(y) + 1)
-                return x, y
-
-            stops += mark_stops(ax, members, own_curve, METHOD_COLOURS.get(method, "black"))
+            stops += mark_stops(ax, members, curves, METHOD_COLOURS.get(method, "black"))
         floor = positive_floor([line[1] for line in lines])
         for x, mean, std, colour, style in lines:
             band(ax, x, mean, std, colour, floor)
@@ -305,9 +304,8 @@ def update_norm_figure(runs, tasks):
             mean, std = mean_std(logs)
             lines.append((mean, std, METHOD_COLOURS.get(method, "black"),
                           CLIP_STYLES.get(clip, "-.")))
-            stops += mark_stops(ax, members,
-                                lambda m: (np.arange(1, len(m["log"]["update_norm2"]) + 1),
-                                           m["log"]["update_norm2"]),
+            sizes = [m["log"]["update_norm2"] for m in members]
+            stops += mark_stops(ax, members, [(np.arange(1, len(y) + 1), y) for y in sizes],
                                 METHOD_COLOURS.get(method, "black"))
         for mean, std, colour, style in lines:
             x = np.arange(1, len(mean) + 1)

@@ -109,10 +109,8 @@ struct Conv1d {
   /// \param grad     this layer's slice of the gradient, num_params() entries; accumulated
   template <class Scalar>
   void param_vjp(const Matrix<Scalar>& columns, const Scalar* delta, Scalar* grad) const {
-    add_outer_products(grad, out_channels, window_size(), delta, columns.data(), columns.cols());
-    Eigen::Map<Vector<Scalar>> db(grad + weight_count(), out_channels);
-    db.noalias() +=
-        detail::ConstMatrixMap<Scalar>(delta, out_channels, columns.cols()).rowwise().sum();
+    add_weight_and_bias_products(grad, out_channels, window_size(), delta, columns.data(),
+                                 columns.cols());
   }
 
   /// Writes the input VJP ∂L/∂x, (L·C_in) × B position-major, into `dx`.

@@ -60,10 +60,8 @@ struct Dense {
   /// \param grad   this layer's slice of the gradient, num_params() entries; accumulated
   template <class Scalar>
   void param_vjp(const Matrix<Scalar>& x, const Scalar* delta, Scalar* grad) const {
-    // The batch sum is the inner dimension of this product (outer_product.hpp).
-    add_outer_products(grad, outputs, inputs, delta, x.data(), x.cols());
-    Eigen::Map<Vector<Scalar>> db(grad + weight_count(), outputs);
-    db.noalias() += detail::ConstMatrixMap<Scalar>(delta, outputs, x.cols()).rowwise().sum();
+    // The batch sum is the inner dimension of these products (outer_product.hpp).
+    add_weight_and_bias_products(grad, outputs, inputs, delta, x.data(), x.cols());
   }
 
   /// Writes the input VJP ∂L/∂x = Wᵀ Δ, n_in × B (column-major), into `dx`.

@@ -166,4 +166,14 @@ void add_outer_products(Scalar* dw, Index rows, Index cols, const Scalar* d, con
       Eigen::Map<const Matrix<Scalar>>(x, cols, n).transpose();
 }
 
+/// The parameter VJP of a layer whose gradient slice is W (rows × cols, row-major) followed by
+/// its bias b (rows), as both Dense and Conv1d lay it out: dW += D Xᵀ, db += D 1.
+template <class Scalar>
+void add_weight_and_bias_products(Scalar* grad, Index rows, Index cols, const Scalar* d,
+                                  const Scalar* x, Index n) {
+  add_outer_products(grad, rows, cols, d, x, n);
+  Eigen::Map<Vector<Scalar>>(grad + rows * cols, rows).noalias() +=
+      Eigen::Map<const Matrix<Scalar>>(d, rows, n).rowwise().sum();
+}
+
 }  // namespace sbptt

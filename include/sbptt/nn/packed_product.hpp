@@ -49,13 +49,12 @@ public:
             const Scalar* bias = nullptr) {
     rows_ = transpose ? cols : rows;
     cols_ = transpose ? rows : cols;
-    by_rows_ = 4 * rows_ <= kLanes;
     const Index panels = (rows_ + kLanes - 1) / kLanes;
-    grow_and_zero(data_, by_rows_ ? rows_ * cols_ : panels * kLanes * cols_);
+    grow_and_zero(data_, by_rows() ? rows_ * cols_ : panels * kLanes * cols_);
     grow_and_zero(bias_, panels * kLanes);
     // Loops ordered so that the transposed case (Wᵀ, packed at every parameter update along
     // with W) copies contiguous runs of a source row.
-    if (by_rows_) {
+    if (by_rows()) {
       for (Index i = 0; i < rows_; ++i)
         for (Index c = 0; c < cols_; ++c)
           data_(i * cols_ + c) = transpose ? row_major[c * cols + i] : row_major[i * cols + c];
@@ -81,7 +80,7 @@ public:
   /// Y = A X + b: `x` is cols() × n column-major with leading dimension `ldx`, `y` rows() × n
   /// column-major with leading dimension `ldy` (overwritten; it must not overlap `x`).
   void multiply(const Scalar* x, Index ldx, Index n, Scalar* y, Index ldy) const {
-    if (by_rows_) {
+    if (by_rows()) {
       for (Index j = 0; j < n; ++j)
         for (Index i = 0; i < rows_; ++i) y[i + j * ldy] = row_dot(i, x + j * ldx);
       return;
@@ -132,6 +131,9 @@ private:
     }
   }
 
+  /// Whether A is short and kept in the row-major layout of the file comment.
+  [[nodiscard]] bool by_rows() const { return 4 * rows_ <= kLanes; }
+
   /// b_i + a_i· x in the order of the file comment (short matrices).
   [[nodiscard]] Scalar row_dot(Index i, const Scalar* x) const {
     using Eigen::internal::pmadd;
@@ -180,7 +182,6 @@ private:
 
   Index rows_ = 0;
   Index cols_ = 0;
-  bool by_rows_ = false;  // the short-matrix layout of the file comment
   Vector<Scalar> data_;
   Vector<Scalar> bias_;
 };

@@ -31,7 +31,6 @@
 /// `SplitBackwardController`'s `add_param_gradient` concurrently with `backward_inputs` of
 /// another step (`Network`'s are), and the loss functor must be thread-safe (a `const` pure
 /// function).
-#include <chrono>
 #include <cmath>
 #include <memory>
 #include <optional>
@@ -167,7 +166,7 @@ public:
       packed_controller_.forward(trajectory_.states[i], trajectory_.controls[i],
                                  trajectory_.workspaces[i]);
       note_non_finite(Quantity::Control, n, trajectory_.controls[i]);
-      for_samples(batch, forward_scratch_, true, fork_[0], [&](Index b, Scratch& t) {
+      fork_[0].for_samples(pool_.get(), batch, forward_scratch_, true, [&](Index b, Scratch& t) {
         t.x = trajectory_.states[i].col(b);
         t.u = trajectory_.controls[i].col(b);
         sim_.step(t.x, t.u, t.x_next);
@@ -193,8 +192,10 @@ public:
     packed_controller_.pack();
     auto task = [&](Index k, Index) {
       const Index first = k * kEvaluateChunk;
-      evaluate_chunk(initial_states.middleCols(first, std::min(kEvaluateChunk, batch - first)),
-                     chunks_[static_cast<std::size_t>(k)], first);
+      const Index size = std::min(kEvaluateChunk, batch - first);
+      chunks_[static_cast<std::size_t>(k)].roll_out(sim_, packed_controller_, objective_, steps_,
+                                                    initial_states.middleCols(first, size), first,
+                                                    eval_losses_.segment(first, size));
     };
     if (pool_) {
       pool_->run(chunks, task);
@@ -211,7 +212,7 @@ public:
         forward_non_finite_ = chunk.non_finite;
       }
     }
-    return mean_of_samples(eval_losses_);
+    return detail::mean_of_samples(eval_losses_, steps_, forward_non_finite_);
   }
 
   /// Reverse sweep over the stored trajectory. Sets `gradient` (num_params) to the vector of
@@ -292,30 +293,8 @@ private:
     }
   }
 
-  [[nodiscard]] Scratch make_scratch() const { return Scratch(sim_.state_dim(), sim_.control_dim()); }
-
-  /// Calls f(b, scratch) for every sample b of the batch, as items of a parallel run when
-  /// `parallel`, a pool exists and `decision` finds the loop worth it, else in order on this
-  /// thread (timed while the decision is still probing).
-  template <class F>
-  void for_samples(Index batch, std::vector<Scratch>& scratch, bool parallel,
-                   detail::ForkDecision& decision, F&& f) {
-    if (pool_ && parallel && batch > 1) {
-      if (decision.fork()) {
-        auto task = [&](Index b, Index worker) { f(b, scratch[static_cast<std::size_t>(worker)]); };
-        pool_->run(batch, task);
-        return;
-      }
-      if (decision.probing()) {
-        const auto start = std::chrono::steady_clock::now();
-        for (Index b = 0; b < batch; ++b) f(b, scratch[0]);
-        decision.record(std::chrono::duration<double, std::nano>(
-                            std::chrono::steady_clock::now() - start)
-                            .count());
-        return;
-      }
-    }
-    for (Index b = 0; b < batch; ++b) f(b, scratch[0]);
+  [[nodiscard]] Scratch make_scratch() const {
+    return Scratch(sim_.state_dim(), sim_.control_dim());
   }
 
   void check_initial_states(const Matrix<Scalar>& initial_states, const char* caller) const {
@@ -360,7 +339,7 @@ private:
       const bool physics = physics_flows(mode) && !cut;
       const bool network = network_flows(mode) && !cut;
       const bool scored = objective_.timing == LossTiming::Continuous || n + 1 == steps_;
-      for_samples(batch, s.scratch, parallel, fork_[1], [&](Index b, Scratch& t) {
+      fork_[1].for_samples(pool_.get(), batch, s.scratch, parallel, [&](Index b, Scratch& t) {
         if (scored) {  // λ_{n+1} += w/B · ∂ℓ/∂x_{n+1}
           t.x = trajectory_.states[i + 1].col(b);
           objective_.state_loss(t.x, &t.seed);
@@ -406,44 +385,13 @@ private:
       s.diagnostics.first_non_finite = detail::first_non_finite_component(gradient);
   }
 
-  /// Rolls out `x0` (state_dim × b, samples first..first+b−1 of the set) into `eval_losses_`.
-  void evaluate_chunk(const auto& x0, EvalChunk& c, Index first) {
-    const Index batch = x0.cols();
-    const Scalar w = static_cast<Scalar>(objective_.step_weight);
-    const Scalar control_scale = static_cast<Scalar>(
-        objective_.control_weight / static_cast<double>(steps_ * sim_.control_dim()));
-    if (!c.scratch) c.scratch = make_scratch();
-    Scratch& t = *c.scratch;
-    c.non_finite.reset();
-    c.state = x0;
-    c.next.resize(sim_.state_dim(), batch);
-    auto losses = eval_losses_.segment(first, batch);
-    losses.setZero();
-    for (Index n = 0; n < steps_; ++n) {
-      packed_controller_.forward(c.state, c.control, c.workspace);
-      c.note(Quantity::Control, n, 2 * n, c.control, first);
-      for (Index b = 0; b < batch; ++b) {
-        t.x = c.state.col(b);
-        t.u = c.control.col(b);
-        sim_.step(t.x, t.u, t.x_next);
-        c.next.col(b) = t.x_next;
-        if (objective_.control_weight > 0)
-          losses(b) += control_scale * c.control.col(b).squaredNorm();
-        if (objective_.timing == LossTiming::Continuous || n + 1 == steps_)
-          losses(b) += w * objective_.state_loss(t.x_next, static_cast<State*>(nullptr));
-      }
-      c.state.swap(c.next);
-      c.note(Quantity::State, n + 1, 2 * n + 1, c.state, first);
-    }
-  }
-
   /// Batch-mean loss of the stored trajectory.
   Scalar batch_loss() {
     const Index batch = trajectory_.batch();
     const Scalar w = static_cast<Scalar>(objective_.step_weight);
     const Index first = objective_.timing == LossTiming::Final ? steps_ : 1;
     eval_losses_.setZero(batch);
-    for_samples(batch, forward_scratch_, true, fork_[2], [&](Index b, Scratch& t) {
+    fork_[2].for_samples(pool_.get(), batch, forward_scratch_, true, [&](Index b, Scratch& t) {
       for (Index n = first; n <= steps_; ++n) {
         t.x = trajectory_.states[static_cast<std::size_t>(n)].col(b);
         eval_losses_(b) += w * objective_.state_loss(t.x, static_cast<State*>(nullptr));
@@ -456,19 +404,7 @@ private:
                            squares;
       }
     });
-    return mean_of_samples(eval_losses_);
-  }
-
-  /// Mean of per-sample losses, summed in sample order (thread-count independent); notes the
-  /// first non-finite sample loss.
-  Scalar mean_of_samples(const Vector<Scalar>& losses) {
-    Scalar total = 0;
-    for (Index b = 0; b < losses.size(); ++b) {
-      if (!forward_non_finite_ && !std::isfinite(losses(b)))
-        forward_non_finite_ = NonFinite{Quantity::Loss, steps_, b, static_cast<double>(losses(b))};
-      total += losses(b);
-    }
-    return total / static_cast<Scalar>(losses.size());
+    return detail::mean_of_samples(eval_losses_, steps_, forward_non_finite_);
   }
 
   void record_adjoint(Sweep& s, Index n) {

@@ -3,6 +3,7 @@
 /// scan for the first non-finite value. Implementation details of `sbptt::Engine`.
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <mutex>
 #include <optional>
@@ -10,6 +11,7 @@
 #include <vector>
 
 #include "sbptt/bptt/diagnostics.hpp"
+#include "sbptt/bptt/objective.hpp"
 #include "sbptt/bptt/packed_controller.hpp"
 #include "sbptt/core/non_finite.hpp"
 #include "sbptt/core/parallel.hpp"
@@ -145,6 +147,41 @@ struct EvaluationChunk {
 
   /// Notes the first non-finite entry of `values` unless one is already noted.
   void note(Quantity quantity, Index step, Index rank, const Matrix<Scalar>& values, Index first);
+
+  /// Rolls out `x0` (state_dim × b, samples first … first + b − 1 of the set) for `steps`
+  /// steps with `controller` (packed) through `sim`, and sets `losses` (b) to each sample's
+  /// loss under `objective`.
+  template <class Sim, class Controller, class Loss, class Initial, class Losses>
+  void roll_out(const Sim& sim, const Controller& controller, const Objective<Loss>& objective,
+                Index steps, const Initial& x0, Index first, Losses&& losses) {
+    using State = typename Sim::State;
+    const Index batch = x0.cols();
+    const auto w = static_cast<Scalar>(objective.step_weight);
+    const auto control_scale = static_cast<Scalar>(
+        objective.control_weight / static_cast<double>(steps * sim.control_dim()));
+    if (!scratch) scratch.emplace(sim.state_dim(), sim.control_dim());
+    Scratch& t = *scratch;
+    non_finite.reset();
+    state = x0;
+    next.resize(sim.state_dim(), batch);
+    losses.setZero();
+    for (Index n = 0; n < steps; ++n) {
+      controller.forward(state, control, workspace);
+      note(Quantity::Control, n, 2 * n, control, first);
+      for (Index b = 0; b < batch; ++b) {
+        t.x = state.col(b);
+        t.u = control.col(b);
+        sim.step(t.x, t.u, t.x_next);
+        next.col(b) = t.x_next;
+        if (objective.control_weight > 0)
+          losses(b) += control_scale * control.col(b).squaredNorm();
+        if (objective.timing == LossTiming::Continuous || n + 1 == steps)
+          losses(b) += w * objective.state_loss(t.x_next, static_cast<State*>(nullptr));
+      }
+      state.swap(next);
+      note(Quantity::State, n + 1, 2 * n + 1, state, first);
+    }
+  }
 };
 
 /// Whether a per-sample loop is worth splitting over threads. A fork costs about a microsecond
@@ -165,6 +202,31 @@ public:
   void record(double ns) {
     best_ns_ = runs_ == 0 ? ns : std::min(best_ns_, ns);
     ++runs_;
+  }
+
+  /// Calls f(b, scratch) for every sample b of the batch: as items of a parallel run on `pool`
+  /// when `parallel`, a pool exists and the loop is worth it, else in order on this thread
+  /// (timed while still probing). `scratch` has one entry per worker of `pool`.
+  template <class Scratch, class F>
+  void for_samples(ThreadPool* pool, Index batch, std::vector<Scratch>& scratch, bool parallel,
+                   F&& f) {
+    if (pool != nullptr && parallel && batch > 1) {
+      if (fork()) {
+        auto task = [&](Index b, Index worker) {
+          f(b, scratch[static_cast<std::size_t>(worker)]);
+        };
+        pool->run(batch, task);
+        return;
+      }
+      if (probing()) {
+        const auto start = std::chrono::steady_clock::now();
+        for (Index b = 0; b < batch; ++b) f(b, scratch[0]);
+        record(std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - start)
+                   .count());
+        return;
+      }
+    }
+    for (Index b = 0; b < batch; ++b) f(b, scratch[0]);
   }
 
 private:
@@ -190,6 +252,20 @@ void EvaluationChunk<Scalar, Workspace, Scratch>::note(Quantity quantity, Index 
   if (non_finite) return;
   note_first_non_finite(quantity, step, values, non_finite, first);
   if (non_finite) order = rank;
+}
+
+/// Mean of per-sample losses, summed in sample order (thread-count independent); notes the
+/// first non-finite one in `slot` (at step `steps`) unless `slot` already holds a value.
+template <class Scalar>
+[[nodiscard]] Scalar mean_of_samples(const Vector<Scalar>& losses, Index steps,
+                                     std::optional<NonFinite>& slot) {
+  Scalar total = 0;
+  for (Index b = 0; b < losses.size(); ++b) {
+    if (!slot && !std::isfinite(losses(b)))
+      slot = NonFinite{Quantity::Loss, steps, b, static_cast<double>(losses(b))};
+    total += losses(b);
+  }
+  return total / static_cast<Scalar>(losses.size());
 }
 
 /// The first non-finite component of a gradient or parameter vector (step −1, `sample` =

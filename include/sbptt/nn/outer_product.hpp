@@ -11,9 +11,11 @@
 /// at about 230.
 ///
 /// It needs 32 vector registers and masked loads and stores for the rows' last panel, so it is
-/// compiled for AVX-512 only, and used when a row of dW fills at least one register. Other
-/// builds, and narrower rows, use Eigen's product (with AVX2's 16 registers the same scheme,
-/// holding 8 × 1 panels, measured slower than Eigen).
+/// compiled for AVX-512 only, and used when a row of dW fills at least half a register (100 ×
+/// 10 × 8 in float: 230 ns against Eigen's 404; 100 × 4 × 8: 228 against 251, but 60 × 6 × 120
+/// no faster and 100 × 1 × 8 seven times slower). Other builds, and narrower rows, use Eigen's
+/// product (with AVX2's 16 registers the same scheme, holding 8 × 1 panels, measured slower
+/// than Eigen).
 ///
 /// In the kernel every entry is ((dW_ij + d_i0 x_j0) + d_i1 x_j1) + … in sample order with
 /// fused multiply-adds, whatever the shapes; Eigen's product has an order of its own. Either
@@ -52,10 +54,13 @@ public:
 
 private:
   // X's block (kPanels × kSamples registers), kRows × kPanels accumulators and a broadcast:
-  // 24 + 6 + 1 of the 32 registers.
+  // 24 + 6 + 1 of the 32 registers. A row narrower than a register has one masked panel, so
+  // its blocks take kNarrowRows rows, that many chains of FMAs in flight (2 rows: 621 ns for
+  // 100 × 10 × 8, 8 rows: 230 ns). In a wider row's partial panel 8 rows measured slower.
   static constexpr int kSamples = 8;
   static constexpr int kPanels = 3;
   static constexpr int kRows = 2;
+  static constexpr int kNarrowRows = 8;
 
   /// The 1 … kSamples − 1 samples after the last full group, by a kernel of that width.
   template <std::size_t... Counts>
@@ -78,12 +83,16 @@ private:
       columns<Samples, kPanels, false>(dw, rows, cols, d, x, p * kLanes);
     if (full_panels - p == 2) columns<Samples, 2, false>(dw, rows, cols, d, x, p * kLanes);
     if (full_panels - p == 1) columns<Samples, 1, false>(dw, rows, cols, d, x, p * kLanes);
-    if (full_panels * kLanes < cols)
+    if (full_panels == 0) {
+      columns<Samples, 1, true, kNarrowRows>(dw, rows, cols, d, x, 0);
+    } else if (full_panels * kLanes < cols) {
       columns<Samples, 1, true>(dw, rows, cols, d, x, full_panels * kLanes);
+    }
   }
 
-  /// Columns first … first + Panels·kLanes − 1 of every row (up to cols when `Masked`).
-  template <int Samples, int Panels, bool Masked>
+  /// Columns first … first + Panels·kLanes − 1 of every row (up to cols when `Masked`), in
+  /// blocks of `Rows` rows.
+  template <int Samples, int Panels, bool Masked, int Rows = kRows>
   static void columns(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
                       Index first) {
     const Index lanes = Masked ? cols - first : kLanes;
@@ -92,9 +101,9 @@ private:
       for (int k = 0; k < Samples; ++k)
         xs[p][k] = load<Masked>(x + k * cols + first + p * kLanes, lanes);
     Index i = 0;
-    for (; i + kRows <= rows; i += kRows)
-      update_rows<Samples, Panels, kRows, Masked>(dw + i * cols + first, cols, d + i, rows, xs,
-                                                  lanes);
+    for (; i + Rows <= rows; i += Rows)
+      update_rows<Samples, Panels, Rows, Masked>(dw + i * cols + first, cols, d + i, rows, xs,
+                                                 lanes);
     for (; i < rows; ++i)
       update_rows<Samples, Panels, 1, Masked>(dw + i * cols + first, cols, d + i, rows, xs,
                                               lanes);
@@ -155,7 +164,7 @@ void add_outer_products(Scalar* dw, Index rows, Index cols, const Scalar* d, con
                         Index n) {
 #if defined(EIGEN_VECTORIZE_AVX512)
   if constexpr (std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>) {
-    if (cols >= detail::OuterProductKernel<Scalar>::kLanes) {
+    if (2 * cols >= detail::OuterProductKernel<Scalar>::kLanes) {
       detail::OuterProductKernel<Scalar>::run(dw, rows, cols, d, x, n);
       return;
     }

@@ -15,6 +15,7 @@
 #include "sbptt/objectives/guidance.hpp"
 #include "sbptt/objectives/quantum.hpp"
 #include "sbptt/bptt/engine.hpp"
+#include "sbptt/core/finite_difference.hpp"
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"
 #include "sbptt/optim/adam.hpp"
@@ -112,8 +113,15 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
     if (settings[t].second == 0) CHECK_FALSE(overlapped[t]);
   }
   CHECK_FALSE(overlapped[0]);
-  // The sweeps of the pair equal the single sweeps, and training moved the parameters.
-  CHECK(pairs[0].regular == full[0]);
+  // The sweeps of the pair equal the single sweeps (bit for bit when they run apart, to
+  // round-off when one control lets them share the network's backward pass), and training
+  // moved the parameters.
+  if (sim.control_dim() == 1) {
+    CHECK(relative_error<S>(pairs[0].regular, full[0]) <
+          1000 * std::numeric_limits<S>::epsilon());
+  } else {
+    CHECK(pairs[0].regular == full[0]);
+  }
   CHECK(trained_r[0] != initial.params());
   CHECK(trained_c[0] != trained_r[0]);
 }

@@ -80,6 +80,11 @@ public:
     net_.add_param_gradient(ws, adjoints, grad);
     macs_.fetch_add(per_sample_ * ws.batch_size(), std::memory_order_relaxed);
   }
+  void add_param_gradient(const Workspace& ws, const LayerAdjoints& adjoints,
+                          const Matrix<S>& scales, sbptt::Vector<S>& grad) const {
+    net_.add_param_gradient(ws, adjoints, scales, grad);
+    macs_.fetch_add(per_sample_ * ws.batch_size(), std::memory_order_relaxed);
+  }
 
   [[nodiscard]] long long macs() const { return macs_.load(); }
   void reset() { macs_ = 0; }
@@ -95,7 +100,7 @@ private:
   mutable std::atomic<long long> macs_{0};
 };
 
-static_assert(sbptt::SplitBackwardController<CountingNetwork<float>>,
-              "bench must time the engine's split backward, as a Network gets it");
+static_assert(sbptt::SeedScalingController<CountingNetwork<float>>,
+              "bench must time the engine's split and shared-seed backward, as a Network gets it");
 
 }  // namespace bench

@@ -143,6 +143,8 @@ public:
     pool_ = threads > 1 ? std::make_unique<detail::ThreadPool>(threads) : nullptr;
     if constexpr (SplitBackwardController<Ctrl>)
       handoff_ = pool_ ? std::make_unique<Handoff>() : nullptr;
+    if constexpr (SeedScalingController<Ctrl>)
+      shared_handoff_ = pool_ ? std::make_unique<SharedHandoff>() : nullptr;
     threads_ = threads;
     for (auto& decision : fork_) decision = detail::ForkDecision(split_above_ns);
     const auto slots = static_cast<std::size_t>(threads);
@@ -227,17 +229,9 @@ public:
       // thread then has nothing better to do than the parameter products.
       if (handoff_ && !fork_[1].probing() && !fork_[1].fork()) {
         Handoff& h = *handoff_;
-        h.reset();
         auto add = [&](std::size_t slot) { add_params(h, slot, gradient); };
-        auto adder = [&](Index, Index) { h.keep_adding(steps_, add); };
-        pool_->run_beside(1, adder, [&] {
-          try {
-            sweep(sweeps_[0], schedule, gradient, truncation, false, &h);
-          } catch (...) {
-            h.abandoned.store(true, std::memory_order_release);
-            throw;
-          }
-        });
+        h.run(*pool_, steps_, add,
+              [&] { sweep(sweeps_[0], schedule, gradient, truncation, false, &h); });
         return sweeps_[0].diagnostics;
       }
     }
@@ -253,13 +247,22 @@ public:
     return result;
   }
 
-  /// As above, reusing the buffers of `result` (no allocation once sized). With threads the
-  /// two sweeps run at the same time, each exactly as it would alone.
+  /// As above, reusing the buffers of `result` (no allocation once sized). With one control
+  /// and a `SeedScalingController` both sweeps share one backward pass of the controller
+  /// (`shared_seed_sweeps`); otherwise, with threads, the two sweeps run at the same time,
+  /// each exactly as it would alone.
   void regular_and_modified(const Matrix<Scalar>& initial_states, GradientPair<Scalar>& result,
                             Index truncation = 0) {
     result.loss = forward(initial_states);
     result.forward_non_finite = forward_non_finite_;
     check_sweep(FlowMode::Full, truncation);
+    if constexpr (SeedScalingController<Ctrl>) {
+      if (sim_.control_dim() == 1) {
+        shared_seed_sweeps(result, truncation);
+        finish_pair(result);
+        return;
+      }
+    }
     auto task = [&](Index item, Index) {
       if (item == 0) {
         sweep(sweeps_[0], FlowMode::Full, result.regular, truncation, !pool_);
@@ -273,9 +276,7 @@ public:
       task(0, 0);
       task(1, 0);
     }
-    result.regular_diagnostics = sweeps_[0].diagnostics;
-    result.modified_diagnostics = sweeps_[1].diagnostics;
-    result.comparison = compare(result.modified, result.regular);
+    finish_pair(result);
   }
 
 private:
@@ -284,6 +285,8 @@ private:
   using EvalChunk = detail::EvaluationChunk<Scalar, typename Ctrl::Workspace, Scratch>;
 
   using Handoff = typename detail::ParamHandoffOf<Ctrl>::Type;
+  using SharedHandoff = typename detail::SharedSeedHandoffOf<Ctrl>::Type;
+  using SharedStep = typename detail::SharedSeedHandoffOf<Ctrl>::Step;
 
   /// Adds the parameter products recorded in `slot` of the hand-off to `gradient`.
   void add_params(Handoff& h, std::size_t slot, Vector<Scalar>& gradient) const {
@@ -319,19 +322,9 @@ private:
   void sweep(Sweep& s, const FlowSchedule& schedule, Vector<Scalar>& gradient, Index truncation,
              bool parallel, Handoff* handoff = nullptr) {
     const Index batch = trajectory_.batch();
-    gradient.setZero(controller_.num_params());
-    s.lambda.setZero(sim_.state_dim(), batch);
-    s.mu.resize(sim_.control_dim(), batch);
-    s.propagated.resize(sim_.state_dim(), batch);
-    s.diagnostics.adjoint_norms.assign(static_cast<std::size_t>(steps_ + 1), 0.0);
-    s.diagnostics.first_non_finite.reset();
-    s.diagnostics.params_overlapped = handoff != nullptr;
+    begin_sweep(s, gradient, handoff != nullptr);
     auto add = [&](std::size_t slot) { add_params(*handoff, slot, gradient); };
-    const Scalar seed_scale =
-        static_cast<Scalar>(objective_.step_weight / static_cast<double>(batch));
-    const Scalar control_seed =
-        static_cast<Scalar>(2.0 * objective_.control_weight /
-                            static_cast<double>(steps_ * sim_.control_dim() * batch));
+    const Scalar seed_scale = loss_seed_scale(), control_seed = control_seed_scale();
     for (Index n = steps_ - 1; n >= 0; --n) {
       const auto i = static_cast<std::size_t>(n);
       const FlowMode mode = schedule.at(n);
@@ -376,13 +369,140 @@ private:
         s.lambda.setZero();
       }
     }
-    record_adjoint(s, 0);
     if constexpr (SplitBackwardController<Ctrl>) {
       if (handoff != nullptr) handoff->wait_added(steps_, add);
     }
+    end_sweep(s, gradient);
+  }
+
+  /// Both sweeps of `regular_and_modified` with one backward pass of the controller per step.
+  /// With a single control, μ_n of each sweep is a row (1 × B) and the controller's backward is
+  /// linear in each sample's seed, so the layer adjoints of the seed 1 serve both: each sweep
+  /// scales them by its own μ_n for its parameter products, and the Full sweep its input
+  /// adjoint K_nᵀ1 for λ_n. That saves the PhysicsOnly sweep's layer VJPs. With threads, the
+  /// parameter products run on a second thread, in step order as on one thread
+  /// (`ParamHandoff`), so the results do not depend on the thread count.
+  void shared_seed_sweeps(GradientPair<Scalar>& result, Index truncation)
+    requires SeedScalingController<Ctrl>
+  {
+    if (!pool_) {
+      shared_seed_sweep(result, truncation, nullptr);
+      return;
+    }
+    SharedHandoff& h = *shared_handoff_;
+    auto add = [&](std::size_t slot) {
+      add_shared_step(h.ring[slot], h.steps[slot], result);
+    };
+    h.run(*pool_, steps_, add, [&] { shared_seed_sweep(result, truncation, &h); });
+  }
+
+  void shared_seed_sweep(GradientPair<Scalar>& result, Index truncation, SharedHandoff* handoff)
+    requires SeedScalingController<Ctrl>
+  {
+    const Index batch = trajectory_.batch();
+    Sweep& full = sweeps_[0];
+    Sweep& physics = sweeps_[1];
+    begin_sweep(full, result.regular, handoff != nullptr);
+    begin_sweep(physics, result.modified, handoff != nullptr);
+    unit_seed_.setOnes(1, batch);
+    auto add = [&](std::size_t slot) {
+      add_shared_step(handoff->ring[slot], handoff->steps[slot], result);
+    };
+    const Scalar seed_scale = loss_seed_scale(), control_seed = control_seed_scale();
+    for (Index n = steps_ - 1; n >= 0; --n) {
+      const auto i = static_cast<std::size_t>(n);
+      const bool cut = truncation > 0 && n > 0 && n % truncation == 0;
+      const bool scored = objective_.timing == LossTiming::Continuous || n + 1 == steps_;
+      fork_[1].for_samples(pool_.get(), batch, full.scratch, handoff == nullptr,
+                           [&](Index b, Scratch& t) {
+        if (scored) {
+          t.x_next = trajectory_.states[i + 1].col(b);
+          objective_.state_loss(t.x_next, &t.seed);
+        }
+        t.x = trajectory_.states[i].col(b);
+        t.u = trajectory_.controls[i].col(b);
+        for (Sweep* s : {&full, &physics}) {
+          if (scored) s->lambda.col(b) += seed_scale * t.seed;
+          t.lambda_sample = s->lambda.col(b);
+          sim_.vjp(t.x, t.u, t.lambda_sample, cut ? nullptr : &t.lambda_x, &t.lambda_u);
+          s->mu.col(b) = t.lambda_u;
+          if (!cut) s->propagated.col(b) = t.lambda_x;
+        }
+      });
+      for (Sweep* s : {&full, &physics}) {
+        record_adjoint(*s, n + 1);
+        if (objective_.control_weight > 0)
+          s->mu.noalias() += control_seed * trajectory_.controls[i];
+      }
+      const Index k = steps_ - 1 - n;  // steps recorded so far
+      const std::size_t slot = handoff != nullptr ? handoff->slot_for(k, add) : 0;
+      SharedStep& step = handoff != nullptr ? handoff->ring[slot] : shared_step_;
+      step.full_mu = full.mu;
+      step.physics_mu = physics.mu;
+      packed_controller_.backward_inputs(trajectory_.workspaces[i], unit_seed_,
+                                         cut ? nullptr : &full.input_adjoint, step.adjoints);
+      if (handoff != nullptr) {
+        handoff->steps[slot] = n;
+        handoff->recorded.store(k + 1, std::memory_order_release);
+      } else {
+        add_shared_step(step, n, result);
+      }
+      if (cut) {
+        full.lambda.setZero();
+        physics.lambda.setZero();
+      } else {
+        full.lambda.swap(full.propagated);
+        full.lambda.array() += full.input_adjoint.array().rowwise() * full.mu.row(0).array();
+        physics.lambda.swap(physics.propagated);
+      }
+    }
+    if (handoff != nullptr) handoff->wait_added(steps_, add);
+    end_sweep(full, result.regular);
+    end_sweep(physics, result.modified);
+  }
+
+  /// Adds both sweeps' parameter products of the step `n` recorded in `step`.
+  void add_shared_step(const SharedStep& step, Index n, GradientPair<Scalar>& result) const
+    requires SeedScalingController<Ctrl>
+  {
+    const auto& workspace = trajectory_.workspaces[static_cast<std::size_t>(n)];
+    controller_.add_param_gradient(workspace, step.adjoints, step.full_mu, result.regular);
+    controller_.add_param_gradient(workspace, step.adjoints, step.physics_mu, result.modified);
+  }
+
+  void begin_sweep(Sweep& s, Vector<Scalar>& gradient, bool overlapped) {
+    const Index batch = trajectory_.batch();
+    gradient.setZero(controller_.num_params());
+    s.lambda.setZero(sim_.state_dim(), batch);
+    s.mu.resize(sim_.control_dim(), batch);
+    s.propagated.resize(sim_.state_dim(), batch);
+    s.diagnostics.adjoint_norms.assign(static_cast<std::size_t>(steps_ + 1), 0.0);
+    s.diagnostics.first_non_finite.reset();
+    s.diagnostics.params_overlapped = overlapped;
+  }
+
+  void end_sweep(Sweep& s, const Vector<Scalar>& gradient) {
+    record_adjoint(s, 0);
     s.diagnostics.grad_norm2 = static_cast<double>(gradient.squaredNorm());
     if (!s.diagnostics.first_non_finite)
       s.diagnostics.first_non_finite = detail::first_non_finite_component(gradient);
+  }
+
+  void finish_pair(GradientPair<Scalar>& result) const {
+    result.regular_diagnostics = sweeps_[0].diagnostics;
+    result.modified_diagnostics = sweeps_[1].diagnostics;
+    result.comparison = compare(result.modified, result.regular);
+  }
+
+  /// w/B, the factor of every loss seed; and 2ρ/(m·k·B), that of the control term of μ_n.
+  [[nodiscard]] Scalar loss_seed_scale() const {
+    return static_cast<Scalar>(objective_.step_weight /
+                               static_cast<double>(trajectory_.batch()));
+  }
+  [[nodiscard]] Scalar control_seed_scale() const {
+    return static_cast<Scalar>(2.0 * objective_.control_weight /
+                               static_cast<double>(steps_ * sim_.control_dim() *
+                                                   trajectory_.batch()));
   }
 
   /// Batch-mean loss of the stored trajectory.
@@ -426,6 +546,9 @@ private:
   Index steps_;
   Index threads_ = 1;
   std::unique_ptr<Handoff> handoff_;  ///< with a pool and a SplitBackwardController
+  std::unique_ptr<SharedHandoff> shared_handoff_;  ///< with a pool and a SeedScalingController
+  SharedStep shared_step_;  ///< the one step of `shared_seed_sweep` on one thread
+  Matrix<Scalar> unit_seed_;  ///< 1 × B ones
   detail::PackedController<Ctrl> packed_controller_{controller_};
 
   Trajectory<Scalar, typename Ctrl::Workspace> trajectory_;

@@ -108,6 +108,22 @@ struct ParamHandoff {
     return static_cast<std::size_t>(k % ring_size);
   }
 
+  /// Runs `sweep` on this thread while a second thread of `pool` adds the `total` slots it
+  /// records with `add`.
+  template <class Add, class Sweep>
+  void run(ThreadPool& pool, Index total, Add& add, Sweep&& sweep) {
+    reset();
+    auto adder = [&](Index, Index) { keep_adding(total, add); };
+    pool.run_beside(1, adder, [&] {
+      try {
+        sweep();
+      } catch (...) {
+        abandoned.store(true, std::memory_order_release);
+        throw;
+      }
+    });
+  }
+
   /// The second thread's part: adds slots as they are recorded until all `total` are added
   /// (or the sweep gave up).
   template <class Add>
@@ -133,6 +149,26 @@ struct ParamHandoffOf {
 template <class C>
 struct ParamHandoffOf<C, true> {
   using Type = ParamHandoff<typename C::LayerAdjoints>;
+};
+
+/// One step of the shared-seed sweeps of the combined update: the layer adjoints of the
+/// seed 1 and the control adjoints μ_n (1 × B) of the Full and the PhysicsOnly sweep.
+template <class Adjoints, class Scalar>
+struct SharedSeedStep {
+  Adjoints adjoints;
+  Matrix<Scalar> full_mu, physics_mu;
+};
+
+/// `ParamHandoff` of `SharedSeedStep` for a `SeedScalingController`, else `Absent`.
+template <class C, bool = SeedScalingController<C>>
+struct SharedSeedHandoffOf {
+  using Step = Absent;
+  using Type = Absent;
+};
+template <class C>
+struct SharedSeedHandoffOf<C, true> {
+  using Step = SharedSeedStep<typename C::LayerAdjoints, typename C::Scalar>;
+  using Type = ParamHandoff<Step>;
 };
 
 /// One independently rolled-out chunk of `Engine::evaluate`: its states, controls, controller

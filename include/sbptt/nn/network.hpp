@@ -41,6 +41,7 @@ struct NetworkScratch {
   Vector<Scalar> adjoint;  ///< input adjoint of a layer with an activation, before f'
   Vector<Scalar> columns;  ///< conv window adjoints (im2col shape)
   std::vector<Vector<Scalar>> deltas;  ///< Δ of every layer, for the plain `backward`
+  std::vector<Vector<Scalar>> scaled_deltas;  ///< Δ_l·diag(s) of the scaled parameter half
 };
 
 /// Packed W (with b) and Wᵀ of the first `count` layers. The vectors only grow, so that the
@@ -232,14 +233,27 @@ public:
   /// for the forward pass in `ws`.
   void add_param_gradient(const Workspace& ws, const LayerAdjoints& adjoints,
                           Vector<Scalar>& grad) const {
-    check_workspace(ws);
-    check_grad_size(grad);
-    bool recorded = adjoints.deltas_.size() >= layers_.size();
-    for (std::size_t l = 0; recorded && l < layers_.size(); ++l)
-      recorded = adjoints.deltas_[l].size() >= layer_output_dim(layers_[l]) * ws.batch_;
-    detail::require(recorded, "Network::add_param_gradient: the adjoints do not cover this ",
-                    "workspace's batch; expected them recorded by backward_inputs at it");
+    check_recorded(ws, adjoints, grad);
     params_from(ws, adjoints.deltas_, grad);
+  }
+
+  /// The same for the seed dY·diag(s), `scales` = s (1 × B), from adjoints recorded with dY:
+  /// every layer's Δ is linear in its sample's column of dY, so Δ_l·diag(s) are that seed's.
+  void add_param_gradient(const Workspace& ws, const LayerAdjoints& adjoints,
+                          const Matrix<Scalar>& scales, Vector<Scalar>& grad) const {
+    check_recorded(ws, adjoints, grad);
+    detail::require(scales.rows() == 1 && scales.cols() == ws.batch_,
+                    "Network::add_param_gradient: scales is ", scales.rows(), " × ",
+                    scales.cols(), ", expected 1 × ", ws.batch_, " (one per sample)");
+    auto& scaled = detail::network_scratch<Scalar>().scaled_deltas;
+    if (scaled.size() < layers_.size()) scaled.resize(layers_.size());
+    for (std::size_t l = 0; l < layers_.size(); ++l) {
+      const Index rows = layer_output_dim(layers_[l]);
+      detail::grow_map(scaled[l], rows, ws.batch_).noalias() =
+          detail::ConstMatrixMap<Scalar>(adjoints.deltas_[l].data(), rows, ws.batch_) *
+          scales.row(0).asDiagonal();
+    }
+    params_from(ws, scaled, grad);
   }
 
 private:
@@ -354,6 +368,17 @@ private:
     }
   }
 
+  void check_recorded(const Workspace& ws, const LayerAdjoints& adjoints,
+                      const Vector<Scalar>& grad) const {
+    check_workspace(ws);
+    check_grad_size(grad);
+    bool recorded = adjoints.deltas_.size() >= layers_.size();
+    for (std::size_t l = 0; recorded && l < layers_.size(); ++l)
+      recorded = adjoints.deltas_[l].size() >= layer_output_dim(layers_[l]) * ws.batch_;
+    detail::require(recorded, "Network::add_param_gradient: the adjoints do not cover this ",
+                    "workspace's batch; expected them recorded by backward_inputs at it");
+  }
+
   void check_grad_size(const Vector<Scalar>& grad) const {
     detail::require(grad.size() == num_params(), "Network::backward: grad has ", grad.size(),
                     " entries, expected num_params() = ", num_params());
@@ -441,7 +466,6 @@ static_assert(static_assert_controller<Network<double>>());
 static_assert(static_assert_controller<Network<float>>());
 static_assert(Controller<Network<double>> && Controller<Network<float>>);
 static_assert(PackingController<Network<double>> && PackingController<Network<float>>);
-static_assert(SplitBackwardController<Network<double>> &&
-              SplitBackwardController<Network<float>>);
+static_assert(SeedScalingController<Network<double>> && SeedScalingController<Network<float>>);
 
 }  // namespace sbptt

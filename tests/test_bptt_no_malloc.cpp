@@ -52,6 +52,7 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 #include "sbptt/core/finite_difference.hpp"
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"
+#include "support/networks.hpp"
 #include "sbptt/sim/cartpole.hpp"
 #include "sbptt/sim/schrodinger.hpp"
 
@@ -65,13 +66,6 @@ struct MallocGuard {
   MallocGuard(const MallocGuard&) = delete;
   MallocGuard& operator=(const MallocGuard&) = delete;
 };
-
-template <class Scalar>
-Network<Scalar> quantum_cnn() {
-  return Network<Scalar>({Conv1d{32, 2, 60, 3, 2, Activation::Tanh},
-                          Conv1d{15, 60, 60, 3, 2, Activation::Tanh},
-                          Dense{420, 1, Activation::Identity}});
-}
 
 /// Warm-up, then the same calls again with Eigen's allocator switched off. The results of the
 /// guarded calls must equal the warm-up's (the guard changes nothing but the check).
@@ -151,7 +145,7 @@ TEMPLATE_TEST_CASE("engine: quantum control with the paper's CNN allocates nothi
                    "warm-up", "[bptt][malloc]", float, double) {
   using S = TestType;
   const Schrodinger1D<S, 32> sim;
-  auto net = quantum_cnn<S>();
+  auto net = testing::quantum_cnn<S>();
   Rng rng(4);
   glorot_uniform(net, rng);
   Engine engine(sim, net, quantum_objective(sim, 4), 24);

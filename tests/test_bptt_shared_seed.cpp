@@ -12,6 +12,7 @@
 #include "sbptt/core/finite_difference.hpp"
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"
+#include "support/networks.hpp"
 #include "sbptt/objectives/cartpole.hpp"
 #include "sbptt/objectives/quantum.hpp"
 #include "sbptt/sim/cartpole.hpp"
@@ -99,9 +100,7 @@ TEMPLATE_TEST_CASE("shared seed: cart pole with an MLP gives the lone sweeps' ve
 
 TEST_CASE("shared seed: quantum control with a CNN gives the lone sweeps' vectors", "[bptt]") {
   const Schrodinger1D<double, 16> sim;
-  CountingNetwork<double> net({Conv1d{16, 2, 6, 3, 2, Activation::Tanh},
-                               Conv1d{7, 6, 6, 3, 2, Activation::Tanh},
-                               Dense{18, 1, Activation::Identity}});
+  CountingNetwork<double> net(testing::quantum_cnn<double>(16, 6).layers());
   Rng rng(12);
   glorot_uniform(net, rng);
   const Matrix<double> x0 = sim.initial_states(rng, 5);

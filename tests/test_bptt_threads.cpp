@@ -18,6 +18,7 @@
 #include "sbptt/core/finite_difference.hpp"
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"
+#include "support/networks.hpp"
 #include "sbptt/optim/adam.hpp"
 #include "sbptt/sim/cartpole.hpp"
 #include "sbptt/sim/guidance_by_repulsion.hpp"
@@ -161,9 +162,7 @@ TEST_CASE("threads: guidance (continuous loss, regulariser) is bitwise identical
 
 TEST_CASE("threads: quantum control with a CNN is bitwise identical", "[bptt][threads]") {
   const Schrodinger1D<float, 16> sim;
-  Network<float> net({Conv1d{16, 2, 12, 3, 2, Activation::Tanh},
-                      Conv1d{7, 12, 12, 3, 2, Activation::Tanh},
-                      Dense{36, 1, Activation::Identity}});
+  Network<float> net = testing::quantum_cnn<float>(16, 12);
   Rng rng(44);
   glorot_uniform(net, rng);
   const Matrix<float> train = sim.initial_states(rng, 16);

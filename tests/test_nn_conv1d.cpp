@@ -9,6 +9,7 @@
 #include "sbptt/core/finite_difference.hpp"
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"
+#include "support/networks.hpp"
 
 using sbptt::Activation;
 using sbptt::Conv1d;
@@ -22,15 +23,6 @@ using sbptt::testing::randomize;
 template <class Scalar>
 sbptt::Matrix<Scalar> random_batch(Index rows, Index cols, std::uint64_t seed) {
   return sbptt::testing::random_matrix<Scalar>(rows, cols, seed, 1.5);
-}
-
-// The quantum-control CNN of the paper: (32 positions × 2 channels) → conv 60 k3 s2 tanh
-// → 15×60 → conv 60 k3 s2 tanh → 7×60 → flatten 420 → dense 1.
-template <class Scalar>
-Network<Scalar> quantum_cnn() {
-  return Network<Scalar>({Conv1d{32, 2, 60, 3, 2, Activation::Tanh},
-                          Conv1d{15, 60, 60, 3, 2, Activation::Tanh},
-                          Dense{420, 1, Activation::Identity}});
 }
 
 }  // namespace
@@ -107,7 +99,7 @@ TEMPLATE_TEST_CASE("conv1d parameter order matches PyTorch Conv1d", "[nn][conv1d
 TEMPLATE_TEST_CASE("the quantum CNN has the paper's shapes and 11,701 parameters",
                    "[nn][conv1d]", float, double) {
   using S = TestType;
-  const auto net = quantum_cnn<S>();
+  const auto net = sbptt::testing::quantum_cnn<S>();
   CHECK(net.num_params() == 11701);
   CHECK(net.input_dim() == 64);
   CHECK(net.output_dim() == 1);
@@ -154,7 +146,7 @@ TEST_CASE("conv1d backward equals central finite differences", "[nn][conv1d]") {
 }
 
 TEST_CASE("the quantum CNN backward equals central finite differences", "[nn][conv1d]") {
-  auto net = quantum_cnn<double>();
+  auto net = sbptt::testing::quantum_cnn<double>();
   sbptt::Rng rng(42);
   sbptt::glorot_uniform(net, rng);
   for (const Index batch : {1, 5}) {
@@ -167,7 +159,7 @@ TEST_CASE("the quantum CNN backward equals central finite differences", "[nn][co
 
 TEST_CASE("conv backward with dX == nullptr gives the same parameter gradient",
           "[nn][conv1d]") {
-  auto net = quantum_cnn<double>();
+  auto net = sbptt::testing::quantum_cnn<double>();
   randomize(net, 11, 0.2);
   const auto x = random_batch<double>(64, 5, 12);
   const auto dy = random_batch<double>(1, 5, 13);

@@ -321,32 +321,15 @@ private:
   /// With `handoff` the parameter products go through it (`reverse`), else they are done here.
   void sweep(Sweep& s, const FlowSchedule& schedule, Vector<Scalar>& gradient, Index truncation,
              bool parallel, Handoff* handoff = nullptr) {
-    const Index batch = trajectory_.batch();
     begin_sweep(s, gradient, handoff != nullptr);
     auto add = [&](std::size_t slot) { add_params(*handoff, slot, gradient); };
-    const Scalar seed_scale = loss_seed_scale(), control_seed = control_seed_scale();
     for (Index n = steps_ - 1; n >= 0; --n) {
       const auto i = static_cast<std::size_t>(n);
       const FlowMode mode = schedule.at(n);
       const bool cut = truncation > 0 && n > 0 && n % truncation == 0;
       const bool physics = physics_flows(mode) && !cut;
       const bool network = network_flows(mode) && !cut;
-      const bool scored = objective_.timing == LossTiming::Continuous || n + 1 == steps_;
-      fork_[1].for_samples(pool_.get(), batch, s.scratch, parallel, [&](Index b, Scratch& t) {
-        if (scored) {  // λ_{n+1} += w/B · ∂ℓ/∂x_{n+1}
-          t.x = trajectory_.states[i + 1].col(b);
-          objective_.state_loss(t.x, &t.seed);
-          s.lambda.col(b) += seed_scale * t.seed;
-        }
-        t.x = trajectory_.states[i].col(b);
-        t.u = trajectory_.controls[i].col(b);
-        t.lambda_sample = s.lambda.col(b);
-        sim_.vjp(t.x, t.u, t.lambda_sample, physics ? &t.lambda_x : nullptr, &t.lambda_u);
-        s.mu.col(b) = t.lambda_u;
-        if (physics) s.propagated.col(b) = t.lambda_x;
-      });
-      record_adjoint(s, n + 1);
-      if (objective_.control_weight > 0) s.mu.noalias() += control_seed * trajectory_.controls[i];
+      adjoint_products(s, n, physics, parallel);
       Matrix<Scalar>* input_adjoint = network ? &s.input_adjoint : nullptr;
       if constexpr (SplitBackwardController<Ctrl>) {
         if (handoff != nullptr) {
@@ -408,32 +391,11 @@ private:
     auto add = [&](std::size_t slot) {
       add_shared_step(handoff->ring[slot], handoff->steps[slot], result);
     };
-    const Scalar seed_scale = loss_seed_scale(), control_seed = control_seed_scale();
     for (Index n = steps_ - 1; n >= 0; --n) {
       const auto i = static_cast<std::size_t>(n);
       const bool cut = truncation > 0 && n > 0 && n % truncation == 0;
-      const bool scored = objective_.timing == LossTiming::Continuous || n + 1 == steps_;
-      fork_[1].for_samples(pool_.get(), batch, full.scratch, handoff == nullptr,
-                           [&](Index b, Scratch& t) {
-        if (scored) {
-          t.x_next = trajectory_.states[i + 1].col(b);
-          objective_.state_loss(t.x_next, &t.seed);
-        }
-        t.x = trajectory_.states[i].col(b);
-        t.u = trajectory_.controls[i].col(b);
-        for (Sweep* s : {&full, &physics}) {
-          if (scored) s->lambda.col(b) += seed_scale * t.seed;
-          t.lambda_sample = s->lambda.col(b);
-          sim_.vjp(t.x, t.u, t.lambda_sample, cut ? nullptr : &t.lambda_x, &t.lambda_u);
-          s->mu.col(b) = t.lambda_u;
-          if (!cut) s->propagated.col(b) = t.lambda_x;
-        }
-      });
-      for (Sweep* s : {&full, &physics}) {
-        record_adjoint(*s, n + 1);
-        if (objective_.control_weight > 0)
-          s->mu.noalias() += control_seed * trajectory_.controls[i];
-      }
+      adjoint_products(full, n, !cut, handoff == nullptr);
+      adjoint_products(physics, n, !cut, handoff == nullptr);
       const Index k = steps_ - 1 - n;  // steps recorded so far
       const std::size_t slot = handoff != nullptr ? handoff->slot_for(k, add) : 0;
       SharedStep& step = handoff != nullptr ? handoff->ring[slot] : shared_step_;
@@ -468,6 +430,31 @@ private:
     const auto& workspace = trajectory_.workspaces[static_cast<std::size_t>(n)];
     controller_.add_param_gradient(workspace, step.adjoints, step.full_mu, result.regular);
     controller_.add_param_gradient(workspace, step.adjoints, step.physics_mu, result.modified);
+  }
+
+  /// The per-sample half of step n of sweep `s`: λ_{n+1} += its loss seed, μ_n = B_nᵀλ_{n+1}
+  /// (plus the control seed) and, when `physics`, A_nᵀλ_{n+1} into `s.propagated`.
+  void adjoint_products(Sweep& s, Index n, bool physics, bool parallel) {
+    const auto i = static_cast<std::size_t>(n);
+    const Scalar seed_scale = loss_seed_scale();
+    const bool scored = objective_.timing == LossTiming::Continuous || n + 1 == steps_;
+    fork_[1].for_samples(pool_.get(), trajectory_.batch(), s.scratch, parallel,
+                         [&](Index b, Scratch& t) {
+      if (scored) {  // λ_{n+1} += w/B · ∂ℓ/∂x_{n+1}
+        t.x = trajectory_.states[i + 1].col(b);
+        objective_.state_loss(t.x, &t.seed);
+        s.lambda.col(b) += seed_scale * t.seed;
+      }
+      t.x = trajectory_.states[i].col(b);
+      t.u = trajectory_.controls[i].col(b);
+      t.lambda_sample = s.lambda.col(b);
+      sim_.vjp(t.x, t.u, t.lambda_sample, physics ? &t.lambda_x : nullptr, &t.lambda_u);
+      s.mu.col(b) = t.lambda_u;
+      if (physics) s.propagated.col(b) = t.lambda_x;
+    });
+    record_adjoint(s, n + 1);
+    if (objective_.control_weight > 0)
+      s.mu.noalias() += control_seed_scale() * trajectory_.controls[i];
   }
 
   void begin_sweep(Sweep& s, Vector<Scalar>& gradient, bool overlapped) {

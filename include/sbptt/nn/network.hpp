@@ -13,7 +13,7 @@
 /// Memory: `forward` keeps what `backward` needs in the caller's `Workspace` (input copy,
 /// every layer's output, the im2col matrices) and resizes those buffers only when the batch
 /// size or the network changes. `backward` takes the workspace `const`, so its own temporaries
-/// (layer adjoints) live in thread-local buffers that only ever grow: after the first call on
+/// (layer adjoints) live in thread-local buffers (network_scratch.hpp) that only ever grow: after the first call on
 /// a thread, repeated calls at the same sizes allocate nothing, and several threads may run
 /// `backward` on the same workspace at once (e.g. the two sweeps of the combined update).
 #include <cstddef>
@@ -29,44 +29,10 @@
 #include "sbptt/core/types.hpp"
 #include "sbptt/nn/activation.hpp"
 #include "sbptt/nn/layer.hpp"
+#include "sbptt/nn/network_scratch.hpp"
 #include "sbptt/nn/packed_product.hpp"
 
 namespace sbptt {
-
-namespace detail {
-
-/// Per-thread temporaries of `Network::backward` (see the file comment for why).
-template <class Scalar>
-struct NetworkScratch {
-  Vector<Scalar> adjoint;  ///< input adjoint of a layer with an activation, before f'
-  Vector<Scalar> columns;  ///< conv window adjoints (im2col shape)
-  std::vector<Vector<Scalar>> deltas;  ///< Δ of every layer, for the plain `backward`
-  std::vector<Vector<Scalar>> scaled_deltas;  ///< Δ_l·diag(s) of the scaled parameter half
-};
-
-/// Packed W (with b) and Wᵀ of the first `count` layers. The vectors only grow, so that the
-/// per-thread scratch serves networks of several shapes in turn without allocating.
-template <class Scalar>
-struct PackedLayers {
-  std::size_t count = 0;
-  std::vector<PackedMatrix<Scalar>> weights;
-  std::vector<PackedMatrix<Scalar>> transposed;
-};
-
-/// What the overloads without packed weights pack into, one per thread.
-template <class Scalar>
-[[nodiscard]] PackedLayers<Scalar>& packed_scratch() {
-  thread_local PackedLayers<Scalar> packed;
-  return packed;
-}
-
-template <class Scalar>
-[[nodiscard]] NetworkScratch<Scalar>& network_scratch() {
-  thread_local NetworkScratch<Scalar> scratch;
-  return scratch;
-}
-
-}  // namespace detail
 
 /// A sequential stack of `Dense` / `Conv1d` layers; satisfies `sbptt::Controller`.
 ///

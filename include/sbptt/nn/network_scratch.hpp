@@ -1,0 +1,49 @@
+#pragma once
+/// \file The per-thread temporaries of `Network`: its packed weights when none are given and
+/// its backward pass's layer adjoints. Thread-local, because `backward` takes the workspace
+/// `const` and may run on several threads at once (network.hpp); the buffers only grow, so a
+/// thread allocates nothing after its first call at a shape.
+#include <cstddef>
+#include <vector>
+
+#include "sbptt/core/types.hpp"
+#include "sbptt/nn/packed_product.hpp"
+
+namespace sbptt {
+
+namespace detail {
+
+/// Per-thread temporaries of `Network::backward` (see the file comment for why).
+template <class Scalar>
+struct NetworkScratch {
+  Vector<Scalar> adjoint;  ///< input adjoint of a layer with an activation, before f'
+  Vector<Scalar> columns;  ///< conv window adjoints (im2col shape)
+  std::vector<Vector<Scalar>> deltas;  ///< Δ of every layer, for the plain `backward`
+  std::vector<Vector<Scalar>> scaled_deltas;  ///< Δ_l·diag(s) of the scaled parameter half
+};
+
+/// Packed W (with b) and Wᵀ of the first `count` layers. The vectors only grow, so that the
+/// per-thread scratch serves networks of several shapes in turn without allocating.
+template <class Scalar>
+struct PackedLayers {
+  std::size_t count = 0;
+  std::vector<PackedMatrix<Scalar>> weights;
+  std::vector<PackedMatrix<Scalar>> transposed;
+};
+
+/// What the overloads without packed weights pack into, one per thread.
+template <class Scalar>
+[[nodiscard]] PackedLayers<Scalar>& packed_scratch() {
+  thread_local PackedLayers<Scalar> packed;
+  return packed;
+}
+
+template <class Scalar>
+[[nodiscard]] NetworkScratch<Scalar>& network_scratch() {
+  thread_local NetworkScratch<Scalar> scratch;
+  return scratch;
+}
+
+}  // namespace detail
+
+}  // namespace sbptt

@@ -20,7 +20,9 @@
 /// resized only when the shape changes).
 ///
 /// Threads (`set_threads`): the per-sample work of a step (simulator step and VJP, loss seeds)
-/// is split over the samples; `regular_and_modified` runs its two sweeps at once; `evaluate`
+/// is split over the samples; `regular_and_modified` runs its two sweeps at once, or, when
+/// they share the controller's backward pass (one control), hands both sweeps' parameter
+/// products to the second thread as a lone sweep does (below); `evaluate`
 /// rolls out fixed chunks of `kEvaluateChunk` samples independently. A lone sweep (`reverse`)
 /// whose per-sample loops are too cheap to split hands the parameter products of a
 /// `SplitBackwardController` to a second thread instead, step by step, and adds them in step
@@ -44,6 +46,7 @@
 #include "sbptt/core/error.hpp"
 #include "sbptt/bptt/engine_buffers.hpp"
 #include "sbptt/bptt/packed_controller.hpp"
+#include "sbptt/bptt/shared_seed_sweeps.hpp"
 #include "sbptt/core/parallel.hpp"
 
 namespace sbptt {
@@ -143,8 +146,7 @@ public:
     pool_ = threads > 1 ? std::make_unique<detail::ThreadPool>(threads) : nullptr;
     if constexpr (SplitBackwardController<Ctrl>)
       handoff_ = pool_ ? std::make_unique<Handoff>() : nullptr;
-    if constexpr (SeedScalingController<Ctrl>)
-      shared_handoff_ = pool_ ? std::make_unique<SharedHandoff>() : nullptr;
+    if constexpr (SeedScalingController<Ctrl>) shared_seed_.set_threaded(pool_ != nullptr);
     threads_ = threads;
     for (auto& decision : fork_) decision = detail::ForkDecision(split_above_ns);
     const auto slots = static_cast<std::size_t>(threads);
@@ -249,7 +251,7 @@ public:
 
   /// As above, reusing the buffers of `result` (no allocation once sized). With one control
   /// and a `SeedScalingController` both sweeps share one backward pass of the controller
-  /// (`shared_seed_sweeps`); otherwise, with threads, the two sweeps run at the same time,
+  /// (shared_seed_sweeps.hpp); otherwise, with threads, the two sweeps run at the same time,
   /// each exactly as it would alone.
   void regular_and_modified(const Matrix<Scalar>& initial_states, GradientPair<Scalar>& result,
                             Index truncation = 0) {
@@ -258,7 +260,7 @@ public:
     check_sweep(FlowMode::Full, truncation);
     if constexpr (SeedScalingController<Ctrl>) {
       if (sim_.control_dim() == 1) {
-        shared_seed_sweeps(result, truncation);
+        shared_seed_.run(*this, result, truncation);
         finish_pair(result);
         return;
       }
@@ -285,8 +287,8 @@ private:
   using EvalChunk = detail::EvaluationChunk<Scalar, typename Ctrl::Workspace, Scratch>;
 
   using Handoff = typename detail::ParamHandoffOf<Ctrl>::Type;
-  using SharedHandoff = typename detail::SharedSeedHandoffOf<Ctrl>::Type;
-  using SharedStep = typename detail::SharedSeedHandoffOf<Ctrl>::Step;
+  template <class Adjoints, class S>
+  friend class detail::SharedSeedSweeps;
 
   /// Adds the parameter products recorded in `slot` of the hand-off to `gradient`.
   void add_params(Handoff& h, std::size_t slot, Vector<Scalar>& gradient) const {
@@ -355,88 +357,15 @@ private:
     if constexpr (SplitBackwardController<Ctrl>) {
       if (handoff != nullptr) handoff->wait_added(steps_, add);
     }
-    end_sweep(s, gradient);
-  }
-
-  /// Both sweeps of `regular_and_modified` with one backward pass of the controller per step.
-  /// With a single control, μ_n of each sweep is a row (1 × B) and the controller's backward is
-  /// linear in each sample's seed, so the layer adjoints of the seed 1 serve both: each sweep
-  /// scales them by its own μ_n for its parameter products, and the Full sweep its input
-  /// adjoint K_nᵀ1 for λ_n. That saves the PhysicsOnly sweep's layer VJPs. With threads, the
-  /// parameter products run on a second thread, in step order as on one thread
-  /// (`ParamHandoff`), so the results do not depend on the thread count.
-  void shared_seed_sweeps(GradientPair<Scalar>& result, Index truncation)
-    requires SeedScalingController<Ctrl>
-  {
-    if (!pool_) {
-      shared_seed_sweep(result, truncation, nullptr);
-      return;
-    }
-    SharedHandoff& h = *shared_handoff_;
-    auto add = [&](std::size_t slot) {
-      add_shared_step(h.ring[slot], h.steps[slot], result);
-    };
-    h.run(*pool_, steps_, add, [&] { shared_seed_sweep(result, truncation, &h); });
-  }
-
-  void shared_seed_sweep(GradientPair<Scalar>& result, Index truncation, SharedHandoff* handoff)
-    requires SeedScalingController<Ctrl>
-  {
-    const Index batch = trajectory_.batch();
-    Sweep& full = sweeps_[0];
-    Sweep& physics = sweeps_[1];
-    begin_sweep(full, result.regular, handoff != nullptr);
-    begin_sweep(physics, result.modified, handoff != nullptr);
-    unit_seed_.setOnes(1, batch);
-    auto add = [&](std::size_t slot) {
-      add_shared_step(handoff->ring[slot], handoff->steps[slot], result);
-    };
-    for (Index n = steps_ - 1; n >= 0; --n) {
-      const auto i = static_cast<std::size_t>(n);
-      const bool cut = truncation > 0 && n > 0 && n % truncation == 0;
-      adjoint_products(full, n, !cut, handoff == nullptr);
-      adjoint_products(physics, n, !cut, handoff == nullptr);
-      const Index k = steps_ - 1 - n;  // steps recorded so far
-      const std::size_t slot = handoff != nullptr ? handoff->slot_for(k, add) : 0;
-      SharedStep& step = handoff != nullptr ? handoff->ring[slot] : shared_step_;
-      step.full_mu = full.mu;
-      step.physics_mu = physics.mu;
-      packed_controller_.backward_inputs(trajectory_.workspaces[i], unit_seed_,
-                                         cut ? nullptr : &full.input_adjoint, step.adjoints);
-      if (handoff != nullptr) {
-        handoff->steps[slot] = n;
-        handoff->recorded.store(k + 1, std::memory_order_release);
-      } else {
-        add_shared_step(step, n, result);
-      }
-      if (cut) {
-        full.lambda.setZero();
-        physics.lambda.setZero();
-      } else {
-        full.lambda.swap(full.propagated);
-        full.lambda.array() += full.input_adjoint.array().rowwise() * full.mu.row(0).array();
-        physics.lambda.swap(physics.propagated);
-      }
-    }
-    if (handoff != nullptr) handoff->wait_added(steps_, add);
-    end_sweep(full, result.regular);
-    end_sweep(physics, result.modified);
-  }
-
-  /// Adds both sweeps' parameter products of the step `n` recorded in `step`.
-  void add_shared_step(const SharedStep& step, Index n, GradientPair<Scalar>& result) const
-    requires SeedScalingController<Ctrl>
-  {
-    const auto& workspace = trajectory_.workspaces[static_cast<std::size_t>(n)];
-    controller_.add_param_gradient(workspace, step.adjoints, step.full_mu, result.regular);
-    controller_.add_param_gradient(workspace, step.adjoints, step.physics_mu, result.modified);
+    s.end(gradient);
   }
 
   /// The per-sample half of step n of sweep `s`: λ_{n+1} += its loss seed, μ_n = B_nᵀλ_{n+1}
   /// (plus the control seed) and, when `physics`, A_nᵀλ_{n+1} into `s.propagated`.
   void adjoint_products(Sweep& s, Index n, bool physics, bool parallel) {
     const auto i = static_cast<std::size_t>(n);
-    const Scalar seed_scale = loss_seed_scale();
+    const auto batch = static_cast<double>(trajectory_.batch());
+    const auto seed_scale = static_cast<Scalar>(objective_.step_weight / batch);  // w/B
     const bool scored = objective_.timing == LossTiming::Continuous || n + 1 == steps_;
     fork_[1].for_samples(pool_.get(), trajectory_.batch(), s.scratch, parallel,
                          [&](Index b, Scratch& t) {
@@ -452,44 +381,23 @@ private:
       s.mu.col(b) = t.lambda_u;
       if (physics) s.propagated.col(b) = t.lambda_x;
     });
-    record_adjoint(s, n + 1);
-    if (objective_.control_weight > 0)
-      s.mu.noalias() += control_seed_scale() * trajectory_.controls[i];
+    s.record_adjoint(n + 1);
+    if (objective_.control_weight > 0)  // + 2ρ/(m·k·B) · c_n
+      s.mu.noalias() += static_cast<Scalar>(2.0 * objective_.control_weight /
+                                            (static_cast<double>(steps_ * sim_.control_dim()) *
+                                             batch)) *
+                        trajectory_.controls[i];
   }
 
   void begin_sweep(Sweep& s, Vector<Scalar>& gradient, bool overlapped) {
-    const Index batch = trajectory_.batch();
     gradient.setZero(controller_.num_params());
-    s.lambda.setZero(sim_.state_dim(), batch);
-    s.mu.resize(sim_.control_dim(), batch);
-    s.propagated.resize(sim_.state_dim(), batch);
-    s.diagnostics.adjoint_norms.assign(static_cast<std::size_t>(steps_ + 1), 0.0);
-    s.diagnostics.first_non_finite.reset();
-    s.diagnostics.params_overlapped = overlapped;
-  }
-
-  void end_sweep(Sweep& s, const Vector<Scalar>& gradient) {
-    record_adjoint(s, 0);
-    s.diagnostics.grad_norm2 = static_cast<double>(gradient.squaredNorm());
-    if (!s.diagnostics.first_non_finite)
-      s.diagnostics.first_non_finite = detail::first_non_finite_component(gradient);
+    s.begin(sim_.state_dim(), sim_.control_dim(), trajectory_.batch(), steps_, overlapped);
   }
 
   void finish_pair(GradientPair<Scalar>& result) const {
     result.regular_diagnostics = sweeps_[0].diagnostics;
     result.modified_diagnostics = sweeps_[1].diagnostics;
     result.comparison = compare(result.modified, result.regular);
-  }
-
-  /// w/B, the factor of every loss seed; and 2ρ/(m·k·B), that of the control term of μ_n.
-  [[nodiscard]] Scalar loss_seed_scale() const {
-    return static_cast<Scalar>(objective_.step_weight /
-                               static_cast<double>(trajectory_.batch()));
-  }
-  [[nodiscard]] Scalar control_seed_scale() const {
-    return static_cast<Scalar>(2.0 * objective_.control_weight /
-                               static_cast<double>(steps_ * sim_.control_dim() *
-                                                   trajectory_.batch()));
   }
 
   /// Batch-mean loss of the stored trajectory.
@@ -514,14 +422,6 @@ private:
     return detail::mean_of_samples(eval_losses_, steps_, forward_non_finite_);
   }
 
-  void record_adjoint(Sweep& s, Index n) {
-    s.diagnostics.adjoint_norms[static_cast<std::size_t>(n)] =
-        static_cast<double>(s.lambda.norm());
-    if (!s.diagnostics.first_non_finite)
-      detail::note_first_non_finite(Quantity::Adjoint, n, s.lambda,
-                                    s.diagnostics.first_non_finite);
-  }
-
   void note_non_finite(Quantity quantity, Index n, const Matrix<Scalar>& values) {
     if (!forward_non_finite_)
       detail::note_first_non_finite(quantity, n, values, forward_non_finite_);
@@ -533,9 +433,7 @@ private:
   Index steps_;
   Index threads_ = 1;
   std::unique_ptr<Handoff> handoff_;  ///< with a pool and a SplitBackwardController
-  std::unique_ptr<SharedHandoff> shared_handoff_;  ///< with a pool and a SeedScalingController
-  SharedStep shared_step_;  ///< the one step of `shared_seed_sweep` on one thread
-  Matrix<Scalar> unit_seed_;  ///< 1 × B ones
+  typename detail::SharedSeedSweepsOf<Ctrl>::Type shared_seed_;  ///< one control: shared pass
   detail::PackedController<Ctrl> packed_controller_{controller_};
 
   Trajectory<Scalar, typename Ctrl::Workspace> trajectory_;

@@ -32,6 +32,25 @@ struct SampleScratch {
   }
 };
 
+/// Sets `slot` to the first non-finite entry of `values` (scanning sample by sample), with
+/// samples numbered from `first`; leaves it alone when every entry is finite.
+template <class Scalar>
+void note_first_non_finite(Quantity quantity, Index step, const Matrix<Scalar>& values,
+                           std::optional<NonFinite>& slot, Index first = 0) {
+  if (const auto at = first_non_finite(values))
+    slot = NonFinite{quantity, step, first + at->column,
+                     static_cast<double>(values(at->row, at->column))};
+}
+
+/// The first non-finite component of a gradient or parameter vector (step −1, `sample` =
+/// parameter index).
+template <class Scalar>
+[[nodiscard]] std::optional<NonFinite> first_non_finite_component(const Vector<Scalar>& g) {
+  if (const auto at = first_non_finite(g))
+    return NonFinite{Quantity::Gradient, -1, at->row, static_cast<double>(g(at->row))};
+  return std::nullopt;
+}
+
 /// Buffers and report of one reverse sweep: λ, A_nᵀλ, μ and K_nᵀμ (state_dim or control_dim
 /// × B), plus one scratch per thread. Two of them let both sweeps of the combined update run at
 /// the same time.
@@ -40,6 +59,31 @@ struct SweepBuffers {
   Matrix<Scalar> lambda, propagated, mu, input_adjoint;
   SweepDiagnostics diagnostics;
   std::vector<Scratch> scratch;
+
+  /// λ = 0 and the report cleared, for a sweep of `steps` steps over `batch` samples.
+  void begin(Index state_dim, Index control_dim, Index batch, Index steps, bool overlapped) {
+    lambda.setZero(state_dim, batch);
+    mu.resize(control_dim, batch);
+    propagated.resize(state_dim, batch);
+    diagnostics.adjoint_norms.assign(static_cast<std::size_t>(steps + 1), 0.0);
+    diagnostics.first_non_finite.reset();
+    diagnostics.params_overlapped = overlapped;
+  }
+
+  /// Reports ‖λ‖ as λ_n, and its first non-finite entry unless one is already reported.
+  void record_adjoint(Index n) {
+    diagnostics.adjoint_norms[static_cast<std::size_t>(n)] = static_cast<double>(lambda.norm());
+    if (!diagnostics.first_non_finite)
+      note_first_non_finite(Quantity::Adjoint, n, lambda, diagnostics.first_non_finite);
+  }
+
+  /// Records λ_0 and reports the finished `gradient`.
+  void end(const Vector<Scalar>& gradient) {
+    record_adjoint(0);
+    diagnostics.grad_norm2 = static_cast<double>(gradient.squaredNorm());
+    if (!diagnostics.first_non_finite)
+      diagnostics.first_non_finite = first_non_finite_component(gradient);
+  }
 };
 
 /// The hand-off of a sweep whose parameter products run on a second thread. The sweeping
@@ -151,26 +195,6 @@ struct ParamHandoffOf<C, true> {
   using Type = ParamHandoff<typename C::LayerAdjoints>;
 };
 
-/// One step of the shared-seed sweeps of the combined update: the layer adjoints of the
-/// seed 1 and the control adjoints μ_n (1 × B) of the Full and the PhysicsOnly sweep.
-template <class Adjoints, class Scalar>
-struct SharedSeedStep {
-  Adjoints adjoints;
-  Matrix<Scalar> full_mu, physics_mu;
-};
-
-/// `ParamHandoff` of `SharedSeedStep` for a `SeedScalingController`, else `Absent`.
-template <class C, bool = SeedScalingController<C>>
-struct SharedSeedHandoffOf {
-  using Step = Absent;
-  using Type = Absent;
-};
-template <class C>
-struct SharedSeedHandoffOf<C, true> {
-  using Step = SharedSeedStep<typename C::LayerAdjoints, typename C::Scalar>;
-  using Type = ParamHandoff<Step>;
-};
-
 /// One independently rolled-out chunk of `Engine::evaluate`: its states, controls, controller
 /// workspace and the first non-finite value it met, with that value's place in rollout order.
 template <class Scalar, class Workspace, class Scratch>
@@ -271,16 +295,6 @@ private:
   double best_ns_ = 0;
 };
 
-/// Sets `slot` to the first non-finite entry of `values` (scanning sample by sample), with
-/// samples numbered from `first`; leaves it alone when every entry is finite.
-template <class Scalar>
-void note_first_non_finite(Quantity quantity, Index step, const Matrix<Scalar>& values,
-                           std::optional<NonFinite>& slot, Index first = 0) {
-  if (const auto at = first_non_finite(values))
-    slot = NonFinite{quantity, step, first + at->column,
-                     static_cast<double>(values(at->row, at->column))};
-}
-
 template <class Scalar, class Workspace, class Scratch>
 void EvaluationChunk<Scalar, Workspace, Scratch>::note(Quantity quantity, Index step, Index rank,
                                                       const Matrix<Scalar>& values,
@@ -302,15 +316,6 @@ template <class Scalar>
     total += losses(b);
   }
   return total / static_cast<Scalar>(losses.size());
-}
-
-/// The first non-finite component of a gradient or parameter vector (step −1, `sample` =
-/// parameter index).
-template <class Scalar>
-[[nodiscard]] std::optional<NonFinite> first_non_finite_component(const Vector<Scalar>& g) {
-  if (const auto at = first_non_finite(g))
-    return NonFinite{Quantity::Gradient, -1, at->row, static_cast<double>(g(at->row))};
-  return std::nullopt;
 }
 
 }  // namespace sbptt::detail

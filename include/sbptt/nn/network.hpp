@@ -13,9 +13,10 @@
 /// Memory: `forward` keeps what `backward` needs in the caller's `Workspace` (input copy,
 /// every layer's output, the im2col matrices) and resizes those buffers only when the batch
 /// size or the network changes. `backward` takes the workspace `const`, so its own temporaries
-/// (layer adjoints) live in thread-local buffers (network_scratch.hpp) that only ever grow: after the first call on
-/// a thread, repeated calls at the same sizes allocate nothing, and several threads may run
-/// `backward` on the same workspace at once (e.g. the two sweeps of the combined update).
+/// (layer adjoints) live in thread-local buffers (network_scratch.hpp) that only ever grow:
+/// after the first call on a thread, repeated calls at the same sizes allocate nothing, and
+/// several threads may run `backward` on the same workspace at once (e.g. the two sweeps of
+/// the combined update).
 #include <cstddef>
 #include <initializer_list>
 #include <string>

@@ -1,0 +1,129 @@
+#pragma once
+/// \file Both sweeps of the combined update with one backward pass of the controller per step,
+/// for a controller with one output. Implementation detail of `Engine::regular_and_modified`.
+///
+/// Both sweeps add (∂N/∂θ)_nᵀ μ_n at every step n, each with its own control adjoint μ_n. With
+/// one control, μ_n is a number per sample, and the controller's backward pass is linear in
+/// each sample's seed: the layer adjoints Δ_l(μ) are Δ_l(1)·diag(μ). So one pass with the seed
+/// 1 records Δ_l(1); the Full sweep scales them by its μ_n for g_R, and its input adjoint
+/// K_nᵀ1 for λ_n; the PhysicsOnly sweep scales them by its own μ_n for g_M. That saves the
+/// PhysicsOnly sweep's layer VJPs, about half of its network work (docs/design.md). Results
+/// equal the two separate sweeps up to round-off, because (μ·Δ(1))·x is another grouping of
+/// the same products.
+///
+/// Threads: the sweeping thread runs both sweeps' per-sample VJPs and the one backward pass,
+/// and records each step (layer adjoints and both μ_n) into a `ParamHandoff` ring; the
+/// parameter products of both sweeps are added from it in step order, on whichever thread
+/// holds the ring's lock, so the sums are the single thread's bit for bit.
+#include <cstddef>
+#include <memory>
+
+#include "sbptt/bptt/engine_buffers.hpp"
+#include "sbptt/core/concepts.hpp"
+#include "sbptt/core/types.hpp"
+
+namespace sbptt::detail {
+
+/// One recorded step: the layer adjoints of the seed 1 and the control adjoints μ_n (1 × B)
+/// of the Full and the PhysicsOnly sweep.
+template <class Adjoints, class Scalar>
+struct SharedSeedStep {
+  Adjoints adjoints;
+  Matrix<Scalar> full_mu, physics_mu;
+};
+
+/// The shared-seed sweeps of an `Engine` (its friend) whose controller has layer adjoints of
+/// type `Adjoints`.
+template <class Adjoints, class Scalar>
+class SharedSeedSweeps {
+public:
+  /// With threads, steps are handed to the engine's second thread (else added in place).
+  void set_threaded(bool threaded) {
+    handoff_ = threaded ? std::make_unique<Handoff>() : nullptr;
+  }
+
+  /// g_R into `result.regular`, g_M into `result.modified`, and both sweeps' diagnostics in
+  /// the engine's sweep buffers, over the engine's stored trajectory.
+  template <class Engine, class Pair>
+  void run(Engine& engine, Pair& result, Index truncation) {
+    if (!handoff_) {
+      sweep(engine, result, truncation, nullptr);
+      return;
+    }
+    Handoff& h = *handoff_;
+    auto add = [&](std::size_t slot) { add_step(engine, h.ring[slot], h.steps[slot], result); };
+    h.run(*engine.pool_, engine.steps_, add, [&] { sweep(engine, result, truncation, &h); });
+  }
+
+private:
+  using Step = SharedSeedStep<Adjoints, Scalar>;
+  using Handoff = ParamHandoff<Step>;
+
+  template <class Engine, class Pair>
+  void sweep(Engine& e, Pair& result, Index truncation, Handoff* handoff) {
+    const Index batch = e.trajectory_.batch();
+    auto& full = e.sweeps_[0];
+    auto& physics = e.sweeps_[1];
+    e.begin_sweep(full, result.regular, handoff != nullptr);
+    e.begin_sweep(physics, result.modified, handoff != nullptr);
+    unit_seed_.setOnes(1, batch);
+    auto add = [&](std::size_t slot) {
+      add_step(e, handoff->ring[slot], handoff->steps[slot], result);
+    };
+    for (Index n = e.steps_ - 1; n >= 0; --n) {
+      const auto i = static_cast<std::size_t>(n);
+      const bool cut = truncation > 0 && n > 0 && n % truncation == 0;
+      e.adjoint_products(full, n, !cut, handoff == nullptr);
+      e.adjoint_products(physics, n, !cut, handoff == nullptr);
+      const Index k = e.steps_ - 1 - n;  // steps recorded so far
+      const std::size_t slot = handoff != nullptr ? handoff->slot_for(k, add) : 0;
+      Step& step = handoff != nullptr ? handoff->ring[slot] : single_;
+      step.full_mu = full.mu;
+      step.physics_mu = physics.mu;
+      e.packed_controller_.backward_inputs(e.trajectory_.workspaces[i], unit_seed_,
+                                           cut ? nullptr : &full.input_adjoint, step.adjoints);
+      if (handoff != nullptr) {
+        handoff->steps[slot] = n;
+        handoff->recorded.store(k + 1, std::memory_order_release);
+      } else {
+        add_step(e, step, n, result);
+      }
+      if (cut) {
+        full.lambda.setZero();
+        physics.lambda.setZero();
+      } else {
+        full.lambda.swap(full.propagated);
+        full.lambda.array() += full.input_adjoint.array().rowwise() * full.mu.row(0).array();
+        physics.lambda.swap(physics.propagated);
+      }
+    }
+    if (handoff != nullptr) handoff->wait_added(e.steps_, add);
+    full.end(result.regular);
+    physics.end(result.modified);
+  }
+
+  /// Adds both sweeps' parameter products of step `n`, recorded in `step`.
+  template <class Engine, class Pair>
+  static void add_step(const Engine& e, const Step& step, Index n, Pair& result) {
+    const auto& workspace = e.trajectory_.workspaces[static_cast<std::size_t>(n)];
+    e.controller_.add_param_gradient(workspace, step.adjoints, step.full_mu, result.regular);
+    e.controller_.add_param_gradient(workspace, step.adjoints, step.physics_mu,
+                                     result.modified);
+  }
+
+  std::unique_ptr<Handoff> handoff_;  ///< with threads
+  Step single_;  ///< the one step in use without threads
+  Matrix<Scalar> unit_seed_;  ///< 1 × B ones
+};
+
+/// `SharedSeedSweeps` for a `SeedScalingController`, else `Absent`.
+template <class C, bool = SeedScalingController<C>>
+struct SharedSeedSweepsOf {
+  using Type = Absent;
+};
+template <class C>
+struct SharedSeedSweepsOf<C, true> {
+  using Type = SharedSeedSweeps<typename C::LayerAdjoints, typename C::Scalar>;
+};
+
+}  // namespace sbptt::detail

@@ -1,8 +1,9 @@
 // Threads change the speed, never the numbers: the loss, g_R, g_M, every diagnostic, the
 // evaluation of a set, its non-finite report, and the parameters after a few Trainer epochs
 // are bitwise identical for 1, 2 and 3 threads (cart pole with an MLP, guidance, and quantum
-// control with a CNN; batches and sets whose sizes do not divide evenly), whether the
-// per-sample loops are split or a lone sweep hands its parameter products to a second thread.
+// control with a CNN; batches and sets whose sizes do not divide evenly; the pair also
+// truncated), whether the per-sample loops are split or a sweep hands its parameter products
+// to a second thread (a lone sweep, or the pair's shared backward pass with one control).
 #include <catch2/catch.hpp>
 
 #include <cmath>
@@ -50,7 +51,7 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
                                const Matrix<typename Sim::Scalar>& test, Index batch) {
   using S = typename Sim::Scalar;
   const Matrix<S> x0 = train.leftCols(batch);
-  std::vector<GradientPair<S>> pairs;
+  std::vector<GradientPair<S>> pairs, truncated_pairs;
   std::vector<Vector<S>> full, physics, stopped, trained_r, trained_c;
   std::vector<S> evaluations;
   std::vector<bool> overlapped;
@@ -68,6 +69,8 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
     GradientPair<S> pair;
     engine.regular_and_modified(x0, pair);
     pairs.push_back(pair);
+    engine.regular_and_modified(x0, pair, steps / 4);  // truncated, for variety
+    truncated_pairs.push_back(pair);
     Vector<S> g;
     engine.forward(x0);
     engine.reverse(FlowMode::Full, g);
@@ -100,6 +103,9 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
     CHECK(pairs[t].loss == pairs[0].loss);
     CHECK(pairs[t].regular == pairs[0].regular);
     CHECK(pairs[t].modified == pairs[0].modified);
+    CHECK(truncated_pairs[t].regular == truncated_pairs[0].regular);
+    CHECK(truncated_pairs[t].modified == truncated_pairs[0].modified);
+    check_same(truncated_pairs[t].modified_diagnostics, truncated_pairs[0].modified_diagnostics);
     check_same(pairs[t].regular_diagnostics, pairs[0].regular_diagnostics);
     check_same(pairs[t].modified_diagnostics, pairs[0].modified_diagnostics);
     CHECK(pairs[t].comparison.cos_modified_regular == pairs[0].comparison.cos_modified_regular);
@@ -215,22 +221,24 @@ TEST_CASE("threads: bad settings are rejected with a clear message", "[bptt][thr
 
 TEST_CASE("threads: a sweep that throws while handing off its parameter products stops both "
           "threads, and the engine sweeps correctly afterwards", "[bptt][threads]") {
-  /// The cart pole, whose VJP throws while `fail` is set.
+  /// The cart pole, whose VJP throws once `countdown` further calls have been made (never
+  /// while it is negative).
   struct Failing : CartPole<double, 2> {
-    bool* fail;
-    explicit Failing(bool* f) : fail(f) {}
+    int* countdown;
+    explicit Failing(int* c) : countdown(c) {}
     void vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
              Control* lambda_u) const {
-      if (*fail) throw std::runtime_error("planted VJP failure");
+      if (*countdown >= 0 && (*countdown)-- == 0) throw std::runtime_error("planted VJP failure");
       CartPole<double, 2>::vjp(x, u, lambda, lambda_x, lambda_u);
     }
   };
-  bool fail = false;
-  const Failing sim(&fail);
+  int countdown = -1;
+  const Failing sim(&countdown);
   Rng rng(45);
   const Matrix<double> x0 = cartpole_initial_states(sim, rng, 6);
   const auto net = seeded_mlp<double>(sim.state_dim(), 1, 9);
   Engine alone(sim, net, cartpole_objective<double, 2>(), 25);
+  const GradientPair<double> expected_pair = alone.regular_and_modified(x0, 7);
   Vector<double> expected;
   alone.forward(x0);
   alone.reverse(FlowMode::Full, expected);
@@ -241,9 +249,23 @@ TEST_CASE("threads: a sweep that throws while handing off its parameter products
   engine.forward(x0);
   CHECK_FALSE(engine.reverse(FlowMode::Full, g).params_overlapped);  // the loops are timed
   REQUIRE(engine.reverse(FlowMode::Full, g).params_overlapped);
-  fail = true;
-  CHECK_THROWS_WITH(engine.reverse(FlowMode::Full, g), "planted VJP failure");
-  fail = false;
-  CHECK(engine.reverse(FlowMode::Full, g).params_overlapped);
-  CHECK(g == expected);
+  // At the first VJP, and in the middle of the sweep (6 samples a step, 2 VJPs each in the
+  // pair, whose single control makes both sweeps share a backward pass and hand off both
+  // sweeps' products).
+  for (const int calls_before_failure : {0, 60}) {
+    INFO("failing after " << calls_before_failure << " VJPs");
+    countdown = calls_before_failure;
+    CHECK_THROWS_WITH(engine.reverse(FlowMode::Full, g), "planted VJP failure");
+    countdown = calls_before_failure;
+    CHECK_THROWS_WITH(engine.regular_and_modified(x0, 7), "planted VJP failure");
+    countdown = -1;
+    engine.forward(x0);
+    CHECK(engine.reverse(FlowMode::Full, g).params_overlapped);
+    CHECK(g == expected);
+    const GradientPair<double> pair = engine.regular_and_modified(x0, 7);
+    CHECK(pair.regular_diagnostics.params_overlapped);
+    CHECK(pair.regular == expected_pair.regular);
+    CHECK(pair.modified == expected_pair.modified);
+    CHECK(pair.modified_diagnostics.adjoint_norms == expected_pair.modified_diagnostics.adjoint_norms);
+  }
 }

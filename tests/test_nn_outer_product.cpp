@@ -26,10 +26,10 @@ TEMPLATE_TEST_CASE("dW += D X^T within the rounding bound, nothing written outsi
   // a masked one (53), 5 panels (a block of 3 and one of 2), 100 (6 + 4 masked), the
   // convolution's 180 (3 blocks, 2, 4 masked); rows: 1, 2, odd, the paper's 100. Rows narrower
   // than a register go in blocks of 8 rows: 17 × 10 (float) and 19 × 5 (double) have two
-  // blocks and a remainder.
+  // blocks and a remainder, 21 × 4 is exactly half a register of doubles.
   for (const auto& [rows, cols] :
        {std::pair<Index, Index>{1, 100}, {2, 100}, {3, 10}, {5, 8}, {7, 16}, {100, 100},
-        {100, 24}, {60, 180}, {17, 53}, {33, 64}, {9, 80}, {17, 10}, {19, 5}}) {
+        {100, 24}, {60, 180}, {17, 53}, {33, 64}, {9, 80}, {17, 10}, {19, 5}, {21, 4}}) {
     for (const Index n : {1, 3, 7, 8, 9, 16, 21, 56}) {
       const Matrix<S> d = random_matrix<S>(rows, n, ++seed, 1.0);
       const Matrix<S> x = random_matrix<S>(cols, n, ++seed, 1.0);

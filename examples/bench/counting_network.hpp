@@ -81,8 +81,9 @@ public:
     macs_.fetch_add(per_sample_ * ws.batch_size(), std::memory_order_relaxed);
   }
   void add_param_gradient(const Workspace& ws, const LayerAdjoints& adjoints,
-                          const Matrix<S>& scales, sbptt::Vector<S>& grad) const {
-    net_.add_param_gradient(ws, adjoints, scales, grad);
+                          const Matrix<S>& scales, LayerAdjoints& scaled,
+                          sbptt::Vector<S>& grad) const {
+    net_.add_param_gradient(ws, adjoints, scales, scaled, grad);
     macs_.fetch_add(per_sample_ * ws.batch_size(), std::memory_order_relaxed);
   }
 

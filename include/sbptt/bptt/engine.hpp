@@ -30,9 +30,9 @@
 /// by the same operations whatever the thread count, and every batch sum is taken in a fixed
 /// order, so all results are bitwise identical for any number of threads. With more than one
 /// thread the controller's `backward` must be safe to call concurrently on one workspace, a
-/// `SplitBackwardController`'s `add_param_gradient` concurrently with `backward_inputs` of
-/// another step (`Network`'s are), and the loss functor must be thread-safe (a `const` pure
-/// function).
+/// `SplitBackwardController`'s `add_param_gradient` (a `SeedScalingController`'s scaled one
+/// too) concurrently with `backward_inputs` of another step (`Network`'s are), and the loss
+/// functor must be thread-safe (a `const` pure function).
 #include <cmath>
 #include <memory>
 #include <optional>

@@ -14,7 +14,11 @@
 /// Threads: the sweeping thread runs both sweeps' per-sample VJPs and the one backward pass,
 /// and records each step (layer adjoints and both μ_n) into a `ParamHandoff` ring; the
 /// parameter products of both sweeps are added from it in step order, on whichever thread
-/// holds the ring's lock, so the sums are the single thread's bit for bit.
+/// holds the ring's lock, so the sums are the single thread's bit for bit. The per-sample
+/// loops are never split over the threads here, even where a lone sweep would split them:
+/// for quantum control (2 × 8 VJPs of about 0.76 µs per step) splitting them instead of
+/// handing off the products made the two-thread C epoch 301.8 ms, against 248–263 ms
+/// (docs/benchmarks.md, fifth run).
 #include <cstddef>
 #include <memory>
 
@@ -25,10 +29,12 @@
 namespace sbptt::detail {
 
 /// One recorded step: the layer adjoints of the seed 1 and the control adjoints μ_n (1 × B)
-/// of the Full and the PhysicsOnly sweep.
+/// of the Full and the PhysicsOnly sweep, with room for the adjoints scaled by either. The
+/// room belongs to the slot, not to a thread, so that no call allocates after the first
+/// (whichever thread adds the slot).
 template <class Adjoints, class Scalar>
 struct SharedSeedStep {
-  Adjoints adjoints;
+  Adjoints adjoints, scaled;
   Matrix<Scalar> full_mu, physics_mu;
 };
 
@@ -46,30 +52,32 @@ public:
   /// the engine's sweep buffers, over the engine's stored trajectory.
   template <class Engine, class Pair>
   void run(Engine& engine, Pair& result, Index truncation) {
-    if (!handoff_) {
-      sweep(engine, result, truncation, nullptr);
-      return;
+    Handoff* h = handoff_.get();
+    auto add = [&](std::size_t slot) { add_step(engine, h->ring[slot], h->steps[slot], result); };
+    if (h == nullptr) {
+      sweep(engine, result, truncation, nullptr, add);
+    } else {
+      h->run(*engine.pool_, engine.steps_, add,
+             [&] { sweep(engine, result, truncation, h, add); });
     }
-    Handoff& h = *handoff_;
-    auto add = [&](std::size_t slot) { add_step(engine, h.ring[slot], h.steps[slot], result); };
-    h.run(*engine.pool_, engine.steps_, add, [&] { sweep(engine, result, truncation, &h); });
   }
 
 private:
   using Step = SharedSeedStep<Adjoints, Scalar>;
   using Handoff = ParamHandoff<Step>;
 
-  template <class Engine, class Pair>
-  void sweep(Engine& e, Pair& result, Index truncation, Handoff* handoff) {
+  /// Never inlined: the calls with and without the hand-off must run the same machine code,
+  /// or the contraction of a·b + c into FMA could differ between them, and the results
+  /// between thread counts.
+  template <class Engine, class Pair, class Add>
+  [[gnu::noinline]] void sweep(Engine& e, Pair& result, Index truncation, Handoff* handoff,
+                               Add& add) {
     const Index batch = e.trajectory_.batch();
     auto& full = e.sweeps_[0];
     auto& physics = e.sweeps_[1];
     e.begin_sweep(full, result.regular, handoff != nullptr);
     e.begin_sweep(physics, result.modified, handoff != nullptr);
     unit_seed_.setOnes(1, batch);
-    auto add = [&](std::size_t slot) {
-      add_step(e, handoff->ring[slot], handoff->steps[slot], result);
-    };
     for (Index n = e.steps_ - 1; n >= 0; --n) {
       const auto i = static_cast<std::size_t>(n);
       const bool cut = truncation > 0 && n > 0 && n % truncation == 0;
@@ -104,10 +112,11 @@ private:
 
   /// Adds both sweeps' parameter products of step `n`, recorded in `step`.
   template <class Engine, class Pair>
-  static void add_step(const Engine& e, const Step& step, Index n, Pair& result) {
+  static void add_step(const Engine& e, Step& step, Index n, Pair& result) {
     const auto& workspace = e.trajectory_.workspaces[static_cast<std::size_t>(n)];
-    e.controller_.add_param_gradient(workspace, step.adjoints, step.full_mu, result.regular);
-    e.controller_.add_param_gradient(workspace, step.adjoints, step.physics_mu,
+    e.controller_.add_param_gradient(workspace, step.adjoints, step.full_mu, step.scaled,
+                                     result.regular);
+    e.controller_.add_param_gradient(workspace, step.adjoints, step.physics_mu, step.scaled,
                                      result.modified);
   }
 

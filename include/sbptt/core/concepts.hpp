@@ -164,16 +164,19 @@ concept SplitBackwardController =
     };
 
 /// A `SplitBackwardController` that also adds the parameter products of a column-scaled seed:
-/// `void add_param_gradient(ws, adjoints, scales, grad) const` adds what the packed `backward`
-/// adds for dY·diag(scales) (`scales` 1 × B) from adjoints recorded with dY. The backward pass
-/// is linear in each column of dY, so for a one-output controller one pass with dY = 1 serves
-/// every seed: the engine's combined update then runs one backward pass for both sweeps.
+/// `void add_param_gradient(ws, adjoints, scales, scaled, grad) const` adds what the packed
+/// `backward` adds for dY·diag(scales) (`scales` 1 × B) from adjoints recorded with dY, using
+/// the `LayerAdjoints` `scaled` as its workspace. The backward pass is linear in each column
+/// of dY, so for a one-output controller one pass with dY = 1 serves every seed: the engine's
+/// combined update then runs one backward pass for both sweeps.
 template <class C>
 concept SeedScalingController =
     SplitBackwardController<C> &&
     requires(const C& c, const typename C::Workspace& ws,
              const typename C::LayerAdjoints& recorded, const Matrix<typename C::Scalar>& scales,
-             Vector<typename C::Scalar>& grad) { c.add_param_gradient(ws, recorded, scales, grad); };
+             typename C::LayerAdjoints& scaled, Vector<typename C::Scalar>& grad) {
+      c.add_param_gradient(ws, recorded, scales, scaled, grad);
+    };
 
 /// Compile-time check with a readable message per missing member; returns true.
 template <class S>

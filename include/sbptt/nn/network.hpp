@@ -206,21 +206,26 @@ public:
 
   /// The same for the seed dY·diag(s), `scales` = s (1 × B), from adjoints recorded with dY:
   /// every layer's Δ is linear in its sample's column of dY, so Δ_l·diag(s) are that seed's.
+  /// They are formed in `scaled` (grown, never shrunk), which the caller owns so that its
+  /// buffers do not depend on which thread makes the call.
   void add_param_gradient(const Workspace& ws, const LayerAdjoints& adjoints,
-                          const Matrix<Scalar>& scales, Vector<Scalar>& grad) const {
+                          const Matrix<Scalar>& scales, LayerAdjoints& scaled,
+                          Vector<Scalar>& grad) const {
     check_recorded(ws, adjoints, grad);
     detail::require(scales.rows() == 1 && scales.cols() == ws.batch_,
                     "Network::add_param_gradient: scales is ", scales.rows(), " × ",
                     scales.cols(), ", expected 1 × ", ws.batch_, " (one per sample)");
-    auto& scaled = detail::network_scratch<Scalar>().scaled_deltas;
-    if (scaled.size() < layers_.size()) scaled.resize(layers_.size());
+    detail::require(&scaled != &adjoints,
+                    "Network::add_param_gradient: scaled is the recorded adjoints; expected "
+                    "another LayerAdjoints");
+    if (scaled.deltas_.size() < layers_.size()) scaled.deltas_.resize(layers_.size());
     for (std::size_t l = 0; l < layers_.size(); ++l) {
       const Index rows = layer_output_dim(layers_[l]);
-      detail::grow_map(scaled[l], rows, ws.batch_).noalias() =
+      detail::grow_map(scaled.deltas_[l], rows, ws.batch_).noalias() =
           detail::ConstMatrixMap<Scalar>(adjoints.deltas_[l].data(), rows, ws.batch_) *
           scales.row(0).asDiagonal();
     }
-    params_from(ws, scaled, grad);
+    params_from(ws, scaled.deltas_, grad);
   }
 
 private:

@@ -19,7 +19,6 @@ struct NetworkScratch {
   Vector<Scalar> adjoint;  ///< input adjoint of a layer with an activation, before f'
   Vector<Scalar> columns;  ///< conv window adjoints (im2col shape)
   std::vector<Vector<Scalar>> deltas;  ///< Δ of every layer, for the plain `backward`
-  std::vector<Vector<Scalar>> scaled_deltas;  ///< Δ_l·diag(s) of the scaled parameter half
 };
 
 /// Packed W (with b) and Wᵀ of the first `count` layers. The vectors only grow, so that the

@@ -12,10 +12,10 @@
 ///
 /// It needs 32 vector registers and masked loads and stores for the rows' last panel, so it is
 /// compiled for AVX-512 only, and used when a row of dW fills at least half a register (100 ×
-/// 10 × 8 in float: 230 ns against Eigen's 404; 100 × 4 × 8: 228 against 251, but 60 × 6 × 120
-/// no faster and 100 × 1 × 8 seven times slower). Other builds, and narrower rows, use Eigen's
-/// product (with AVX2's 16 registers the same scheme, holding 8 × 1 panels, measured slower
-/// than Eigen).
+/// 10 × 8 in float: 230 ns against Eigen's 404; 100 × 4 × 8 in double: 217 against 256).
+/// Narrower rows measured no faster (60 × 6 × 120 in float) or seven times slower (100 × 1 ×
+/// 8), so they, and other builds, use Eigen's product (with AVX2's 16 registers the same
+/// scheme, holding 8 × 1 panels, measured slower than Eigen).
 ///
 /// In the kernel every entry is ((dW_ij + d_i0 x_j0) + d_i1 x_j1) + … in sample order with
 /// fused multiply-adds, whatever the shapes; Eigen's product has an order of its own. Either

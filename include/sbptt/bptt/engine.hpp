@@ -20,20 +20,19 @@
 /// resized only when the shape changes).
 ///
 /// Threads (`set_threads`): the per-sample work of a step (simulator step and VJP, loss seeds)
-/// is split over the samples; `regular_and_modified` runs its two sweeps at once, or, when
-/// they share the controller's backward pass (one control), hands both sweeps' parameter
-/// products to the second thread as a lone sweep does (below); `evaluate`
-/// rolls out fixed chunks of `kEvaluateChunk` samples independently. A lone sweep (`reverse`)
-/// whose per-sample loops are too cheap to split hands the parameter products of a
-/// `SplitBackwardController` to a second thread instead, step by step, and adds them in step
-/// order (engine_buffers.hpp, `ParamHandoff`). Every sample is computed
-/// by the same operations whatever the thread count, and every batch sum is taken in a fixed
-/// order, so all results are bitwise identical for any number of threads. With more than one
-/// thread the controller's `backward` must be safe to call concurrently on one workspace, a
-/// `SplitBackwardController`'s `add_param_gradient` (a `SeedScalingController`'s scaled one
-/// too) concurrently with `backward_inputs` of another step (`Network`'s are), and the loss
+/// is split over the samples; `evaluate` rolls out fixed chunks of `kEvaluateChunk` samples
+/// independently. A lone sweep (`reverse`) whose per-sample loops are too cheap to split hands
+/// the parameter products of a `SplitBackwardController` to a second thread instead, step by
+/// step, and adds them in step order (engine_buffers.hpp, `ParamHandoff`); so does the pair
+/// of `regular_and_modified` when its sweeps share one backward pass (one control), else its
+/// two sweeps run at once. Every sample is computed by the same operations whatever the
+/// thread count, and every batch sum is taken in a fixed order, so all results are bitwise
+/// identical for any number of threads. With more than one thread the controller's
+/// `backward` must be safe to call concurrently on one workspace, its `add_param_gradient`
+/// (both) concurrently with `backward_inputs` of another step (`Network`'s are), and the loss
 /// functor must be thread-safe (a `const` pure function).
 #include <cmath>
+#include <initializer_list>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -151,7 +150,7 @@ public:
     for (auto& decision : fork_) decision = detail::ForkDecision(split_above_ns);
     const auto slots = static_cast<std::size_t>(threads);
     for (auto* scratch : {&forward_scratch_, &sweeps_[0].scratch, &sweeps_[1].scratch})
-      scratch->assign(slots, make_scratch());
+      scratch->assign(slots, Scratch(sim_.state_dim(), sim_.control_dim()));
   }
   [[nodiscard]] Index threads() const { return threads_; }
 
@@ -298,10 +297,6 @@ private:
     }
   }
 
-  [[nodiscard]] Scratch make_scratch() const {
-    return Scratch(sim_.state_dim(), sim_.control_dim());
-  }
-
   void check_initial_states(const Matrix<Scalar>& initial_states, const char* caller) const {
     detail::require(initial_states.rows() == sim_.state_dim(), "Engine::", caller, ": ",
                     initial_states.rows(), " rows in the initial states; expected state_dim = ",
@@ -331,7 +326,7 @@ private:
       const bool cut = truncation > 0 && n > 0 && n % truncation == 0;
       const bool physics = physics_flows(mode) && !cut;
       const bool network = network_flows(mode) && !cut;
-      adjoint_products(s, n, physics, parallel);
+      adjoint_products({&s}, n, physics, parallel);
       Matrix<Scalar>* input_adjoint = network ? &s.input_adjoint : nullptr;
       if constexpr (SplitBackwardController<Ctrl>) {
         if (handoff != nullptr) {
@@ -360,33 +355,38 @@ private:
     s.end(gradient);
   }
 
-  /// The per-sample half of step n of sweep `s`: λ_{n+1} += its loss seed, μ_n = B_nᵀλ_{n+1}
-  /// (plus the control seed) and, when `physics`, A_nᵀλ_{n+1} into `s.propagated`.
-  void adjoint_products(Sweep& s, Index n, bool physics, bool parallel) {
+  /// The per-sample half of step n of each of `sweeps` (one, or the pair's two): λ_{n+1} += its
+  /// loss seed (computed once for all), μ_n = B_nᵀλ_{n+1} (plus the control seed) and, when
+  /// `physics`, A_nᵀλ_{n+1} into `s.propagated`. The loops use the first sweep's scratch.
+  void adjoint_products(std::initializer_list<Sweep*> sweeps, Index n, bool physics,
+                        bool parallel) {
     const auto i = static_cast<std::size_t>(n);
     const auto batch = static_cast<double>(trajectory_.batch());
     const auto seed_scale = static_cast<Scalar>(objective_.step_weight / batch);  // w/B
+    const auto control_seed = static_cast<Scalar>(  // 2ρ/(m·k·B)
+        2.0 * objective_.control_weight /
+        (static_cast<double>(steps_ * sim_.control_dim()) * batch));
     const bool scored = objective_.timing == LossTiming::Continuous || n + 1 == steps_;
-    fork_[1].for_samples(pool_.get(), trajectory_.batch(), s.scratch, parallel,
+    fork_[1].for_samples(pool_.get(), trajectory_.batch(), (*sweeps.begin())->scratch, parallel,
                          [&](Index b, Scratch& t) {
-      if (scored) {  // λ_{n+1} += w/B · ∂ℓ/∂x_{n+1}
+      if (scored) {  // λ_{n+1} += w/B · ∂ℓ/∂x_{n+1}, below
         t.x = trajectory_.states[i + 1].col(b);
         objective_.state_loss(t.x, &t.seed);
-        s.lambda.col(b) += seed_scale * t.seed;
       }
       t.x = trajectory_.states[i].col(b);
       t.u = trajectory_.controls[i].col(b);
-      t.lambda_sample = s.lambda.col(b);
-      sim_.vjp(t.x, t.u, t.lambda_sample, physics ? &t.lambda_x : nullptr, &t.lambda_u);
-      s.mu.col(b) = t.lambda_u;
-      if (physics) s.propagated.col(b) = t.lambda_x;
+      for (Sweep* s : sweeps) {
+        if (scored) s->lambda.col(b) += seed_scale * t.seed;
+        t.lambda_sample = s->lambda.col(b);
+        sim_.vjp(t.x, t.u, t.lambda_sample, physics ? &t.lambda_x : nullptr, &t.lambda_u);
+        s->mu.col(b) = t.lambda_u;
+        if (physics) s->propagated.col(b) = t.lambda_x;
+      }
     });
-    s.record_adjoint(n + 1);
-    if (objective_.control_weight > 0)  // + 2ρ/(m·k·B) · c_n
-      s.mu.noalias() += static_cast<Scalar>(2.0 * objective_.control_weight /
-                                            (static_cast<double>(steps_ * sim_.control_dim()) *
-                                             batch)) *
-                        trajectory_.controls[i];
+    for (Sweep* s : sweeps) {
+      s->record_adjoint(n + 1);
+      if (objective_.control_weight > 0) s->mu.noalias() += control_seed * trajectory_.controls[i];
+    }
   }
 
   void begin_sweep(Sweep& s, Vector<Scalar>& gradient, bool overlapped) {

@@ -81,8 +81,7 @@ private:
     for (Index n = e.steps_ - 1; n >= 0; --n) {
       const auto i = static_cast<std::size_t>(n);
       const bool cut = truncation > 0 && n > 0 && n % truncation == 0;
-      e.adjoint_products(full, n, !cut, handoff == nullptr);
-      e.adjoint_products(physics, n, !cut, handoff == nullptr);
+      e.adjoint_products({&full, &physics}, n, !cut, false);
       const Index k = e.steps_ - 1 - n;  // steps recorded so far
       const std::size_t slot = handoff != nullptr ? handoff->slot_for(k, add) : 0;
       Step& step = handoff != nullptr ? handoff->ring[slot] : single_;

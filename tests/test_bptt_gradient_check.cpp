@@ -1,7 +1,8 @@
 // check_gradient compares the engine's R gradient and the objective's ∂ℓ/∂x with central
 // differences of the rollout loss: the shipped scenes pass (double and float), and a loss whose
 // gradient is wrong, or a simulator whose VJP is wrong, fails. The engine also rejects a
-// fixed-size State whose size disagrees with state_dim().
+// fixed-size State whose size disagrees with state_dim(). Quantum control runs the batched
+// simulator path (step_batch / vjp_batch) of the engine.
 #include <catch2/catch.hpp>
 
 #include "sbptt/bptt/gradient_check.hpp"
@@ -10,6 +11,7 @@
 #include "sbptt/nn/network.hpp"
 #include "sbptt/objectives/cartpole.hpp"
 #include "sbptt/objectives/guidance.hpp"
+#include "sbptt/objectives/quantum.hpp"
 #include "sbptt/sim/cartpole.hpp"
 #include "sbptt/sim/guidance_by_repulsion.hpp"
 #include "sbptt/sim/linear.hpp"
@@ -74,6 +76,18 @@ TEST_CASE("check_gradient passes the shipped scenes in double", "[bptt][gradient
     Rng rng(4);
     const auto x0 = guidance_initial_states(sim, rng, 2);
     const auto check = check_gradient(sim, network, guidance_objective(sim, 0.01), 15, x0,
+                                      {.max_parameters = 500});
+    INFO("R " << check.regular_error << ", state loss " << check.state_loss_error);
+    CHECK(check.parameters_checked == network.num_params());
+    CHECK(check.worst() < 1e-5);
+  }
+  SECTION("quantum control, continuous loss, the batched simulator") {
+    const Schrodinger1D<double, 8> sim;
+    static_assert(BatchSimulator<Schrodinger1D<double, 8>>);
+    auto network = small_network<double>(16, 1, 6);
+    Rng rng(7);
+    const auto x0 = sim.initial_states(rng, 19);  // a full block of 8 lanes, and a partial one
+    const auto check = check_gradient(sim, network, quantum_objective(sim, 3), 12, x0,
                                       {.max_parameters = 500});
     INFO("R " << check.regular_error << ", state loss " << check.state_loss_error);
     CHECK(check.parameters_checked == network.num_params());

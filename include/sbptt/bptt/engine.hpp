@@ -169,12 +169,17 @@ public:
       packed_controller_.forward(trajectory_.states[i], trajectory_.controls[i],
                                  trajectory_.workspaces[i]);
       note_non_finite(Quantity::Control, n, trajectory_.controls[i]);
-      fork_[0].for_samples(pool_.get(), batch, forward_scratch_, true, [&](Index b, Scratch& t) {
-        t.x = trajectory_.states[i].col(b);
-        t.u = trajectory_.controls[i].col(b);
-        sim_.step(t.x, t.u, t.x_next);
-        trajectory_.states[i + 1].col(b) = t.x_next;
-      });
+      if constexpr (BatchSimulator<Sim>) {
+        sim_.step_batch(trajectory_.states[i], trajectory_.controls[i], trajectory_.states[i + 1]);
+      } else {
+        fork_[0].for_samples(pool_.get(), batch, forward_scratch_, true,
+                             [&](Index b, Scratch& t) {
+          t.x = trajectory_.states[i].col(b);
+          t.u = trajectory_.controls[i].col(b);
+          sim_.step(t.x, t.u, t.x_next);
+          trajectory_.states[i + 1].col(b) = t.x_next;
+        });
+      }
       note_non_finite(Quantity::State, n + 1, trajectory_.states[i + 1]);
     }
     return batch_loss();
@@ -357,7 +362,8 @@ private:
 
   /// The per-sample half of step n of each of `sweeps` (one, or the pair's two): λ_{n+1} += its
   /// loss seed (computed once for all), μ_n = B_nᵀλ_{n+1} (plus the control seed) and, when
-  /// `physics`, A_nᵀλ_{n+1} into `s.propagated`. The loops use the first sweep's scratch.
+  /// `physics`, A_nᵀλ_{n+1} into `s.propagated`. The loops use the first sweep's scratch. A
+  /// `BatchSimulator` gets the whole batch's VJPs in one call per sweep.
   void adjoint_products(std::initializer_list<Sweep*> sweeps, Index n, bool physics,
                         bool parallel) {
     const auto i = static_cast<std::size_t>(n);
@@ -367,22 +373,31 @@ private:
         2.0 * objective_.control_weight /
         (static_cast<double>(steps_ * sim_.control_dim()) * batch));
     const bool scored = objective_.timing == LossTiming::Continuous || n + 1 == steps_;
-    fork_[1].for_samples(pool_.get(), trajectory_.batch(), (*sweeps.begin())->scratch, parallel,
-                         [&](Index b, Scratch& t) {
-      if (scored) {  // λ_{n+1} += w/B · ∂ℓ/∂x_{n+1}, below
-        t.x = trajectory_.states[i + 1].col(b);
-        objective_.state_loss(t.x, &t.seed);
-      }
-      t.x = trajectory_.states[i].col(b);
-      t.u = trajectory_.controls[i].col(b);
-      for (Sweep* s : sweeps) {
-        if (scored) s->lambda.col(b) += seed_scale * t.seed;
-        t.lambda_sample = s->lambda.col(b);
-        sim_.vjp(t.x, t.u, t.lambda_sample, physics ? &t.lambda_x : nullptr, &t.lambda_u);
-        s->mu.col(b) = t.lambda_u;
-        if (physics) s->propagated.col(b) = t.lambda_x;
-      }
-    });
+    auto seed = [&](Index b, Scratch& t) {  // λ_{n+1} += w/B · ∂ℓ/∂x_{n+1}
+      t.x = trajectory_.states[i + 1].col(b);
+      objective_.state_loss(t.x, &t.seed);
+      for (Sweep* s : sweeps) s->lambda.col(b) += seed_scale * t.seed;
+    };
+    auto& scratch = (*sweeps.begin())->scratch;
+    if constexpr (BatchSimulator<Sim>) {
+      if (scored) fork_[1].for_samples(pool_.get(), trajectory_.batch(), scratch, parallel, seed);
+      for (Sweep* s : sweeps)
+        sim_.vjp_batch(trajectory_.states[i], trajectory_.controls[i], s->lambda,
+                       physics ? &s->propagated : nullptr, &s->mu);
+    } else {
+      fork_[1].for_samples(pool_.get(), trajectory_.batch(), scratch, parallel,
+                           [&](Index b, Scratch& t) {
+        if (scored) seed(b, t);
+        t.x = trajectory_.states[i].col(b);
+        t.u = trajectory_.controls[i].col(b);
+        for (Sweep* s : sweeps) {
+          t.lambda_sample = s->lambda.col(b);
+          sim_.vjp(t.x, t.u, t.lambda_sample, physics ? &t.lambda_x : nullptr, &t.lambda_u);
+          s->mu.col(b) = t.lambda_u;
+          if (physics) s->propagated.col(b) = t.lambda_x;
+        }
+      });
+    }
     for (Sweep* s : sweeps) {
       s->record_adjoint(n + 1);
       if (objective_.control_weight > 0) s->mu.noalias() += control_seed * trajectory_.controls[i];

@@ -228,11 +228,16 @@ struct EvaluationChunk {
     for (Index n = 0; n < steps; ++n) {
       controller.forward(state, control, workspace);
       note(Quantity::Control, n, 2 * n, control, first);
+      if constexpr (BatchSimulator<Sim>) sim.step_batch(state, control, next);
       for (Index b = 0; b < batch; ++b) {
-        t.x = state.col(b);
-        t.u = control.col(b);
-        sim.step(t.x, t.u, t.x_next);
-        next.col(b) = t.x_next;
+        if constexpr (BatchSimulator<Sim>) {
+          t.x_next = next.col(b);
+        } else {
+          t.x = state.col(b);
+          t.u = control.col(b);
+          sim.step(t.x, t.u, t.x_next);
+          next.col(b) = t.x_next;
+        }
         if (objective.control_weight > 0)
           losses(b) += control_scale * control.col(b).squaredNorm();
         if (objective.timing == LossTiming::Continuous || n + 1 == steps)

@@ -113,6 +113,24 @@ concept Simulator = detail::HasSimulatorSizes<S> && detail::HasSimulatorStep<S> 
 template <class S>
 concept SimulatorWithJacobians = Simulator<S> && detail::HasSimulatorJacobians<S>;
 
+/// A `Simulator` that also steps and differentiates a whole batch in one call, columns being
+/// samples (`Schrodinger1D` runs its samples side by side in SIMD lanes):
+/// - `void step_batch(const Matrix<Scalar>& X, const Matrix<Scalar>& U, Matrix<Scalar>& X_next)`
+///   with X state_dim × B, U control_dim × B, X_next resized to state_dim × B;
+/// - `void vjp_batch(const Matrix<Scalar>& X, const Matrix<Scalar>& U, const Matrix<Scalar>&
+///   Lambda, Matrix<Scalar>* Lambda_x, Matrix<Scalar>* Lambda_u)`, `vjp` per column, a null
+///   pointer skipping that product.
+/// Column b of a result may differ from `step` / `vjp` of column b by rounding but must not
+/// depend on the other columns. The engine then uses these for every rollout and sweep.
+template <class S>
+concept BatchSimulator =
+    Simulator<S> && requires(const S& sim, const Matrix<typename S::Scalar>& x,
+                             const Matrix<typename S::Scalar>& u, Matrix<typename S::Scalar>& out,
+                             Matrix<typename S::Scalar>* out_x, Matrix<typename S::Scalar>* out_u) {
+      sim.step_batch(x, u, out);
+      sim.vjp_batch(x, u, x, out_x, out_u);
+    };
+
 /// A parametric batch map `Y = N(X; θ)` with one flat parameter vector θ.
 ///
 /// Members:

@@ -32,6 +32,7 @@
 ///
 /// vjp costs one factorisation of U₁, the adjoint solve, one tridiagonal product and, for Bᵀλ
 /// only, one forward solve: O(Nx), never forming A.
+#include <algorithm>
 #include <cmath>
 #include <complex>
 #include <numbers>
@@ -40,6 +41,7 @@
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/rng.hpp"
+#include "sbptt/sim/schrodinger_lanes.hpp"
 #include "sbptt/sim/tridiagonal.hpp"
 
 namespace sbptt {
@@ -86,6 +88,9 @@ class Schrodinger1D {
   static_assert(std::is_floating_point_v<ScalarT>, "Schrodinger1D: Scalar must be a real type");
   static_assert(Nx == Eigen::Dynamic || Nx >= 1, "Schrodinger1D: Nx must be >= 1 or Dynamic");
   static constexpr int kStateSize = Nx == Eigen::Dynamic ? Eigen::Dynamic : 2 * Nx;
+  // The batched step keeps a few blocks of 64 bytes per grid point on the stack (under 200 KiB
+  // at Nx = 256), so it needs a fixed Nx, and a bounded one.
+  static constexpr bool kLanesInStack = Nx != Eigen::Dynamic && Nx <= 256;
 
 public:
   using Scalar = ScalarT;
@@ -203,6 +208,53 @@ public:
     }
   }
 
+  /// `step` for every column of x (2Nx × B) and u (1 × B) into x_next (resized to 2Nx × B;
+  /// it may be x itself). The samples run side by side in SIMD lanes (schrodinger_lanes.hpp):
+  /// the same equations as `step`, in another order of operations, so the two agree to
+  /// rounding, not bit for bit. A column's result does not depend on the other columns.
+  void step_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, Matrix<Scalar>& x_next) const
+    requires(kLanesInStack)
+  {
+    check_batch(x, u, "step_batch");
+    x_next.resize(state_dim(), x.cols());
+    const Lanes lanes(half_dt(), dx_);
+    typename Lanes::Field psi;
+    for (Index first = 0; first < x.cols(); first += Lanes::kLanes) {
+      const int count = lane_count(x.cols(), first);
+      Lanes::load(x, first, count, psi);
+      lanes.step(Lanes::load_controls(u, first, count), psi);
+      Lanes::store(psi, first, count, x_next);
+    }
+  }
+
+  /// `vjp` for every column of x (2Nx × B), u (1 × B) and lambda (2Nx × B): lambda_x (if not
+  /// null) resized to 2Nx × B, lambda_u to 1 × B. As `step_batch`: equal to `vjp` to rounding.
+  void vjp_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, const Matrix<Scalar>& lambda,
+                 Matrix<Scalar>* lambda_x, Matrix<Scalar>* lambda_u) const
+    requires(kLanesInStack)
+  {
+    check_batch(x, u, "vjp_batch");
+    detail::require(lambda.rows() == state_dim() && lambda.cols() == x.cols(),
+                    "Schrodinger1D::vjp_batch: lambda is ", lambda.rows(), " x ", lambda.cols(),
+                    "; expected ", state_dim(), " x ", x.cols());
+    if (lambda_x) lambda_x->resize(state_dim(), x.cols());
+    if (lambda_u) lambda_u->resize(1, x.cols());
+    const Lanes lanes(half_dt(), dx_);
+    typename Lanes::Field psi, cotangent, propagated;
+    typename Lanes::Lanes control_cotangent;
+    for (Index first = 0; first < x.cols(); first += Lanes::kLanes) {
+      const int count = lane_count(x.cols(), first);
+      Lanes::load(x, first, count, psi);
+      Lanes::load(lambda, first, count, cotangent);
+      lanes.vjp(Lanes::load_controls(u, first, count), psi, cotangent,
+                lambda_x ? &propagated : nullptr, control_cotangent);
+      if (lambda_x) Lanes::store(propagated, first, count, *lambda_x);
+      if (lambda_u)
+        for (int l = 0; l < count; ++l)
+          (*lambda_u)(0, first + l) = control_cotangent[static_cast<std::size_t>(l)];
+    }
+  }
+
   /// φ_n (2Nx), the n-th eigenstate of H(0) (n = 1 ground, 1 ≤ n ≤ Nx): sin(π n j/(Nx+1))
   /// normalised to Σ|φ|² = 1, real (imaginary parts 0). It does not depend on L or dt.
   [[nodiscard]] State eigenstate(Index n) const {
@@ -263,6 +315,11 @@ public:
 
 private:
   using Lu = ConstantTridiagonalLu<Complex, Nx>;
+  using Lanes = detail::SchrodingerLanes<Scalar, Nx == Eigen::Dynamic ? 1 : Nx>;
+
+  [[nodiscard]] static int lane_count(Index batch, Index first) {
+    return static_cast<int>(std::min<Index>(Lanes::kLanes, batch - first));
+  }
 
   [[nodiscard]] Scalar half_dt() const { return dt_ / Scalar(2); }
 
@@ -322,6 +379,13 @@ private:
                     x.size(), "; expected ", state_dim());
     detail::require(u.size() == 1, "Schrodinger1D::", where, ": control has size ", u.size(),
                     "; expected 1");
+  }
+
+  void check_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, const char* where) const {
+    detail::require(x.rows() == state_dim(), "Schrodinger1D::", where, ": states have ",
+                    x.rows(), " rows; expected ", state_dim());
+    detail::require(u.rows() == 1 && u.cols() == x.cols(), "Schrodinger1D::", where,
+                    ": controls are ", u.rows(), " x ", u.cols(), "; expected 1 x ", x.cols());
   }
 
   void check_level(Index n, const char* where) const {

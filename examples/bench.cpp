@@ -20,7 +20,8 @@
 //                product on one core, same scalar, best of several sizes and repeats)
 //   ms Nt, xNt   the same epoch with --threads N threads, and the speed-up over 1 thread
 //   sim ns       one simulator step plus one full VJP (Aᵀλ and Bᵀλ) per sample, on the
-//                states of the last training batch (the per-sample work of the engine)
+//                states of the last training batch (the per-sample work of the engine;
+//                for a BatchSimulator, the batched calls' time over the batch size)
 //   traj KiB     the stored trajectory of one batch of 8 (states, controls, network workspace)
 //   RSS MiB      peak resident memory (getrusage ru_maxrss) of a process that ran the row
 //

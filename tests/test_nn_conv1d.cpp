@@ -64,7 +64,9 @@ TEMPLATE_TEST_CASE("conv1d forward matches a hand computation", "[nn][conv1d]", 
 TEMPLATE_TEST_CASE("conv1d parameter order matches PyTorch Conv1d", "[nn][conv1d]", float,
                    double) {
   using S = TestType;
-  const Index length = 9, in_ch = 3, out_ch = 4, kernel = 3, stride = 2;
+  // Every kernel width with its own window gather (1–5) and one past them (6).
+  const Index kernel = GENERATE(1, 2, 3, 4, 5, 6);
+  const Index length = 9, in_ch = 3, out_ch = 4, stride = 2;
   Network<S> net({Conv1d{length, in_ch, out_ch, kernel, stride, Activation::Identity}});
   const Index positions = (length - kernel) / stride + 1;
   REQUIRE(net.output_dim() == positions * out_ch);
@@ -121,6 +123,7 @@ TEST_CASE("conv1d backward equals central finite differences", "[nn][conv1d]") {
       {8, 3, 2, 3, 1, Activation::Tanh},     {8, 3, 2, 3, 2, Activation::Identity},
       {9, 2, 4, 3, 2, Activation::Tanh},     {7, 2, 3, 1, 1, Activation::Tanh},
       {6, 2, 3, 6, 1, Activation::Tanh},     {10, 2, 3, 2, 3, Activation::Tanh},
+      {9, 2, 3, 4, 2, Activation::Tanh},     {11, 3, 2, 5, 3, Activation::Identity},
   };
   for (const auto& conv : shapes) {
     // Alone, followed by a dense layer (the flatten), and followed by another conv.

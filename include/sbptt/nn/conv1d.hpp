@@ -16,6 +16,7 @@
 /// layer is ONE matrix product per batch; per-element loops would be an order of magnitude
 /// slower at the quantum-control sizes (60 channels).
 #include <string>
+#include <type_traits>
 
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
@@ -73,16 +74,35 @@ struct Conv1d {
     const Index positions = output_length();
     const Index window = window_size();
     columns.resize(window, positions * x.cols());
-    for (Index b = 0; b < x.cols(); ++b) {
-      const Scalar* sample = x.data() + b * x.rows();
-      for (Index p = 0; p < positions; ++p) {
-        // In memory the window is K positions of C_in channels, i.e. a C_in × K matrix; the
-        // weight wants channel-major (c·K + j), hence the small transpose.
-        const detail::ConstMatrixMap<Scalar> win(sample + p * stride * in_channels, in_channels,
-                                                 kernel);
-        detail::MatrixMap<Scalar>(columns.data() + (b * positions + p) * window, kernel,
-                                  in_channels) = win.transpose();
+    with_kernel_width([&](auto k) {
+      for (Index b = 0; b < x.cols(); ++b) {
+        const Scalar* sample = x.data() + b * x.rows();
+        for (Index p = 0; p < positions; ++p) {
+          // In memory the window is K positions of C_in channels (position-major); the weight
+          // wants it channel-major (c·K + j), hence the small transpose.
+          const Scalar* win = sample + p * stride * in_channels;
+          Scalar* column = columns.data() + (b * positions + p) * window;
+          for (Index c = 0; c < in_channels; ++c)
+            for (Index j = 0; j < k; ++j) column[c * k + j] = win[j * in_channels + c];
+        }
       }
+    });
+  }
+
+  /// Calls `f(k)` with the kernel width k as a compile-time constant for K ≤ 5, else as an
+  /// Index. With a fixed K the window transposes of im2col and col2im become whole-register
+  /// shuffles. Eigen's transpose of a C_in × K map, used before, took 2 and 11 times as long
+  /// for the im2col of the paper's two layers at a batch of 8 (500 against 236 ns, 6.1 µs
+  /// against 0.56 µs for 60 channels, K = 3).
+  template <class F>
+  void with_kernel_width(F&& f) const {
+    switch (kernel) {
+      case 1: return f(std::integral_constant<Index, 1>{});
+      case 2: return f(std::integral_constant<Index, 2>{});
+      case 3: return f(std::integral_constant<Index, 3>{});
+      case 4: return f(std::integral_constant<Index, 4>{});
+      case 5: return f(std::integral_constant<Index, 5>{});
+      default: return f(kernel);
     }
   }
 
@@ -126,15 +146,17 @@ struct Conv1d {
     // col2im: overlapping windows (K > s) add up; positions past the last window stay zero.
     detail::MatrixMap<Scalar> dxm(dx, input_dim(), batch);
     dxm.setZero();
-    for (Index b = 0; b < batch; ++b) {
-      Scalar* sample = dx + b * input_dim();
-      for (Index p = 0; p < positions; ++p) {
-        detail::MatrixMap<Scalar> win(sample + p * stride * in_channels, in_channels, kernel);
-        win += detail::ConstMatrixMap<Scalar>(dcols.data() + (b * positions + p) * window, kernel,
-                                              in_channels)
-                   .transpose();
+    with_kernel_width([&](auto k) {
+      for (Index b = 0; b < batch; ++b) {
+        Scalar* sample = dx + b * input_dim();
+        for (Index p = 0; p < positions; ++p) {
+          const Scalar* column = dcols.data() + (b * positions + p) * window;
+          Scalar* win = sample + p * stride * in_channels;
+          for (Index c = 0; c < in_channels; ++c)
+            for (Index j = 0; j < k; ++j) win[j * in_channels + c] += column[c * k + j];
+        }
       }
-    }
+    });
   }
 };
 

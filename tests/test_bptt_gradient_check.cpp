@@ -86,7 +86,7 @@ TEST_CASE("check_gradient passes the shipped scenes in double", "[bptt][gradient
     static_assert(BatchSimulator<Schrodinger1D<double, 8>>);
     auto network = small_network<double>(16, 1, 6);
     Rng rng(7);
-    const auto x0 = sim.initial_states(rng, 19);  // a full block of 8 lanes, and a partial one
+    const auto x0 = sim.initial_states(rng, 19);  // two full blocks of 8 lanes, a partial one
     const auto check = check_gradient(sim, network, quantum_objective(sim, 3), 12, x0,
                                       {.max_parameters = 500});
     INFO("R " << check.regular_error << ", state loss " << check.state_loss_error);

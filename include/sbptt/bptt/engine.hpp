@@ -15,12 +15,13 @@
 /// Cost and memory: the controller runs once per step on the whole batch (one product per
 /// layer, never per sample); a `PackingController` packs its parameters once per rollout
 /// (`forward`, `evaluate`), and the reverse sweeps use the packing of the last of those. The
-/// simulator, the loss and their VJPs run per sample. After the first call at a batch shape,
+/// simulator, the loss and their VJPs run per sample, except that a `BatchSimulator` steps and
+/// differentiates the whole batch in one call (on the calling thread). After the first call at a batch shape,
 /// `forward`, `reverse` and `regular_and_modified` allocate nothing (every buffer is kept and
 /// resized only when the shape changes).
 ///
-/// Threads (`set_threads`): the per-sample work of a step (simulator step and VJP, loss seeds)
-/// is split over the samples; `evaluate` rolls out fixed chunks of `kEvaluateChunk` samples
+/// Threads (`set_threads`): the per-sample work of a step (simulator step and VJP, loss seeds;
+/// only the seeds for a `BatchSimulator`) is split over the samples; `evaluate` rolls out fixed chunks of `kEvaluateChunk` samples
 /// independently. A lone sweep (`reverse`) whose per-sample loops are too cheap to split hands
 /// the parameter products of a `SplitBackwardController` to a second thread instead, step by
 /// step, and adds them in step order (engine_buffers.hpp, `ParamHandoff`); so does the pair
@@ -133,7 +134,8 @@ public:
 
   /// Threads for the per-sample work (≥ 1; 1 = none started). Results do not depend on it
   /// (see the file comment). Starts or stops the engine's worker threads.
-  /// \param split_above_ns a per-sample loop of a step (simulator steps, VJPs, losses) is
+  /// \param split_above_ns a per-sample loop of a step (simulator steps, VJPs, losses; only the
+  ///        losses for a `BatchSimulator`) is
   ///        split over the threads only when it takes at least this long on one thread
   ///        (timed on its first calls): a fork costs about a microsecond, more than a cheap
   ///        simulator's whole batch. 0 splits every loop.
@@ -319,7 +321,7 @@ private:
   }
 
   /// The reverse sweep of the file comment into `s` and `gradient`. The loss seed of x_{n+1}
-  /// is added in the same per-sample pass as the VJPs of step n.
+  /// is added just before the VJPs of step n (`adjoint_products`).
   /// With `handoff` the parameter products go through it (`reverse`), else they are done here.
   void sweep(Sweep& s, const FlowSchedule& schedule, Vector<Scalar>& gradient, Index truncation,
              bool parallel, Handoff* handoff = nullptr) {

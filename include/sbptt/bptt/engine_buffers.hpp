@@ -13,6 +13,7 @@
 #include "sbptt/bptt/diagnostics.hpp"
 #include "sbptt/bptt/objective.hpp"
 #include "sbptt/bptt/packed_controller.hpp"
+#include "sbptt/core/concepts.hpp"
 #include "sbptt/core/non_finite.hpp"
 #include "sbptt/core/parallel.hpp"
 #include "sbptt/core/types.hpp"
@@ -251,8 +252,8 @@ struct EvaluationChunk {
 
 /// Whether a per-sample loop is worth splitting over threads. A fork costs about a microsecond
 /// when the workers are awake, so a cheap simulator (cart pole: tens of ns per sample) runs its
-/// loop on one thread; an expensive one (a quantum step: about a microsecond per sample) is
-/// split. The first `probes` runs are serial and timed; the best time decides from then on.
+/// loop on one thread; an expensive one (a quantum step done per sample: about a microsecond)
+/// is split. The first `probes` runs are serial and timed; the best time decides from then on.
 /// Default threshold: 4 µs of serial work.
 /// Only speed depends on the decision: every sample is computed the same way either way.
 class ForkDecision {

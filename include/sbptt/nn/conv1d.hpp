@@ -71,21 +71,17 @@ struct Conv1d {
   /// \param x  inputs, (L·C_in) × B, position-major
   template <class Scalar>
   void im2col(const Matrix<Scalar>& x, Matrix<Scalar>& columns) const {
+    detail::require(x.rows() == input_dim(), "Conv1d::im2col: x has ", x.rows(),
+                    " rows; expected input_dim() = ", input_dim());
     const Index positions = output_length();
     const Index window = window_size();
     columns.resize(window, positions * x.cols());
-    with_kernel_width([&](auto k) {
-      for (Index b = 0; b < x.cols(); ++b) {
-        const Scalar* sample = x.data() + b * x.rows();
-        for (Index p = 0; p < positions; ++p) {
-          // In memory the window is K positions of C_in channels (position-major); the weight
-          // wants it channel-major (c·K + j), hence the small transpose.
-          const Scalar* win = sample + p * stride * in_channels;
-          Scalar* column = columns.data() + (b * positions + p) * window;
-          for (Index c = 0; c < in_channels; ++c)
-            for (Index j = 0; j < k; ++j) column[c * k + j] = win[j * in_channels + c];
-        }
-      }
+    // In memory a window is K positions of C_in channels (position-major); the weight wants
+    // it channel-major (c·K + j), hence the small transpose.
+    for_each_window(x.cols(), columns.data(), x.data(),
+                    [&](Scalar* column, const Scalar* win, auto k) {
+      for (Index c = 0; c < in_channels; ++c)
+        for (Index j = 0; j < k; ++j) column[c * k + j] = win[j * in_channels + c];
     });
   }
 
@@ -104,6 +100,21 @@ struct Conv1d {
       case 5: return f(std::integral_constant<Index, 5>{});
       default: return f(kernel);
     }
+  }
+
+  /// Calls `f(column, window, k)` for window p of sample b, for every b < `batch` and p:
+  /// `column` is column b·P + p of the im2col matrix at `columns`, `window` the window's first
+  /// entry in the position-major samples at `samples` (input_dim() apart), k the kernel width.
+  template <class ColumnPtr, class SamplePtr, class F>
+  void for_each_window(Index batch, ColumnPtr columns, SamplePtr samples, F&& f) const {
+    const Index positions = output_length();
+    const Index window = window_size();
+    with_kernel_width([&](auto k) {
+      for (Index b = 0; b < batch; ++b)
+        for (Index p = 0; p < positions; ++p)
+          f(columns + (b * positions + p) * window,
+            samples + b * input_dim() + p * stride * in_channels, k);
+    });
   }
 
   /// Y = f(conv(X) + b) for a batch.
@@ -146,16 +157,9 @@ struct Conv1d {
     // col2im: overlapping windows (K > s) add up; positions past the last window stay zero.
     detail::MatrixMap<Scalar> dxm(dx, input_dim(), batch);
     dxm.setZero();
-    with_kernel_width([&](auto k) {
-      for (Index b = 0; b < batch; ++b) {
-        Scalar* sample = dx + b * input_dim();
-        for (Index p = 0; p < positions; ++p) {
-          const Scalar* column = dcols.data() + (b * positions + p) * window;
-          Scalar* win = sample + p * stride * in_channels;
-          for (Index c = 0; c < in_channels; ++c)
-            for (Index j = 0; j < k; ++j) win[j * in_channels + c] += column[c * k + j];
-        }
-      }
+    for_each_window(batch, dcols.data(), dx, [&](const Scalar* column, Scalar* win, auto k) {
+      for (Index c = 0; c < in_channels; ++c)
+        for (Index j = 0; j < k; ++j) win[j * in_channels + c] += column[c * k + j];
     });
   }
 };

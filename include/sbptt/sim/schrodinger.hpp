@@ -241,7 +241,7 @@ public:
     if (lambda_u) lambda_u->resize(1, x.cols());
     const Lanes lanes(half_dt(), dx_);
     typename Lanes::Field psi, cotangent, propagated;
-    typename Lanes::Lanes control_cotangent;
+    typename Lanes::LaneValues control_cotangent;
     for (Index first = 0; first < x.cols(); first += Lanes::kLanes) {
       const int count = lane_count(x.cols(), first);
       Lanes::load(x, first, count, psi);

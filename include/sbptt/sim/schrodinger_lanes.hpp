@@ -7,7 +7,8 @@
 /// substitution), each link waiting for the one before; one sample keeps one lane of the core
 /// busy and the rest wait. Across samples the recurrences are independent.
 ///
-/// Equations (schrodinger.hpp), per lane, with h = dt/2, k = h/dx², δ_j = 2k + h·u·x_j:
+/// Equations (schrodinger.hpp), per lane, for the grid points j = 0 … Nx − 1 at x_j = (j + 1)·dx,
+/// with h = dt/2, k = h/dx², δ_j = 2k + h·u·x_j, and walls ψ_{−1} = ψ_{Nx} = 0:
 ///
 ///     U₁ = I + i h H(u): diagonal 1 + iδ_j, off-diagonals −ik;  U₂ = U₁ᴴ
 ///     pivots p_0 = 1 + iδ_0,  p_j = 1 + iδ_j + k² r_{j−1},  r_j = 1/p_j   (Re p_j ≥ 1)
@@ -17,11 +18,14 @@
 ///     vjp:   Aᵀλ = U₁μ,  Bᵀλ = −h Σ_j x_j Im(conj(s_j) μ_j),  s = ψ + ψ' = 2U₁⁻¹ψ
 ///
 /// Re p_j ≥ 1 by induction (Re r_{j−1} = Re p_{j−1}/|p_{j−1}|² > 0), so |p_j|² ≥ 1: the
-/// reciprocal needs neither a zero check nor a rescaling.
+/// reciprocal conj(p)/|p|² needs no zero check and cannot underflow. It is not rescaled
+/// against overflow, which the per-sample step does: |p|² overflows once |δ| passes about
+/// 1.8e19 in float (|u| ≈ 3e20 at the paper's settings; 1e154 in double), and then r = 0 and
+/// the step is no longer unitary. Controls that large only come from a diverged run.
 ///
 /// Layout: a block is kLanes samples (64 bytes of each grid value: 16 floats or 8 doubles);
 /// `re[i][l]`, `im[i][l]` hold ψ_j of lane l at row i = j + 1. Rows 0 and Nx + 1 are the
-/// walls, always 0, so that ψ_0 = ψ_{Nx+1} = 0 and r_{−1} = y_{−1} = 0 need no branch. A
+/// walls, always 0, so that ψ_{−1} = ψ_{Nx} = 0 and r_{−1} = y_{−1} = 0 need no branch. A
 /// batch's last, partial block is padded with ψ = 0, u = 0, λ = 0, so that every block runs
 /// the same instructions: a sample's result does not depend on its place in the batch or on
 /// the batch's size.
@@ -37,7 +41,7 @@ class SchrodingerLanes {
 public:
   static constexpr int kLanes = static_cast<int>(64 / sizeof(Scalar));
   static constexpr int kRows = Nx + 2;  // the grid and a wall on either side
-  using Lanes = std::array<Scalar, kLanes>;
+  using LaneValues = std::array<Scalar, kLanes>;  // one number per sample of the block
   struct alignas(64) Field {  // one complex value per row and lane; the walls are 0
     Scalar re[kRows][kLanes];
     Scalar im[kRows][kLanes];
@@ -73,14 +77,14 @@ public:
       }
     }
   }
-  static Lanes load_controls(const Matrix<Scalar>& u, Index first, int count) {
-    Lanes out{};
+  static LaneValues load_controls(const Matrix<Scalar>& u, Index first, int count) {
+    LaneValues out{};
     for (int l = 0; l < count; ++l) out[static_cast<std::size_t>(l)] = u(0, first + l);
     return out;
   }
 
   /// psi ← U₁⁻¹U₂ psi for every lane.
-  void step(const Lanes& u, Field& psi) const {
+  void step(const LaneValues& u, Field& psi) const {
     Field r, y;  // r: 1/p_j; y: U₂ψ, then forward- and back-substituted
     r.clear_walls();
     y.clear_walls();
@@ -107,8 +111,8 @@ public:
 
   /// For every lane, with psi the state before the step and lambda the cotangent of the
   /// state after it: lambda_x ← Aᵀλ (if not null), lambda_u ← Bᵀλ.
-  void vjp(const Lanes& u, const Field& psi, const Field& lambda, Field* lambda_x,
-           Lanes& lambda_u) const {
+  void vjp(const LaneValues& u, const Field& psi, const Field& lambda, Field* lambda_x,
+           LaneValues& lambda_u) const {
     Field r, y, mu;  // y: U₁⁻¹ψ = s/2; mu: Uᴴ⁻¹λ, then U₁⁻ᴴλ
     r.clear_walls();
     y.clear_walls();
@@ -125,7 +129,7 @@ public:
         mu.im[i][l] = zi * rr - zr * ri;
       }
     }
-    Lanes acc{};
+    LaneValues acc{};
     for (int i = Nx; i >= 1; --i) {
       const Scalar x = position(i);
       for (int l = 0; l < kLanes; ++l) {

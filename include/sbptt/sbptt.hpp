@@ -19,7 +19,6 @@
 #include "sbptt/sim/integrators.hpp"
 #include "sbptt/sim/linear.hpp"
 #include "sbptt/sim/schrodinger.hpp"
-#include "sbptt/sim/schrodinger_lanes.hpp"
 #include "sbptt/sim/tridiagonal.hpp"
 #include "sbptt/nn/activation.hpp"
 #include "sbptt/nn/conv1d.hpp"

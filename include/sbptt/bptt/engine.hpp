@@ -16,15 +16,16 @@
 /// layer, never per sample); a `PackingController` packs its parameters once per rollout
 /// (`forward`, `evaluate`), and the reverse sweeps use the packing of the last of those. The
 /// simulator, the loss and their VJPs run per sample, except that a `BatchSimulator` steps and
-/// differentiates the whole batch in one call (on the calling thread). After the first call at a batch shape,
-/// `forward`, `reverse` and `regular_and_modified` allocate nothing (every buffer is kept and
-/// resized only when the shape changes).
+/// differentiates the whole batch in one call on the calling thread (batch_physics.hpp).
+/// After the first call at a batch shape, `forward`, `reverse` and `regular_and_modified`
+/// allocate nothing (every buffer is kept and resized only when the shape changes).
 ///
 /// Threads (`set_threads`): the per-sample work of a step (simulator step and VJP, loss seeds;
-/// only the seeds for a `BatchSimulator`) is split over the samples; `evaluate` rolls out fixed chunks of `kEvaluateChunk` samples
-/// independently. A lone sweep (`reverse`) whose per-sample loops are too cheap to split hands
-/// the parameter products of a `SplitBackwardController` to a second thread instead, step by
-/// step, and adds them in step order (engine_buffers.hpp, `ParamHandoff`); so does the pair
+/// only the seeds for a `BatchSimulator`) is split over the samples; `evaluate` rolls out
+/// fixed chunks of `kEvaluateChunk` samples independently. A lone sweep (`reverse`) whose
+/// per-sample loops are too cheap to split hands the parameter products of a
+/// `SplitBackwardController` to a second thread instead, step by step, and adds them in step
+/// order (engine_buffers.hpp, `ParamHandoff`); so does the pair
 /// of `regular_and_modified` when its sweeps share one backward pass (one control), else its
 /// two sweeps run at once. Every sample is computed by the same operations whatever the
 /// thread count, and every batch sum is taken in a fixed order, so all results are bitwise
@@ -171,17 +172,10 @@ public:
       packed_controller_.forward(trajectory_.states[i], trajectory_.controls[i],
                                  trajectory_.workspaces[i]);
       note_non_finite(Quantity::Control, n, trajectory_.controls[i]);
-      if constexpr (BatchSimulator<Sim>) {
-        sim_.step_batch(trajectory_.states[i], trajectory_.controls[i], trajectory_.states[i + 1]);
-      } else {
-        fork_[0].for_samples(pool_.get(), batch, forward_scratch_, true,
-                             [&](Index b, Scratch& t) {
-          t.x = trajectory_.states[i].col(b);
-          t.u = trajectory_.controls[i].col(b);
-          sim_.step(t.x, t.u, t.x_next);
-          trajectory_.states[i + 1].col(b) = t.x_next;
-        });
-      }
+      detail::step_columns(sim_, trajectory_.states[i], trajectory_.controls[i],
+                           trajectory_.states[i + 1], [&](auto&& body) {
+        fork_[0].for_samples(pool_.get(), batch, forward_scratch_, true, body);
+      });
       note_non_finite(Quantity::State, n + 1, trajectory_.states[i + 1]);
     }
     return batch_loss();
@@ -380,26 +374,11 @@ private:
       objective_.state_loss(t.x, &t.seed);
       for (Sweep* s : sweeps) s->lambda.col(b) += seed_scale * t.seed;
     };
-    auto& scratch = (*sweeps.begin())->scratch;
-    if constexpr (BatchSimulator<Sim>) {
-      if (scored) fork_[1].for_samples(pool_.get(), trajectory_.batch(), scratch, parallel, seed);
-      for (Sweep* s : sweeps)
-        sim_.vjp_batch(trajectory_.states[i], trajectory_.controls[i], s->lambda,
-                       physics ? &s->propagated : nullptr, &s->mu);
-    } else {
-      fork_[1].for_samples(pool_.get(), trajectory_.batch(), scratch, parallel,
-                           [&](Index b, Scratch& t) {
-        if (scored) seed(b, t);
-        t.x = trajectory_.states[i].col(b);
-        t.u = trajectory_.controls[i].col(b);
-        for (Sweep* s : sweeps) {
-          t.lambda_sample = s->lambda.col(b);
-          sim_.vjp(t.x, t.u, t.lambda_sample, physics ? &t.lambda_x : nullptr, &t.lambda_u);
-          s->mu.col(b) = t.lambda_u;
-          if (physics) s->propagated.col(b) = t.lambda_x;
-        }
-      });
-    }
+    detail::vjp_columns(sim_, trajectory_.states[i], trajectory_.controls[i], sweeps, physics,
+                        scored, seed, [&](auto&& body) {
+      fork_[1].for_samples(pool_.get(), trajectory_.batch(), (*sweeps.begin())->scratch,
+                           parallel, body);
+    });
     for (Sweep* s : sweeps) {
       s->record_adjoint(n + 1);
       if (objective_.control_weight > 0) s->mu.noalias() += control_seed * trajectory_.controls[i];

@@ -10,28 +10,15 @@
 #include <thread>
 #include <vector>
 
+#include "sbptt/bptt/batch_physics.hpp"
 #include "sbptt/bptt/diagnostics.hpp"
 #include "sbptt/bptt/objective.hpp"
 #include "sbptt/bptt/packed_controller.hpp"
-#include "sbptt/core/concepts.hpp"
 #include "sbptt/core/non_finite.hpp"
 #include "sbptt/core/parallel.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt::detail {
-
-/// Temporaries of the per-sample work of one thread (sized once; never shared by two threads).
-template <class State, class Control>
-struct SampleScratch {
-  State x, x_next, seed, lambda_sample, lambda_x;
-  Control u, lambda_u;
-
-  SampleScratch(Index state_dim, Index control_dim) {
-    for (State* v : {&x, &x_next, &seed, &lambda_sample, &lambda_x}) v->resize(state_dim);
-    u.resize(control_dim);
-    lambda_u.resize(control_dim);
-  }
-};
 
 /// Sets `slot` to the first non-finite entry of `values` (scanning sample by sample), with
 /// samples numbered from `first`; leaves it alone when every entry is finite.
@@ -229,16 +216,11 @@ struct EvaluationChunk {
     for (Index n = 0; n < steps; ++n) {
       controller.forward(state, control, workspace);
       note(Quantity::Control, n, 2 * n, control, first);
-      if constexpr (BatchSimulator<Sim>) sim.step_batch(state, control, next);
+      step_columns(sim, state, control, next, [&](auto&& body) {
+        for (Index b = 0; b < batch; ++b) body(b, t);
+      });
       for (Index b = 0; b < batch; ++b) {
-        if constexpr (BatchSimulator<Sim>) {
-          t.x_next = next.col(b);
-        } else {
-          t.x = state.col(b);
-          t.u = control.col(b);
-          sim.step(t.x, t.u, t.x_next);
-          next.col(b) = t.x_next;
-        }
+        t.x_next = next.col(b);
         if (objective.control_weight > 0)
           losses(b) += control_scale * control.col(b).squaredNorm();
         if (objective.timing == LossTiming::Continuous || n + 1 == steps)

@@ -1,0 +1,69 @@
+#pragma once
+/// \file The simulator's part of one step for a whole batch (columns are samples): a
+/// `BatchSimulator` gets one call; any other simulator one call per sample, through the
+/// caller's `for_each_sample(body)`, which calls `body(b, scratch)` for every sample b with a
+/// thread's `SampleScratch` (serially or over threads, as the caller decides). Implementation
+/// details of `sbptt::Engine`; the forward rollout, the evaluation and the reverse sweeps all
+/// go through here, so that the two paths are chosen in one place.
+#include "sbptt/core/concepts.hpp"
+#include "sbptt/core/types.hpp"
+
+namespace sbptt::detail {
+
+/// Temporaries of the per-sample work of one thread (sized once; never shared by two threads).
+template <class State, class Control>
+struct SampleScratch {
+  State x, x_next, seed, lambda_sample, lambda_x;
+  Control u, lambda_u;
+
+  SampleScratch(Index state_dim, Index control_dim) {
+    for (State* v : {&x, &x_next, &seed, &lambda_sample, &lambda_x}) v->resize(state_dim);
+    u.resize(control_dim);
+    lambda_u.resize(control_dim);
+  }
+};
+
+/// x_next = P(x, u) for every column (x_next sized state_dim × B by the caller).
+template <class Sim, class Scalar, class ForEachSample>
+void step_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& u,
+                  Matrix<Scalar>& x_next, ForEachSample&& for_each_sample) {
+  if constexpr (BatchSimulator<Sim>) {
+    sim.step_batch(x, u, x_next);
+  } else {
+    for_each_sample([&](Index b, auto& t) {
+      t.x = x.col(b);
+      t.u = u.col(b);
+      sim.step(t.x, t.u, t.x_next);
+      x_next.col(b) = t.x_next;
+    });
+  }
+}
+
+/// For each of `sweeps` (pointers to buffers with `lambda`, `mu`, `propagated`, all with B
+/// columns): mu = Bᵀλ per column and, when `physics`, propagated = Aᵀλ, at the step (x, u).
+/// `seed(b, t)`, if `seeded`, first adds sample b's loss seed to every sweep's λ. Per sample,
+/// the seed and the VJPs of all sweeps share one pass (one fork when the loop is split).
+template <class Sim, class Scalar, class Sweeps, class Seed, class ForEachSample>
+void vjp_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& u,
+                 const Sweeps& sweeps, bool physics, bool seeded, Seed&& seed,
+                 ForEachSample&& for_each_sample) {
+  if constexpr (BatchSimulator<Sim>) {
+    if (seeded) for_each_sample(seed);
+    for (auto* s : sweeps)
+      sim.vjp_batch(x, u, s->lambda, physics ? &s->propagated : nullptr, &s->mu);
+  } else {
+    for_each_sample([&](Index b, auto& t) {
+      if (seeded) seed(b, t);
+      t.x = x.col(b);
+      t.u = u.col(b);
+      for (auto* s : sweeps) {
+        t.lambda_sample = s->lambda.col(b);
+        sim.vjp(t.x, t.u, t.lambda_sample, physics ? &t.lambda_x : nullptr, &t.lambda_u);
+        s->mu.col(b) = t.lambda_u;
+        if (physics) s->propagated.col(b) = t.lambda_x;
+      }
+    });
+  }
+}
+
+}  // namespace sbptt::detail

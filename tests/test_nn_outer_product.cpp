@@ -59,3 +59,46 @@ TEMPLATE_TEST_CASE("dW += D X^T within the rounding bound, nothing written outsi
     }
   }
 }
+
+TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel's scale within the rounding bound",
+                   "[nn][outer]", float, double) {
+  // The scale multiplies X's block in the registers: each term is d·(s·x), one rounding more.
+  using S = TestType;
+  const S eps = std::numeric_limits<S>::epsilon();
+  std::uint64_t seed = 500;
+  for (const auto& [rows, cols] : {std::pair<Index, Index>{100, 10}, {100, 100}, {1, 100},
+                                   {60, 180}, {17, 53}, {19, 5}}) {
+    for (const Index n : {1, 7, 8, 16, 21}) {
+      const Matrix<S> d = random_matrix<S>(rows, n, ++seed, 1.0);
+      const Matrix<S> x = random_matrix<S>(cols, n, ++seed, 1.0);
+      const Matrix<S> scale = random_matrix<S>(n, 1, ++seed, 3.0);
+      sbptt::Vector<S> dw = random_matrix<S>(rows * cols, 1, ++seed, 1.0);
+      const sbptt::Vector<S> start = dw;
+      INFO("rows " << rows << " cols " << cols << " n " << n);
+      if (!sbptt::outer_product_kernel_applies<S>(cols)) {
+        // Eigen's product takes no scale: refused, and nothing written.
+        CHECK_THROWS_WITH(sbptt::add_outer_products(dw.data(), rows, cols, d.data(), x.data(), n,
+                                                    scale.data()),
+                          Catch::Contains("a scale for rows of"));
+        CHECK(dw == start);
+        continue;
+      }
+      sbptt::add_outer_products(dw.data(), rows, cols, d.data(), x.data(), n, scale.data());
+      for (Index i = 0; i < rows; ++i) {
+        for (Index j = 0; j < cols; ++j) {
+          long double exact = start(i * cols + j), magnitude = std::abs(exact);
+          for (Index k = 0; k < n; ++k) {
+            const long double term =
+                static_cast<long double>(d(i, k)) * scale(k) * static_cast<long double>(x(j, k));
+            exact += term;
+            magnitude += std::abs(term);
+          }
+          const long double bound =
+              static_cast<long double>(n + 2) * static_cast<long double>(eps) * magnitude * 1.01L;
+          INFO("entry (" << i << ", " << j << ")");
+          REQUIRE(std::abs(static_cast<long double>(dw(i * cols + j)) - exact) <= bound);
+        }
+      }
+    }
+  }
+}

@@ -138,10 +138,13 @@ struct Conv1d {
   /// \param delta    adjoint of the pre-activation, (P·C_out) × B position-major, equivalently
   ///                 C_out × (P·B) column-major
   /// \param grad     this layer's slice of the gradient, num_params() entries; accumulated
+  /// \param scale    null, or a factor per im2col column (P·B: sample b's at b·P … b·P + P − 1)
+  ///                 on its delta, where the register kernel runs
   template <class Scalar>
-  void param_vjp(const Matrix<Scalar>& columns, const Scalar* delta, Scalar* grad) const {
+  void param_vjp(const Matrix<Scalar>& columns, const Scalar* delta, Scalar* grad,
+                 const Scalar* scale = nullptr) const {
     add_weight_and_bias_products(grad, out_channels, window_size(), delta, columns.data(),
-                                 columns.cols());
+                                 columns.cols(), scale);
   }
 
   /// Writes the input VJP ∂L/∂x, (L·C_in) × B position-major, into `dx`.

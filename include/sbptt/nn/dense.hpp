@@ -58,10 +58,13 @@ struct Dense {
   /// \param x      the inputs the forward pass saw, n_in × B
   /// \param delta  adjoint of the pre-activation ∂L/∂(W x + b), n_out × B (column-major)
   /// \param grad   this layer's slice of the gradient, num_params() entries; accumulated
+  /// \param scale  null, or a factor per sample (B) on its delta, where the register kernel
+  ///               runs (`outer_product_kernel_applies(inputs)`)
   template <class Scalar>
-  void param_vjp(const Matrix<Scalar>& x, const Scalar* delta, Scalar* grad) const {
+  void param_vjp(const Matrix<Scalar>& x, const Scalar* delta, Scalar* grad,
+                 const Scalar* scale = nullptr) const {
     // The batch sum is the inner dimension of these products (outer_product.hpp).
-    add_weight_and_bias_products(grad, outputs, inputs, delta, x.data(), x.cols());
+    add_weight_and_bias_products(grad, outputs, inputs, delta, x.data(), x.cols(), scale);
   }
 
   /// Writes the input VJP ∂L/∂x = Wᵀ Δ, n_in × B (column-major), into `dx`.

@@ -31,6 +31,7 @@
 #include "sbptt/nn/activation.hpp"
 #include "sbptt/nn/layer.hpp"
 #include "sbptt/nn/network_scratch.hpp"
+#include "sbptt/nn/outer_product.hpp"
 #include "sbptt/nn/packed_product.hpp"
 
 namespace sbptt {
@@ -219,13 +220,7 @@ public:
                     "Network::add_param_gradient: scaled is the recorded adjoints; expected "
                     "another LayerAdjoints");
     if (scaled.deltas_.size() < layers_.size()) scaled.deltas_.resize(layers_.size());
-    for (std::size_t l = 0; l < layers_.size(); ++l) {
-      const Index rows = layer_output_dim(layers_[l]);
-      detail::grow_map(scaled.deltas_[l], rows, ws.batch_).noalias() =
-          detail::ConstMatrixMap<Scalar>(adjoints.deltas_[l].data(), rows, ws.batch_) *
-          scales.row(0).asDiagonal();
-    }
-    params_from(ws, scaled.deltas_, grad);
+    params_from(ws, adjoints.deltas_, grad, scales.data(), &scaled.deltas_);
   }
 
 private:
@@ -322,19 +317,36 @@ private:
     }
   }
 
-  /// grad += the parameter products of every layer from the recorded Δ_l.
+  /// grad += the parameter products of every layer from the recorded Δ_l, or from Δ_l·diag(s)
+  /// with `scales` = s (B): the register kernel scales X's block in its registers; elsewhere
+  /// Δ_l·diag(s) is formed in `scaled`[l] (grown, never shrunk), which for a conv layer under
+  /// the kernel holds s spread over its im2col columns instead.
   [[gnu::noinline]] void params_from(const Workspace& ws,
                                      const std::vector<Vector<Scalar>>& deltas,
-                                     Vector<Scalar>& grad) const {
+                                     Vector<Scalar>& grad, const Scalar* scales = nullptr,
+                                     std::vector<Vector<Scalar>>* scaled = nullptr) const {
+    const Index batch = ws.batch_;
     for (std::size_t l = 0; l < layers_.size(); ++l) {
       Scalar* g = grad.data() + offsets_[l];
+      const Scalar* delta = deltas[l].data();
       std::visit(
           [&](const auto& spec) {
-            if constexpr (std::is_same_v<std::decay_t<decltype(spec)>, Conv1d>) {
-              spec.param_vjp(ws.columns_[l], deltas[l].data(), g);
-            } else {
-              spec.param_vjp(l == 0 ? ws.input_ : ws.outputs_[l - 1], deltas[l].data(), g);
+            constexpr bool conv = std::is_same_v<std::decay_t<decltype(spec)>, Conv1d>;
+            const Matrix<Scalar>& x = conv ? ws.columns_[l]
+                                           : (l == 0 ? ws.input_ : ws.outputs_[l - 1]);
+            if (scales == nullptr) return spec.param_vjp(x, delta, g);
+            Vector<Scalar>& buffer = (*scaled)[l];
+            if (outer_product_kernel_applies<Scalar>(x.rows())) {
+              const Index per_sample = x.cols() / batch;  // a conv layer's positions P
+              auto spread = detail::grow_map(buffer, per_sample, batch);
+              spread = Eigen::Map<const Matrix<Scalar>>(scales, 1, batch).replicate(per_sample, 1);
+              return spec.param_vjp(x, delta, g, buffer.data());
             }
+            const Index rows = layer_output_dim(layers_[l]);
+            detail::grow_map(buffer, rows, batch).noalias() =
+                detail::ConstMatrixMap<Scalar>(delta, rows, batch) *
+                Eigen::Map<const Vector<Scalar>>(scales, batch).asDiagonal();
+            spec.param_vjp(x, buffer.data(), g);
           },
           layers_[l]);
     }

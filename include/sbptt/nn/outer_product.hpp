@@ -25,6 +25,7 @@
 
 #include <Eigen/Core>
 
+#include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
 
 #if defined(EIGEN_VECTORIZE_AVX512)
@@ -42,13 +43,14 @@ public:
   using Packet = typename Eigen::internal::packet_traits<Scalar>::type;
   static constexpr Index kLanes = Eigen::internal::unpacket_traits<Packet>::size;
 
-  /// dW (rows × cols, row-major) += D (rows × n, column-major) Xᵀ (X: cols × n, column-major).
+  /// dW (rows × cols, row-major) += D (rows × n, column-major) diag(s) Xᵀ (X: cols × n,
+  /// column-major; s: n entries, or none for s = 1).
   static void run(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
-                  Index n) {
+                  Index n, const Scalar* scale) {
     Index k = 0;
     for (; k + kSamples <= n; k += kSamples)
-      samples<kSamples>(dw, rows, cols, d + k * rows, x + k * cols);
-    last_samples(n - k, dw, rows, cols, d + k * rows, x + k * cols,
+      samples<kSamples>(dw, rows, cols, d + k * rows, x + k * cols, at(scale, k));
+    last_samples(n - k, dw, rows, cols, d + k * rows, x + k * cols, at(scale, k),
                  std::make_index_sequence<kSamples - 1>{});
   }
 
@@ -62,12 +64,17 @@ private:
   static constexpr int kRows = 2;
   static constexpr int kNarrowRows = 8;
 
+  static const Scalar* at(const Scalar* scale, Index k) {
+    return scale == nullptr ? nullptr : scale + k;
+  }
+
   /// The 1 … kSamples − 1 samples after the last full group, by a kernel of that width.
   template <std::size_t... Counts>
   static void last_samples(Index count, Scalar* dw, Index rows, Index cols, const Scalar* d,
-                           const Scalar* x, std::index_sequence<Counts...> /*widths*/) {
+                           const Scalar* x, const Scalar* scale,
+                           std::index_sequence<Counts...> /*widths*/) {
     ((count == static_cast<Index>(Counts) + 1
-          ? samples<static_cast<int>(Counts) + 1>(dw, rows, cols, d, x)
+          ? samples<static_cast<int>(Counts) + 1>(dw, rows, cols, d, x, scale)
           : void()),
      ...);
   }
@@ -76,30 +83,37 @@ private:
   /// panels, the remaining whole panels in one more block, and a row's partial last panel on
   /// its own: inside the block of a whole panel it measured 2.4 times slower (100 × 24 × 8).
   template <int Samples>
-  static void samples(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x) {
+  static void samples(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
+                      const Scalar* scale) {
     const Index full_panels = cols / kLanes;
     Index p = 0;
     for (; p + kPanels <= full_panels; p += kPanels)
-      columns<Samples, kPanels, false>(dw, rows, cols, d, x, p * kLanes);
-    if (full_panels - p == 2) columns<Samples, 2, false>(dw, rows, cols, d, x, p * kLanes);
-    if (full_panels - p == 1) columns<Samples, 1, false>(dw, rows, cols, d, x, p * kLanes);
+      columns<Samples, kPanels, false>(dw, rows, cols, d, x, scale, p * kLanes);
+    if (full_panels - p == 2)
+      columns<Samples, 2, false>(dw, rows, cols, d, x, scale, p * kLanes);
+    if (full_panels - p == 1)
+      columns<Samples, 1, false>(dw, rows, cols, d, x, scale, p * kLanes);
     if (full_panels == 0) {
-      columns<Samples, 1, true, kNarrowRows>(dw, rows, cols, d, x, 0);
+      columns<Samples, 1, true, kNarrowRows>(dw, rows, cols, d, x, scale, 0);
     } else if (full_panels * kLanes < cols) {
-      columns<Samples, 1, true>(dw, rows, cols, d, x, full_panels * kLanes);
+      columns<Samples, 1, true>(dw, rows, cols, d, x, scale, full_panels * kLanes);
     }
   }
 
   /// Columns first … first + Panels·kLanes − 1 of every row (up to cols when `Masked`), in
-  /// blocks of `Rows` rows.
+  /// blocks of `Rows` rows. A scale multiplies X's block in the registers, once for all rows.
   template <int Samples, int Panels, bool Masked, int Rows = kRows>
   static void columns(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
-                      Index first) {
+                      const Scalar* scale, Index first) {
     const Index lanes = Masked ? cols - first : kLanes;
     Packet xs[Panels][Samples];
     for (int p = 0; p < Panels; ++p)
       for (int k = 0; k < Samples; ++k)
         xs[p][k] = load<Masked>(x + k * cols + first + p * kLanes, lanes);
+    if (scale != nullptr)
+      for (int k = 0; k < Samples; ++k)
+        for (int p = 0; p < Panels; ++p)
+          xs[p][k] = Eigen::internal::pmul(xs[p][k], Eigen::internal::pset1<Packet>(scale[k]));
     Index i = 0;
     for (; i + Rows <= rows; i += Rows)
       update_rows<Samples, Panels, Rows, Masked>(dw + i * cols + first, cols, d + i, rows, xs,
@@ -157,32 +171,52 @@ private:
 
 }  // namespace detail
 
-/// dW += D Xᵀ. \param dw  rows × cols, row-major (a weight gradient), accumulated
-/// \param d  rows × n, column-major \param x  cols × n, column-major; n is the batch sum.
+/// Whether `add_outer_products` runs the register kernel for rows of `cols` entries (AVX-512,
+/// float or double, a row at least half a register wide); only then does it take a scale.
+template <class Scalar>
+[[nodiscard]] constexpr bool outer_product_kernel_applies([[maybe_unused]] Index cols) {
+#if defined(EIGEN_VECTORIZE_AVX512)
+  if constexpr (std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>)
+    return 2 * cols >= detail::OuterProductKernel<Scalar>::kLanes;
+#endif
+  return false;
+}
+
+/// dW += D diag(s) Xᵀ. \param dw  rows × cols, row-major (a weight gradient), accumulated
+/// \param d  rows × n, column-major \param x  cols × n, column-major; n is the batch sum
+/// \param scale  s, n entries, or null for s = 1; only where `outer_product_kernel_applies`.
 template <class Scalar>
 void add_outer_products(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
-                        Index n) {
+                        Index n, const Scalar* scale = nullptr) {
 #if defined(EIGEN_VECTORIZE_AVX512)
   if constexpr (std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>) {
-    if (2 * cols >= detail::OuterProductKernel<Scalar>::kLanes) {
-      detail::OuterProductKernel<Scalar>::run(dw, rows, cols, d, x, n);
+    if (outer_product_kernel_applies<Scalar>(cols)) {
+      detail::OuterProductKernel<Scalar>::run(dw, rows, cols, d, x, n, scale);
       return;
     }
   }
 #endif
+  detail::require(scale == nullptr, "add_outer_products: a scale for rows of ", cols,
+                  " entries; expected one only where the register kernel runs");
   Eigen::Map<RowMajorMatrix<Scalar>>(dw, rows, cols).noalias() +=
       Eigen::Map<const Matrix<Scalar>>(d, rows, n) *
       Eigen::Map<const Matrix<Scalar>>(x, cols, n).transpose();
 }
 
 /// The parameter VJP of a layer whose gradient slice is W (rows × cols, row-major) followed by
-/// its bias b (rows), as both Dense and Conv1d lay it out: dW += D Xᵀ, db += D 1.
+/// its bias b (rows), as both Dense and Conv1d lay it out: dW += D diag(s) Xᵀ, db += D s (s = 1
+/// without a scale; see `add_outer_products`).
 template <class Scalar>
 void add_weight_and_bias_products(Scalar* grad, Index rows, Index cols, const Scalar* d,
-                                  const Scalar* x, Index n) {
-  add_outer_products(grad, rows, cols, d, x, n);
-  Eigen::Map<Vector<Scalar>>(grad + rows * cols, rows).noalias() +=
-      Eigen::Map<const Matrix<Scalar>>(d, rows, n).rowwise().sum();
+                                  const Scalar* x, Index n, const Scalar* scale = nullptr) {
+  add_outer_products(grad, rows, cols, d, x, n, scale);
+  Eigen::Map<Vector<Scalar>> bias(grad + rows * cols, rows);
+  const Eigen::Map<const Matrix<Scalar>> adjoints(d, rows, n);
+  if (scale == nullptr) {
+    bias.noalias() += adjoints.rowwise().sum();
+  } else {
+    bias.noalias() += adjoints * Eigen::Map<const Vector<Scalar>>(scale, n);
+  }
 }
 
 }  // namespace sbptt

@@ -39,16 +39,50 @@ void step_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>&
   }
 }
 
+/// The two sweeps of a pair side by side for one `vjp_batch` call: [x x], [u u], [λ₁ λ₂] and
+/// the results, 2B columns. A `BatchSimulator`'s column does not depend on the others, so the
+/// results are the two calls' bit for bit; and where a batch fills less than a block of lanes
+/// (the paper's 8 samples in 16 float lanes) both sweeps share one block instead of two.
+template <class Scalar>
+struct PairedColumns {
+  Matrix<Scalar> x, u, lambda, lambda_x, lambda_u;
+
+  /// [a b] into `into`, each B columns.
+  static void place(const Matrix<Scalar>& a, const Matrix<Scalar>& b, Matrix<Scalar>& into) {
+    into.resize(a.rows(), 2 * a.cols());
+    into.leftCols(a.cols()) = a;
+    into.rightCols(a.cols()) = b;
+  }
+};
+
 /// For each of `sweeps` (pointers to buffers with `lambda`, `mu`, `propagated`, all with B
 /// columns): mu = Bᵀλ per column and, when `physics`, propagated = Aᵀλ, at the step (x, u).
 /// `seed(b, t)`, if `seeded`, first adds sample b's loss seed to every sweep's λ. Per sample,
-/// the seed and the VJPs of all sweeps share one pass (one fork when the loop is split).
+/// the seed and the VJPs of all sweeps share one pass (one fork when the loop is split); a
+/// `BatchSimulator` gets one call for two sweeps, through `paired`.
 template <class Sim, class Scalar, class Sweeps, class Seed, class ForEachSample>
 void vjp_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& u,
                  const Sweeps& sweeps, bool physics, bool seeded, Seed&& seed,
-                 ForEachSample&& for_each_sample) {
+                 ForEachSample&& for_each_sample, PairedColumns<Scalar>& paired) {
   if constexpr (BatchSimulator<Sim>) {
     if (seeded) for_each_sample(seed);
+    if (sweeps.size() == 2) {
+      auto* first = *sweeps.begin();
+      auto* second = *(sweeps.begin() + 1);
+      const Index batch = x.cols();
+      PairedColumns<Scalar>::place(x, x, paired.x);
+      PairedColumns<Scalar>::place(u, u, paired.u);
+      PairedColumns<Scalar>::place(first->lambda, second->lambda, paired.lambda);
+      sim.vjp_batch(paired.x, paired.u, paired.lambda, physics ? &paired.lambda_x : nullptr,
+                    &paired.lambda_u);
+      first->mu = paired.lambda_u.leftCols(batch);
+      second->mu = paired.lambda_u.rightCols(batch);
+      if (physics) {
+        first->propagated = paired.lambda_x.leftCols(batch);
+        second->propagated = paired.lambda_x.rightCols(batch);
+      }
+      return;
+    }
     for (auto* s : sweeps)
       sim.vjp_batch(x, u, s->lambda, physics ? &s->propagated : nullptr, &s->mu);
   } else {

@@ -228,8 +228,13 @@ public:
     check_sweep(schedule, truncation);
     if constexpr (SplitBackwardController<Ctrl>) {
       // Only once the simulator's loops have been found too cheap to split: the second
-      // thread then has nothing better to do than the parameter products.
-      if (handoff_ && !fork_[1].probing() && !fork_[1].fork()) {
+      // thread then has nothing better to do than the parameter products. A BatchSimulator's
+      // VJPs are never split (only its loss seeds, and those only when told to split every
+      // loop), so there is nothing to wait for.
+      const bool split_loops = BatchSimulator<Sim>
+                                   ? fork_[1].splits_every_loop()
+                                   : fork_[1].probing() || fork_[1].fork();
+      if (handoff_ && !split_loops) {
         Handoff& h = *handoff_;
         auto add = [&](std::size_t slot) { add_params(h, slot, gradient); };
         h.run(*pool_, steps_, add,
@@ -378,7 +383,7 @@ private:
                         scored, seed, [&](auto&& body) {
       fork_[1].for_samples(pool_.get(), trajectory_.batch(), (*sweeps.begin())->scratch,
                            parallel, body);
-    });
+    }, paired_columns_);
     for (Sweep* s : sweeps) {
       s->record_adjoint(n + 1);
       if (objective_.control_weight > 0) s->mu.noalias() += control_seed * trajectory_.controls[i];
@@ -437,6 +442,7 @@ private:
   std::vector<Scratch> forward_scratch_;
   detail::ForkDecision fork_[3];  ///< per-sample loops: simulator step, VJPs, batch loss
   Sweep sweeps_[2];
+  detail::PairedColumns<Scalar> paired_columns_;  ///< both sweeps' VJPs in one batch call
   std::vector<EvalChunk> chunks_;
   Vector<Scalar> eval_losses_;
   // Last, so that it is destroyed first: its workers stop before the buffers they work on go.

@@ -247,6 +247,7 @@ public:
 
   [[nodiscard]] bool probing() const { return runs_ < probes; }
   [[nodiscard]] bool fork() const { return !probing() && best_ns_ >= threshold_ns_; }
+  [[nodiscard]] bool splits_every_loop() const { return threshold_ns_ == 0; }
   void record(double ns) {
     best_ns_ = runs_ == 0 ? ns : std::min(best_ns_, ns);
     ++runs_;

@@ -1,0 +1,198 @@
+// CartPole's batched step and vjp (float samples in SIMD lanes): against the per-sample step and
+// vjp, against the analytic Jacobians in double (themselves checked against finite differences
+// in test_sim_cartpole.cpp), against central differences of the batched step itself, and
+// independence from the other columns, for the reference and the physical model.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <numbers>
+
+#include "sbptt/core/rng.hpp"
+#include "sbptt/sim/cartpole.hpp"
+
+namespace {
+
+using sbptt::CartPole;
+using sbptt::CartPoleModel;
+using sbptt::CartPoleOptions;
+using sbptt::Index;
+using sbptt::Matrix;
+
+struct Batch {
+  Matrix<float> x, u, lambda;
+};
+
+// States of the paper's distribution spread to any angle (poles upright, hanging and spun
+// past 2π), forces in ±20 N, cotangents.
+Batch random_batch(Index state_dim, Index size, sbptt::Rng& rng) {
+  Batch b{Matrix<float>(state_dim, size), Matrix<float>(1, size),
+          Matrix<float>(state_dim, size)};
+  for (Index c = 0; c < size; ++c) {
+    for (Index i = 0; i < state_dim; ++i) {
+      const bool angle = i >= 2 && i % 2 == 0;
+      b.x(i, c) = static_cast<float>(angle ? rng.uniform(-3.0, 3.0) * std::numbers::pi
+                                           : rng.uniform(-2.0, 2.0));
+      b.lambda(i, c) = static_cast<float>(rng.normal());
+    }
+    b.u(0, c) = static_cast<float>(rng.uniform(-20.0, 20.0));
+  }
+  return b;
+}
+
+CartPoleOptions physical() {
+  CartPoleOptions options;
+  options.model = CartPoleModel::Physical;
+  return options;
+}
+
+template <class Sim>
+void check_against_per_sample(const Sim& sim, Index size, sbptt::Rng& rng) {
+  const Batch b = random_batch(sim.state_dim(), size, rng);
+  Matrix<float> next, lambda_x, lambda_u;
+  sim.step_batch(b.x, b.u, next);
+  sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
+  REQUIRE(next.rows() == sim.state_dim());
+  REQUIRE(next.cols() == size);
+  REQUIRE(lambda_u.cols() == size);
+  double step_error = 0, state_error = 0, control_error = 0;
+  for (Index c = 0; c < size; ++c) {
+    typename Sim::State x = b.x.col(c), lambda = b.lambda.col(c), expected, expected_x;
+    typename Sim::Control u = b.u.col(c), expected_u;
+    sim.step(x, u, expected);
+    sim.vjp(x, u, lambda, &expected_x, &expected_u);
+    step_error = std::max(step_error, static_cast<double>((next.col(c) - expected).norm() /
+                                                          (1 + expected.norm())));
+    state_error = std::max(state_error, static_cast<double>((lambda_x.col(c) - expected_x).norm() /
+                                                            (1 + expected_x.norm())));
+    control_error = std::max(control_error, static_cast<double>(std::abs(lambda_u(0, c) -
+                                                                         expected_u(0)) /
+                                                                (1 + std::abs(expected_u(0)))));
+  }
+  INFO(sim.poles() << " poles, batch " << size);
+  // Both are float: a few roundings of the sine and cosine apart.
+  CHECK(step_error < 2e-6);
+  CHECK(state_error < 2e-6);
+  CHECK(control_error < 2e-6);
+}
+
+// Aᵀλ and Bᵀλ of float vjp_batch against the analytic Jacobians of the double model at the same
+// (float) point.
+template <int Poles>
+void check_against_double_jacobians(const CartPoleOptions& options, sbptt::Rng& rng) {
+  const CartPole<float, Poles> sim(options);
+  const CartPole<double, Poles> reference(options);
+  const Batch b = random_batch(sim.state_dim(), 19, rng);
+  Matrix<float> lambda_x, lambda_u;
+  sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
+  for (Index c = 0; c < b.x.cols(); ++c) {
+    typename CartPole<double, Poles>::StateJacobian a;
+    typename CartPole<double, Poles>::ControlJacobian control;
+    const typename CartPole<double, Poles>::State x = b.x.col(c).cast<double>();
+    const typename CartPole<double, Poles>::State lambda = b.lambda.col(c).cast<double>();
+    reference.jacobians(x, typename CartPole<double, Poles>::Control(b.u(0, c)), a, control);
+    const Eigen::VectorXd expected_x = a.transpose() * lambda;
+    const double expected_u = control.dot(lambda);
+    INFO("column " << c);
+    CHECK((lambda_x.col(c).cast<double>() - expected_x).norm() < 1e-5 * (1 + expected_x.norm()));
+    CHECK(std::abs(lambda_u(0, c) - expected_u) < 1e-5 * (1 + std::abs(expected_u)));
+  }
+}
+
+}  // namespace
+
+TEST_CASE("cartpole batch: step_batch and vjp_batch equal step and vjp per column",
+          "[sim][cartpole]") {
+  sbptt::Rng rng(41);
+  for (Index size : {1, 7, 8, 16, 19, 40}) {
+    check_against_per_sample(CartPole<float, 4>(), size, rng);
+    check_against_per_sample(CartPole<float, Eigen::Dynamic>(3), size, rng);
+    check_against_per_sample(CartPole<float, 2>(physical()), size, rng);
+  }
+  check_against_per_sample(CartPole<float, 1>(), 5, rng);
+}
+
+TEST_CASE("cartpole batch: vjp_batch equals the analytic Jacobians' products in double",
+          "[sim][cartpole]") {
+  sbptt::Rng rng(42);
+  check_against_double_jacobians<4>({}, rng);
+  check_against_double_jacobians<1>({}, rng);
+  check_against_double_jacobians<3>(physical(), rng);
+}
+
+TEST_CASE("cartpole batch: vjp_batch matches central differences of step_batch",
+          "[sim][cartpole]") {
+  // ⟨λ, (P(x + εv, u + εw) − P(x − εv, u − εw)) / 2ε⟩ = ⟨Aᵀλ, v⟩ + (Bᵀλ)·w, per column, in
+  // float: ε = 1e-2 keeps the rounding of the difference near 1e-5, and the truncation,
+  // O(ε²·dt) for this near-identity map, below it.
+  for (const CartPoleOptions& options : {CartPoleOptions{}, physical()}) {
+    const CartPole<float, 3> sim(options);
+    sbptt::Rng rng(43);
+    const Index size = 21;
+    const Batch b = random_batch(sim.state_dim(), size, rng);
+    const Batch direction = random_batch(sim.state_dim(), size, rng);
+    Matrix<float> lambda_x, lambda_u, plus, minus;
+    sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
+    const float eps = 1e-2F;
+    const Matrix<float> w = direction.u / 20.0F;
+    const Matrix<float> v = direction.x / 4.0F;
+    sim.step_batch(b.x + eps * v, b.u + eps * w, plus);
+    sim.step_batch(b.x - eps * v, b.u - eps * w, minus);
+    for (Index c = 0; c < size; ++c) {
+      const double difference =
+          b.lambda.col(c).cast<double>().dot((plus.col(c) - minus.col(c)).cast<double>()) /
+          (2.0 * eps);
+      const double adjoint = lambda_x.col(c).cast<double>().dot(v.col(c).cast<double>()) +
+                             static_cast<double>(lambda_u(0, c)) * w(0, c);
+      INFO("model " << static_cast<int>(options.model) << ", column " << c);
+      CHECK(std::abs(difference - adjoint) < 2e-3 * (1 + std::abs(adjoint)));
+    }
+  }
+}
+
+TEST_CASE("cartpole batch: a column's result does not depend on the other columns",
+          "[sim][cartpole]") {
+  // Bit for bit: this is what keeps training independent of batch composition and threads,
+  // and what lets the engine run both sweeps of the combined update in one call.
+  const CartPole<float, 4> sim;
+  sbptt::Rng rng(44);
+  const Batch b = random_batch(sim.state_dim(), 21, rng);
+  Matrix<float> next, lambda_x, lambda_u;
+  sim.step_batch(b.x, b.u, next);
+  sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
+  for (Index c : {0, 5, 15, 16, 20}) {  // first, middle and last lane of full and partial blocks
+    const Index place = (c * 7) % 3;
+    Matrix<float> x = Matrix<float>::Zero(sim.state_dim(), 3), u = Matrix<float>::Zero(1, 3);
+    Matrix<float> lambda = Matrix<float>::Zero(sim.state_dim(), 3);
+    x.col(place) = b.x.col(c);
+    u.col(place) = b.u.col(c);
+    lambda.col(place) = b.lambda.col(c);
+    Matrix<float> alone_next, alone_x, alone_u;
+    sim.step_batch(x, u, alone_next);
+    sim.vjp_batch(x, u, lambda, &alone_x, &alone_u);
+    INFO("column " << c << " alone at " << place);
+    CHECK(alone_next.col(place) == next.col(c));
+    CHECK(alone_x.col(place) == lambda_x.col(c));
+    CHECK(alone_u(0, place) == lambda_u(0, c));
+  }
+  Matrix<float> in_place = b.x;  // x_next may be x itself
+  sim.step_batch(in_place, b.u, in_place);
+  CHECK(in_place == next);
+  Matrix<float> only_u;  // lambda_x may be skipped
+  sim.vjp_batch(b.x, b.u, b.lambda, nullptr, &only_u);
+  CHECK(only_u == lambda_u);
+}
+
+TEST_CASE("cartpole batch: bad shapes are rejected with a message", "[sim][cartpole]") {
+  const CartPole<float, 2> sim;
+  Matrix<float> out;
+  const Matrix<float> x = Matrix<float>::Zero(6, 4), u = Matrix<float>::Zero(1, 4);
+  CHECK_THROWS_WITH(sim.step_batch(Matrix<float>::Zero(5, 4), u, out),
+                    Catch::Contains("x has 5 rows; expected state_dim() = 6"));
+  CHECK_THROWS_WITH(sim.step_batch(x, Matrix<float>::Zero(1, 3), out),
+                    Catch::Contains("u is 1 x 3; expected 1 x 4"));
+  CHECK_THROWS_WITH(sim.vjp_batch(x, u, Matrix<float>::Zero(6, 3), &out, nullptr),
+                    Catch::Contains("lambda is 6 x 3; expected 6 x 4"));
+  Matrix<float> lambda = Matrix<float>::Zero(6, 4);
+  CHECK_THROWS_WITH(sim.vjp_batch(x, u, lambda, &lambda, nullptr),
+                    Catch::Contains("lambda_x is lambda"));
+}

@@ -236,7 +236,7 @@ public:
                                    : fork_[1].probing() || fork_[1].fork();
       if (handoff_ && !split_loops) {
         Handoff& h = *handoff_;
-        auto add = [&](std::size_t slot) { add_params(h, slot, gradient); };
+        auto add = [&](std::size_t slot, int) { add_params(h, slot, gradient); };
         h.run(*pool_, steps_, add,
               [&] { sweep(sweeps_[0], schedule, gradient, truncation, false, &h); });
         return sweeps_[0].diagnostics;
@@ -325,7 +325,7 @@ private:
   void sweep(Sweep& s, const FlowSchedule& schedule, Vector<Scalar>& gradient, Index truncation,
              bool parallel, Handoff* handoff = nullptr) {
     begin_sweep(s, gradient, handoff != nullptr);
-    auto add = [&](std::size_t slot) { add_params(*handoff, slot, gradient); };
+    auto add = [&](std::size_t slot, int) { add_params(*handoff, slot, gradient); };
     for (Index n = steps_ - 1; n >= 0; --n) {
       const auto i = static_cast<std::size_t>(n);
       const FlowMode mode = schedule.at(n);

@@ -12,9 +12,10 @@
 /// the same products.
 ///
 /// Threads: the sweeping thread runs both sweeps' per-sample VJPs and the one backward pass,
-/// and records each step (layer adjoints and both μ_n) into a `ParamHandoff` ring; the
-/// parameter products of both sweeps are added from it in step order, on whichever thread
-/// holds the ring's lock, so the sums are the single thread's bit for bit. The per-sample
+/// and records each step (layer adjoints and both μ_n) into a `ParamHandoff` ring with a chain
+/// per sweep; each sweep's parameter products are added from it in step order, on whichever
+/// thread holds that chain's lock, so the sums are the single thread's bit for bit, and the
+/// two threads can add the two sweeps' products at once. The per-sample
 /// loops are never split over the threads here, even where a lone sweep would split them:
 /// for quantum control (2 × 8 VJPs of about 0.76 µs per step) splitting them instead of
 /// handing off the products made the two-thread C epoch 301.8 ms, against 248–263 ms
@@ -28,14 +29,15 @@
 
 namespace sbptt::detail {
 
-/// One recorded step: the layer adjoints of the seed 1 and the control adjoints μ_n (1 × B)
-/// of the Full and the PhysicsOnly sweep, with room for the adjoints scaled by either. The
-/// room belongs to the slot, not to a thread, so that no call allocates after the first
-/// (whichever thread adds the slot).
+/// One recorded step: the layer adjoints of the seed 1 and, per sweep (0: Full, 1:
+/// PhysicsOnly), the control adjoints μ_n (1 × B) and room for the scaled adjoints. The room
+/// belongs to the slot and the sweep, not to a thread, so that no call allocates after the
+/// first (whichever thread adds the slot) and the two sweeps' products can run at once.
 template <class Adjoints, class Scalar>
 struct SharedSeedStep {
-  Adjoints adjoints, scaled;
-  Matrix<Scalar> full_mu, physics_mu;
+  Adjoints adjoints;
+  Adjoints scaled[2];
+  Matrix<Scalar> mu[2];
 };
 
 /// The shared-seed sweeps of an `Engine` (its friend) whose controller has layer adjoints of
@@ -53,7 +55,9 @@ public:
   template <class Engine, class Pair>
   void run(Engine& engine, Pair& result, Index truncation) {
     Handoff* h = handoff_.get();
-    auto add = [&](std::size_t slot) { add_step(engine, h->ring[slot], h->steps[slot], result); };
+    auto add = [&](std::size_t slot, int sweep_index) {
+      add_step(engine, h->ring[slot], h->steps[slot], sweep_index, result);
+    };
     if (h == nullptr) {
       sweep(engine, result, truncation, nullptr, add);
     } else {
@@ -64,7 +68,7 @@ public:
 
 private:
   using Step = SharedSeedStep<Adjoints, Scalar>;
-  using Handoff = ParamHandoff<Step>;
+  using Handoff = ParamHandoff<Step, 2>;  // a chain per sweep: g_R and g_M
 
   /// Never inlined: the calls with and without the hand-off must run the same machine code,
   /// or the contraction of a·b + c into FMA could differ between them, and the results
@@ -85,15 +89,16 @@ private:
       const Index k = e.steps_ - 1 - n;  // steps recorded so far
       const std::size_t slot = handoff != nullptr ? handoff->slot_for(k, add) : 0;
       Step& step = handoff != nullptr ? handoff->ring[slot] : single_;
-      step.full_mu = full.mu;
-      step.physics_mu = physics.mu;
+      step.mu[0] = full.mu;
+      step.mu[1] = physics.mu;
       e.packed_controller_.backward_inputs(e.trajectory_.workspaces[i], unit_seed_,
                                            cut ? nullptr : &full.input_adjoint, step.adjoints);
       if (handoff != nullptr) {
         handoff->steps[slot] = n;
         handoff->recorded.store(k + 1, std::memory_order_release);
       } else {
-        add_step(e, step, n, result);
+        add_step(e, step, n, 0, result);
+        add_step(e, step, n, 1, result);
       }
       if (cut) {
         full.lambda.setZero();
@@ -109,14 +114,14 @@ private:
     physics.end(result.modified);
   }
 
-  /// Adds both sweeps' parameter products of step `n`, recorded in `step`.
+  /// Adds the parameter products of step `n`, recorded in `step`, of one sweep (0: Full into
+  /// g_R, 1: PhysicsOnly into g_M).
   template <class Engine, class Pair>
-  static void add_step(const Engine& e, Step& step, Index n, Pair& result) {
+  static void add_step(const Engine& e, Step& step, Index n, int sweep_index, Pair& result) {
     const auto& workspace = e.trajectory_.workspaces[static_cast<std::size_t>(n)];
-    e.controller_.add_param_gradient(workspace, step.adjoints, step.full_mu, step.scaled,
-                                     result.regular);
-    e.controller_.add_param_gradient(workspace, step.adjoints, step.physics_mu, step.scaled,
-                                     result.modified);
+    const auto i = static_cast<std::size_t>(sweep_index);
+    e.controller_.add_param_gradient(workspace, step.adjoints, step.mu[i], step.scaled[i],
+                                     sweep_index == 0 ? result.regular : result.modified);
   }
 
   std::unique_ptr<Handoff> handoff_;  ///< with threads

@@ -203,7 +203,8 @@ public:
     if (lambda_x == nullptr && lambda_u == nullptr) return;
     if (lambda_x != nullptr) lambda_x->resize(state_dim());
     if (options_.model == CartPoleModel::Physical)
-      return physical_vjp(x, u(0), lambda, lambda_x, lambda_u == nullptr ? nullptr : &(*lambda_u)(0));
+      return physical_vjp(x, u(0), lambda, lambda_x,
+                          lambda_u == nullptr ? nullptr : &(*lambda_u)(0));
     const Scalar dt2 = dt_ * dt_;
     // Gᵀλ: the adjoint of each acceleration (ẍ first, then θ̈_i per pole).
     const Scalar cart_adj = dt2 * lambda(0) + dt_ * lambda(1);

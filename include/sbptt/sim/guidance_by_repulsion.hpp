@@ -25,11 +25,16 @@
 /// (size 4(D + E)). Control layout: c_{0,0}, c_{0,1}, c_{1,0}, c_{1,1}, … (size 2D).
 ///
 /// A term that cannot act costs nothing: no spreading loop with one driver, no flocking loop
-/// with one evader. The options, the pair forces and their Jacobians are in
-/// `guidance_forces.hpp`, with how two agents on the same spot are handled (finite values,
-/// continuous Jacobians).
+/// with one evader. `step` and `vjp` are written once on the state's numbers (`step_values`,
+/// `vjp_values`) for one sample or, in float with fixed agent counts, a block of 16 samples
+/// in SIMD lanes (`step_batch`, `vjp_batch`). The options, the pair forces and their
+/// Jacobians are in `guidance_forces.hpp`, with how two agents on the same spot are handled
+/// (finite values, continuous Jacobians).
+#include <array>
 #include <cmath>
+#include <cstddef>
 #include <numbers>
+#include <type_traits>
 
 #include <Eigen/Core>
 
@@ -37,6 +42,7 @@
 #include "sbptt/core/rng.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/sim/guidance_forces.hpp"
+#include "sbptt/sim/lane_rows.hpp"
 
 namespace sbptt {
 
@@ -120,14 +126,9 @@ public:
   /// x_next = P(x, u). x, x_next: state_dim; u: control_dim. `x_next` may alias `x`.
   void step(const State& x, const Control& u, State& x_next) const {
     check_sizes(x, u);
-    Accelerations acc;
-    accelerations(x, u, acc);
+    AccelerationValues acc(2 * agents());
     x_next.resize(state_dim());
-    for (Index a = 0; a < agents(); ++a) {
-      const Index k = 4 * a;
-      x_next.template segment<2>(k) = x.template segment<2>(k) + dt_ * x.template segment<2>(k + 2);
-      x_next.template segment<2>(k + 2) = x.template segment<2>(k + 2) + dt_ * acc.col(a);
-    }
+    step_values(x.data(), u.data(), acc.data(), x_next.data());
   }
 
   /// A = ∂x_next/∂x (state_dim × state_dim), B = ∂x_next/∂u (state_dim × control_dim).
@@ -152,8 +153,11 @@ public:
       b.template block<2, 1>(4 * d + 2, 2 * d) = dt_ * r;
       b.template block<2, 1>(4 * d + 2, 2 * d + 1) = dt_ * perp(r);
     }
-    for_each_pair(x, [&](Index i, Index j, Scalar coeff, const Kernel& kernel, bool mutual) {
-      const Mat2 jac = (dt_ * coeff) * kernel.jacobian();
+    for_each_pair(x.data(), [&](Index i, Index j, Scalar coeff, const Kernel& kernel,
+                                bool mutual) {
+      const Vec2 n(kernel.nx, kernel.ny);
+      const Mat2 jac =
+          (dt_ * coeff) * (kernel.s * Mat2::Identity() + kernel.w * n * n.transpose());
       a.template block<2, 2>(4 * i + 2, 4 * i) += jac;
       a.template block<2, 2>(4 * i + 2, 4 * j) -= jac;
       if (mutual) {
@@ -171,49 +175,73 @@ public:
     check_sizes(x, u);
     detail::require(lambda.size() == state_dim(), "GuidanceByRepulsion: lambda has size ",
                     lambda.size(), ", expected state_dim() = ", state_dim());
-    const Vec2 centre = center(x);
-    // μ_i = dt λ_{v_i}: the adjoint of agent i's acceleration.
-    const auto mu = [&](Index i) -> Vec2 { return dt_ * lambda.template segment<2>(4 * i + 2); };
-    if (lambda_u != nullptr) {
-      lambda_u->resize(control_dim());
-      for (Index d = 0; d < drivers_; ++d) {
-        const Vec2 r = position(x, d) - centre;
-        const Vec2 m = mu(d);
-        (*lambda_u)(2 * d) = r.dot(m);
-        (*lambda_u)(2 * d + 1) = perp(r).dot(m);
-      }
+    if (lambda_u != nullptr) lambda_u->resize(control_dim());
+    if (lambda_x != nullptr) lambda_x->resize(state_dim());
+    vjp_values(x.data(), u.data(), lambda.data(), lambda_x ? lambda_x->data() : nullptr,
+               lambda_u ? lambda_u->data() : nullptr);
+  }
+
+  /// `step` for every column of x (state_dim × B) and u (control_dim × B) into x_next
+  /// (resized to state_dim × B; it may be x itself). Float with fixed agent counts: the
+  /// samples run side by side in SIMD lanes (lane_rows.hpp) through the same lines as `step`
+  /// (`step_values`); the lanes round a sum of two products as the compiler fuses it
+  /// (`sum_of_products`), so the two agree to rounding, not bit for bit. A column's result
+  /// does not depend on the other columns.
+  void step_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, Matrix<Scalar>& x_next) const
+    requires(std::is_same_v<Scalar, float> && kAgents != Eigen::Dynamic)
+  {
+    check_batch(x, u, "step_batch");
+    x_next.resize(state_dim(), x.cols());
+    RowLanes<kStateSize> state, next;
+    RowLanes<kControlSize> control;
+    RowLanes<2 * kAgents> acc;
+    for (Index first = 0; first < x.cols(); first += detail::LaneRows<Scalar>::kLanes) {
+      const int count = detail::LaneRows<Scalar>::count(x.cols(), first);
+      load(x, first, count, state);
+      load(u, first, count, control);
+      step_values(state.data(), control.data(), acc.data(), next.data());
+      store(next, first, count, x_next);
     }
-    if (lambda_x == nullptr) return;
-    State& out = *lambda_x;
-    out.resize(state_dim());
-    for (Index i = 0; i < agents(); ++i) {
-      const Index k = 4 * i;
-      out.template segment<2>(k) = lambda.template segment<2>(k);
-      out.template segment<2>(k + 2) = dt_ * lambda.template segment<2>(k) +
-                                       (Scalar(1) - dt_ * friction(i)) *
-                                           lambda.template segment<2>(k + 2);
+  }
+
+  /// `vjp` for every column of x (state_dim × B), u (control_dim × B) and lambda (state_dim ×
+  /// B): lambda_x (if not null) resized to state_dim × B, lambda_u to control_dim × B. As
+  /// `step_batch`: SIMD lanes, equal to `vjp` to rounding.
+  void vjp_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, const Matrix<Scalar>& lambda,
+                 Matrix<Scalar>* lambda_x, Matrix<Scalar>* lambda_u) const
+    requires(std::is_same_v<Scalar, float> && kAgents != Eigen::Dynamic)
+  {
+    check_batch(x, u, "vjp_batch");
+    detail::require(lambda.rows() == state_dim() && lambda.cols() == x.cols(),
+                    "GuidanceByRepulsion::vjp_batch: lambda is ", lambda.rows(), " x ",
+                    lambda.cols(), "; expected ", state_dim(), " x ", x.cols());
+    if (lambda_x != nullptr) lambda_x->resize(state_dim(), x.cols());
+    if (lambda_u != nullptr) lambda_u->resize(control_dim(), x.cols());
+    RowLanes<kStateSize> state, cotangent, propagated;
+    RowLanes<kControlSize> control, control_cotangent;
+    for (Index first = 0; first < x.cols(); first += detail::LaneRows<Scalar>::kLanes) {
+      const int count = detail::LaneRows<Scalar>::count(x.cols(), first);
+      load(x, first, count, state);
+      load(u, first, count, control);
+      load(lambda, first, count, cotangent);
+      vjp_values(state.data(), control.data(), cotangent.data(),
+                 lambda_x ? propagated.data() : nullptr,
+                 lambda_u ? control_cotangent.data() : nullptr);
+      if (lambda_x) store(propagated, first, count, *lambda_x);
+      if (lambda_u) store(control_cotangent, first, count, *lambda_u);
     }
-    Vec2 pulled_on_centre = Vec2::Zero();  // Σ_d (∂F_con,d/∂S)ᵀ μ_d, shared by all evaders
-    for (Index d = 0; d < drivers_; ++d) {
-      const Vec2 g = control_gain(u, d).transpose() * mu(d);
-      out.template segment<2>(4 * d) += g;
-      pulled_on_centre += g;
-    }
-    for (Index e = drivers_; e < agents(); ++e) {
-      out.template segment<2>(4 * e) -= center_weight_ * pulled_on_centre;
-    }
-    for_each_pair(x, [&](Index i, Index j, Scalar coeff, const Kernel& kernel, bool mutual) {
-      const Vec2 g = coeff * kernel.apply(mutual ? Vec2(mu(i) - mu(j)) : mu(i));
-      out.template segment<2>(4 * i) += g;
-      out.template segment<2>(4 * j) -= g;
-    });
   }
 
 private:
   using Vec2 = Eigen::Matrix<Scalar, 2, 1>;
   using Mat2 = Eigen::Matrix<Scalar, 2, 2>;
-  using Kernel = detail::RadialKernel<Scalar>;
-  using Accelerations = Eigen::Matrix<Scalar, 2, kAgents>;  ///< p̈ of every agent, 2 × agents
+  using Kernel = detail::PairKernel<Scalar>;
+  /// p̈ of every agent, x then y: scratch of `step`.
+  using AccelerationValues = Eigen::Matrix<Scalar, detail::times_or_dynamic(2, kAgents), 1>;
+  /// One lane array per state or control row (`step_batch`; float, fixed agent counts).
+  template <int Rows>
+  using RowLanes = std::array<typename detail::LaneRows<Scalar>::Values,
+                              static_cast<std::size_t>(Rows)>;
 
   static Vec2 perp(const Vec2& r) { return Vec2(-r.y(), r.x()); }
 
@@ -236,50 +264,173 @@ private:
     return center_weight_ * s;
   }
 
+  // The equations of `step` and `vjp` on the numbers of one sample (V = Scalar, pointers into
+  // its vectors) or of a block of samples side by side (V = a lane array, one per state row):
+  // x, lambda, x_next, lambda_x hold state_dim values, u, lambda_u control_dim, acc 2·agents.
+
+  /// The centre S of the control frame, (cx, cy).
+  template <class V>
+  void center_values(const V* x, V& cx, V& cy) const {
+    cx = x[4 * drivers_];
+    cy = x[4 * drivers_ + 1];
+    for (Index e = drivers_ + 1; e < agents(); ++e) {
+      cx += x[4 * e];
+      cy += x[4 * e + 1];
+    }
+    cx *= center_weight_;
+    cy *= center_weight_;
+  }
+
   /// Calls visit(i, j, coeff, K, mutual) once per interacting pair: agent i receives
   /// coeff · K(p_i − p_j), and, if `mutual`, agent j the opposite force.
-  template <class Visit>
-  void for_each_pair(const State& x, Visit&& visit) const {
+  template <class V, class Visit>
+  void for_each_pair(const V* x, Visit&& visit) const {
+    auto separation = [&](Index i, Index j, auto&& kernel) {
+      return kernel(V(x[4 * i] - x[4 * j]), V(x[4 * i + 1] - x[4 * j + 1]));
+    };
+    auto repulsion = [&](const V& rx, const V& ry) {
+      return detail::repulsion_kernel(rx, ry, epsilon_);
+    };
+    auto flocking = [&](const V& rx, const V& ry) {
+      return detail::flocking_kernel(rx, ry, flocking_offset_, flocking_range_);
+    };
     if constexpr (Drivers != 1) {
-      for (Index d = 0; d < drivers_; ++d) {
-        for (Index k = d + 1; k < drivers_; ++k) {
-          const Vec2 r = position(x, d) - position(x, k);
-          visit(d, k, spreading_, detail::repulsion_kernel<Scalar>(r, epsilon_), true);
-        }
-      }
+      for (Index d = 0; d < drivers_; ++d)
+        for (Index k = d + 1; k < drivers_; ++k)
+          visit(d, k, spreading_, separation(d, k, repulsion), true);
     }
-    for (Index e = drivers_; e < agents(); ++e) {
-      for (Index d = 0; d < drivers_; ++d) {
-        const Vec2 r = position(x, e) - position(x, d);
-        visit(e, d, repulsion_, detail::repulsion_kernel<Scalar>(r, epsilon_), false);
-      }
-    }
+    for (Index e = drivers_; e < agents(); ++e)
+      for (Index d = 0; d < drivers_; ++d)
+        visit(e, d, repulsion_, separation(e, d, repulsion), false);
     if constexpr (Evaders != 1) {
-      for (Index e = drivers_; e < agents(); ++e) {
-        for (Index i = e + 1; i < agents(); ++i) {
-          const Vec2 r = position(x, e) - position(x, i);
-          visit(e, i, flocking_,
-                detail::flocking_kernel<Scalar>(r, flocking_offset_, flocking_range_), true);
-        }
+      for (Index e = drivers_; e < agents(); ++e)
+        for (Index i = e + 1; i < agents(); ++i)
+          visit(e, i, flocking_, separation(e, i, flocking), true);
+    }
+  }
+
+  /// p̈ of every agent into acc (x then y per agent).
+  template <class V>
+  void accelerations(const V* x, const V* u, V* acc) const {
+    for (Index i = 0; i < agents(); ++i) {
+      acc[2 * i] = -friction(i) * x[4 * i + 2];
+      acc[2 * i + 1] = -friction(i) * x[4 * i + 3];
+    }
+    V cx, cy;
+    center_values(x, cx, cy);
+    for (Index d = 0; d < drivers_; ++d) {  // F_con,d = c_{d,0} r + c_{d,1} r⊥, r⊥ = (−r_y, r_x)
+      const V rx = x[4 * d] - cx, ry = x[4 * d + 1] - cy;
+      acc[2 * d] += detail::sum_of_products<V>(u[2 * d], rx, u[2 * d + 1], V(-ry));
+      acc[2 * d + 1] += detail::sum_of_products<V>(u[2 * d], ry, u[2 * d + 1], rx);
+    }
+    for_each_pair(x, [&](Index i, Index j, Scalar coeff, const detail::PairKernel<V>& k,
+                         bool mutual) {
+      const V fx = coeff * V(k.s * k.rx), fy = coeff * V(k.s * k.ry);
+      acc[2 * i] += fx;
+      acc[2 * i + 1] += fy;
+      if (mutual) {
+        acc[2 * j] -= fx;
+        acc[2 * j + 1] -= fy;
+      }
+    });
+  }
+
+  /// Explicit Euler: p' = p + dt v, v' = v + dt p̈. x_next may be x.
+  template <class V>
+  void step_values(const V* x, const V* u, V* acc, V* x_next) const {
+    accelerations(x, u, acc);
+    for (Index a = 0; a < agents(); ++a) {
+      for (Index c = 0; c < 2; ++c) {
+        const Index k = 4 * a + c;
+        const V velocity = x[k + 2];
+        x_next[k] = x[k] + dt_ * velocity;
+        x_next[k + 2] = velocity + dt_ * acc[2 * a + c];
       }
     }
   }
 
-  void accelerations(const State& x, const Control& u, Accelerations& acc) const {
-    acc.resize(2, agents());
+  /// Aᵀλ into lambda_x and Bᵀλ into lambda_u (either may be null).
+  template <class V>
+  void vjp_values(const V* x, const V* u, const V* lambda, V* lambda_x, V* lambda_u) const {
+    V cx, cy;
+    center_values(x, cx, cy);
+    // μ_i = dt λ_{v_i}: the adjoint of agent i's acceleration.
+    auto mu = [&](Index i, Index c) -> V { return dt_ * lambda[4 * i + 2 + c]; };
+    if (lambda_u != nullptr) {
+      for (Index d = 0; d < drivers_; ++d) {  // r·μ and r⊥·μ
+        const V rx = x[4 * d] - cx, ry = x[4 * d + 1] - cy;
+        const V m0 = mu(d, 0), m1 = mu(d, 1);
+        lambda_u[2 * d] = detail::sum_of_products<V>(rx, m0, ry, m1);
+        lambda_u[2 * d + 1] = detail::sum_of_products<V>(V(-ry), m0, rx, m1);
+      }
+    }
+    if (lambda_x == nullptr) return;
+    V* out = lambda_x;
     for (Index i = 0; i < agents(); ++i) {
-      acc.col(i) = -friction(i) * x.template segment<2>(4 * i + 2);
+      for (Index c = 0; c < 2; ++c) {
+        const Index k = 4 * i + c;
+        out[k] = lambda[k];
+        const Scalar kept = Scalar(1) - dt_ * friction(i);
+        out[k + 2] = detail::sum_of_products<V>(dt_, lambda[k], kept, lambda[k + 2]);
+      }
     }
-    const Vec2 centre = center(x);
+    // Σ_d (∂F_con,d/∂S)ᵀ μ_d, shared by all evaders; (∂F_con,d/∂r)ᵀ = [[c0, c1], [−c1, c0]].
+    V pulled_x = zero<V>(), pulled_y = zero<V>();
     for (Index d = 0; d < drivers_; ++d) {
-      const Vec2 r = position(x, d) - centre;
-      acc.col(d) += u(2 * d) * r + u(2 * d + 1) * perp(r);
+      const V m0 = mu(d, 0), m1 = mu(d, 1);
+      const V gx = detail::sum_of_products<V>(u[2 * d], m0, u[2 * d + 1], m1);
+      const V gy = detail::sum_of_products<V>(V(-u[2 * d + 1]), m0, u[2 * d], m1);
+      out[4 * d] += gx;
+      out[4 * d + 1] += gy;
+      pulled_x += gx;
+      pulled_y += gy;
     }
-    for_each_pair(x, [&](Index i, Index j, Scalar coeff, const Kernel& kernel, bool mutual) {
-      const Vec2 force = coeff * kernel.value();
-      acc.col(i) += force;
-      if (mutual) acc.col(j) -= force;
+    for (Index e = drivers_; e < agents(); ++e) {
+      out[4 * e] -= center_weight_ * pulled_x;
+      out[4 * e + 1] -= center_weight_ * pulled_y;
+    }
+    for_each_pair(x, [&](Index i, Index j, Scalar coeff, const detail::PairKernel<V>& k,
+                         bool mutual) {
+      const V ax = mutual ? V(mu(i, 0) - mu(j, 0)) : mu(i, 0);
+      const V ay = mutual ? V(mu(i, 1) - mu(j, 1)) : mu(i, 1);
+      V gx, gy;
+      k.apply(ax, ay, gx, gy);
+      out[4 * i] += coeff * gx;
+      out[4 * i + 1] += coeff * gy;
+      out[4 * j] -= coeff * gx;
+      out[4 * j + 1] -= coeff * gy;
     });
+  }
+
+  /// Columns first … first + count − 1 of `m` into one lane array per row, and back.
+  template <class Rows>
+  static void load(const Matrix<Scalar>& m, Index first, int count, Rows& rows) {
+    for (std::size_t r = 0; r < rows.size(); ++r)
+      rows[r] = detail::LaneRows<Scalar>::load(m, static_cast<Index>(r), first, count);
+  }
+  template <class Rows>
+  static void store(const Rows& rows, Index first, int count, Matrix<Scalar>& m) {
+    for (std::size_t r = 0; r < rows.size(); ++r)
+      detail::LaneRows<Scalar>::store(rows[r], m, static_cast<Index>(r), first, count);
+  }
+
+  /// 0 as one number or as a lane array.
+  template <class V>
+  [[nodiscard]] static V zero() {
+    if constexpr (std::is_base_of_v<Eigen::ArrayBase<V>, V>) {
+      return V::Zero();
+    } else {
+      return V(0);
+    }
+  }
+
+  void check_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, const char* caller) const {
+    detail::require(x.rows() == state_dim(), "GuidanceByRepulsion::", caller, ": x has ",
+                    x.rows(), " rows; expected state_dim() = ", state_dim(),
+                    " (one sample per column)");
+    detail::require(u.rows() == control_dim() && u.cols() == x.cols(), "GuidanceByRepulsion::",
+                    caller, ": u is ", u.rows(), " x ", u.cols(), "; expected ", control_dim(),
+                    " x ", x.cols(), " (one control per sample)");
   }
 
   /// Fixed sizes are checked by the compiler; dynamic ones here, since a mismatch would

@@ -11,6 +11,7 @@
 /// and its Jacobian tends to s(0) I from every direction; n = 0 gives exactly that limit, and
 /// nothing is divided by ρ, so no NaN can appear (and no 1/ρ blows up for ρ ≈ 1e-6).
 #include <cmath>
+#include <type_traits>
 #include <utility>
 
 #include <Eigen/Core>
@@ -81,62 +82,79 @@ inline void validate_guidance_options(const GuidanceOptions& options) {
           "physical.flocking = ", static_cast<int>(flocking), ", expected AsCoded or AsIntended");
 }
 
-/// K(r) = s r and ∂K/∂r = s I + w n nᵀ (symmetric) for one agent pair.
-template <class Scalar>
-struct RadialKernel {
-  using Vec2 = Eigen::Matrix<Scalar, 2, 1>;
-  using Mat2 = Eigen::Matrix<Scalar, 2, 2>;
+/// a·b + c·d rounded in one fixed order. With hardware FMA the compiler fuses a sum of two
+/// products into a multiply-add of either one, and chose differently in different inlined
+/// copies of the same line (a fixed and a dynamic agent count gave results one rounding apart),
+/// so a number gets fma(a, b, c·d) explicitly. A lane array keeps the compiler's choice: its
+/// lanes agree with the per-sample step to rounding anyway.
+template <class V, class A, class B, class C, class D>
+[[nodiscard]] V sum_of_products(const A& a, const B& b, const C& c, const D& d) {
+#if defined(__FP_FAST_FMA) || defined(__FP_FAST_FMAF)
+  if constexpr (std::is_floating_point_v<V>) return std::fma(a, b, c * d);
+#endif
+  return a * b + c * d;
+}
 
-  Scalar s{};  ///< the radial profile s(ρ)
-  Scalar w{};  ///< s'(ρ) ρ
-  Vec2 r;      ///< the separation the kernel was evaluated at
-  Vec2 n;      ///< r / ρ, or 0 at ρ = 0
+/// One agent pair: K(r) = s r and ∂K/∂r = s I + w n nᵀ (symmetric). `V` is one number (a
+/// sample) or a lane array (a block of samples side by side, `step_batch`).
+template <class V>
+struct PairKernel {
+  V rx, ry;  ///< the separation r the kernel was evaluated at
+  V nx, ny;  ///< r / ρ, or 0 at ρ = 0
+  V s;       ///< the radial profile s(ρ)
+  V w;       ///< s'(ρ) ρ
 
-  [[nodiscard]] Vec2 value() const { return s * r; }
-  [[nodiscard]] Mat2 jacobian() const { return s * Mat2::Identity() + w * n * n.transpose(); }
-  /// (∂K/∂r)ᵀ μ = (∂K/∂r) μ, the Jacobian being symmetric.
-  [[nodiscard]] Vec2 apply(const Vec2& mu) const { return s * mu + w * n * n.dot(mu); }
+  /// (∂K/∂r)ᵀ (ax, ay) = (∂K/∂r)(ax, ay), the Jacobian being symmetric, into (gx, gy).
+  void apply(const V& ax, const V& ay, V& gx, V& gy) const {
+    const V along = sum_of_products<V>(nx, ax, ny, ay);
+    gx = sum_of_products<V>(s, ax, V(w * nx), along);
+    gy = sum_of_products<V>(s, ay, V(w * ny), along);
+  }
 };
 
-/// Fills ρ and n for separation r (n = 0 at coincidence, see the file comment).
-template <class Scalar>
-void radial_frame(const Eigen::Matrix<Scalar, 2, 1>& r, Scalar& rho,
-                  Eigen::Matrix<Scalar, 2, 1>& n) {
+/// r, n and ρ for the separation (rx, ry) (n = 0 at coincidence, see the file comment).
+template <class V>
+[[nodiscard]] PairKernel<V> pair_frame(const V& rx, const V& ry, V& rho) {
   using std::sqrt;
-  rho = sqrt(r.squaredNorm());
-  if (rho > Scalar(0)) {
-    n = r / rho;
+  rho = sqrt(rx * rx + ry * ry);
+  PairKernel<V> k;
+  k.rx = rx;
+  k.ry = ry;
+  if constexpr (std::is_base_of_v<Eigen::ArrayBase<V>, V>) {  // lanes: a select per lane
+    const auto apart = rho > typename V::Scalar(0);
+    k.nx = apart.select(rx / rho, V::Zero());
+    k.ny = apart.select(ry / rho, V::Zero());
+  } else if (rho > V(0)) {
+    k.nx = rx / rho;
+    k.ny = ry / rho;
   } else {
-    n.setZero();
+    k.nx = V(0);
+    k.ny = V(0);
   }
+  return k;
 }
 
 /// Inverse-square repulsion r / (ε + ‖r‖)², i.e. s = (ε + ρ)⁻², s' = −2 (ε + ρ)⁻³.
-template <class Scalar>
-[[nodiscard]] RadialKernel<Scalar> repulsion_kernel(const Eigen::Matrix<Scalar, 2, 1>& r,
-                                                    Scalar epsilon) {
-  RadialKernel<Scalar> k;
-  Scalar rho;
-  radial_frame(r, rho, k.n);
-  const Scalar q = Scalar(1) / (epsilon + rho);
+template <class V, class Scalar>
+[[nodiscard]] PairKernel<V> repulsion_kernel(const V& rx, const V& ry, Scalar epsilon) {
+  V rho;
+  PairKernel<V> k = pair_frame(rx, ry, rho);
+  const V q = Scalar(1) / (epsilon + rho);
   k.s = q * q;
   k.w = Scalar(-2) * q * q * q * rho;
-  k.r = r;
   return k;
 }
 
 /// Flocking profile f(d) r with d = offset + ‖r‖ and f(d) = (range/d − 1)/d = range/d² − 1/d,
 /// so s = f(d), s' = f'(d) = −2 range/d³ + 1/d². f changes sign at d = range.
-template <class Scalar>
-[[nodiscard]] RadialKernel<Scalar> flocking_kernel(const Eigen::Matrix<Scalar, 2, 1>& r,
-                                                   Scalar offset, Scalar range) {
-  RadialKernel<Scalar> k;
-  Scalar rho;
-  radial_frame(r, rho, k.n);
-  const Scalar q = Scalar(1) / (offset + rho);
+template <class V, class Scalar>
+[[nodiscard]] PairKernel<V> flocking_kernel(const V& rx, const V& ry, Scalar offset,
+                                            Scalar range) {
+  V rho;
+  PairKernel<V> k = pair_frame(rx, ry, rho);
+  const V q = Scalar(1) / (offset + rho);
   k.s = (range * q - Scalar(1)) * q;
   k.w = (Scalar(-2) * range * q + Scalar(1)) * q * q * rho;
-  k.r = r;
   return k;
 }
 

@@ -1,0 +1,198 @@
+// GuidanceByRepulsion's batched step and vjp (float samples in SIMD lanes): against the
+// per-sample step and vjp, against the analytic Jacobians in double (themselves checked against
+// finite differences and automatic differentiation in test_sim_guidance.cpp and
+// test_sim_autodiff_crosscheck.cpp), against central differences of the batched step itself,
+// independence from the other columns, and two agents on the same spot.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+
+#include "sbptt/core/rng.hpp"
+#include "sbptt/sim/guidance_by_repulsion.hpp"
+
+namespace {
+
+using sbptt::GuidanceByRepulsion;
+using sbptt::GuidanceOptions;
+using sbptt::Index;
+using sbptt::Matrix;
+
+struct Batch {
+  Matrix<float> x, u, lambda;
+};
+
+// The paper's initial states with velocities added, controls in ±2, cotangents.
+template <class Sim>
+Batch random_batch(const Sim& sim, Index size, sbptt::Rng& rng) {
+  Batch b{sbptt::guidance_initial_states(sim, rng, size), Matrix<float>(sim.control_dim(), size),
+          Matrix<float>(sim.state_dim(), size)};
+  for (Index c = 0; c < size; ++c) {
+    for (Index a = 0; a < sim.agents(); ++a) {
+      b.x(4 * a + 2, c) = static_cast<float>(rng.uniform(-1.0, 1.0));
+      b.x(4 * a + 3, c) = static_cast<float>(rng.uniform(-1.0, 1.0));
+    }
+    for (Index i = 0; i < sim.control_dim(); ++i)
+      b.u(i, c) = static_cast<float>(rng.uniform(-2.0, 2.0));
+    for (Index i = 0; i < sim.state_dim(); ++i) b.lambda(i, c) = static_cast<float>(rng.normal());
+  }
+  return b;
+}
+
+GuidanceOptions intended() {
+  GuidanceOptions options;
+  options.physical.center = sbptt::GuidanceCenter::Centroid;
+  options.physical.flocking = sbptt::FlockingSign::AsIntended;
+  return options;
+}
+
+template <class Sim>
+void check_against_per_sample(const Sim& sim, const Batch& b) {
+  Matrix<float> next, lambda_x, lambda_u;
+  sim.step_batch(b.x, b.u, next);
+  sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
+  REQUIRE(next.rows() == sim.state_dim());
+  REQUIRE(next.cols() == b.x.cols());
+  REQUIRE(lambda_u.rows() == sim.control_dim());
+  double step_error = 0, state_error = 0, control_error = 0;
+  for (Index c = 0; c < b.x.cols(); ++c) {
+    typename Sim::State x = b.x.col(c), lambda = b.lambda.col(c), expected, expected_x;
+    typename Sim::Control u = b.u.col(c), expected_u;
+    sim.step(x, u, expected);
+    sim.vjp(x, u, lambda, &expected_x, &expected_u);
+    step_error = std::max(step_error, static_cast<double>((next.col(c) - expected).norm() /
+                                                          (1 + expected.norm())));
+    state_error = std::max(state_error, static_cast<double>((lambda_x.col(c) - expected_x).norm() /
+                                                            (1 + expected_x.norm())));
+    control_error = std::max(control_error, static_cast<double>((lambda_u.col(c) - expected_u).norm() /
+                                                                (1 + expected_u.norm())));
+  }
+  INFO("batch " << b.x.cols());
+  CHECK(step_error < 2e-6);
+  CHECK(state_error < 2e-6);
+  CHECK(control_error < 2e-6);
+}
+
+}  // namespace
+
+TEST_CASE("guidance batch: step_batch and vjp_batch equal step and vjp per column",
+          "[sim][guidance]") {
+  sbptt::Rng rng(51);
+  for (Index size : {1, 7, 8, 16, 19, 40}) {
+    const GuidanceByRepulsion<float, 2, 4> paper;
+    check_against_per_sample(paper, random_batch(paper, size, rng));
+    const GuidanceByRepulsion<float, 3, 5> other(intended());
+    check_against_per_sample(other, random_batch(other, size, rng));
+  }
+  const GuidanceByRepulsion<float, 1, 1> alone;  // no spreading, no flocking
+  check_against_per_sample(alone, random_batch(alone, 9, rng));
+}
+
+TEST_CASE("guidance batch: vjp_batch equals the analytic Jacobians' products in double",
+          "[sim][guidance]") {
+  const GuidanceByRepulsion<float, 2, 4> sim;
+  const GuidanceByRepulsion<double, 2, 4> reference;
+  sbptt::Rng rng(52);
+  const Batch b = random_batch(sim, 19, rng);
+  Matrix<float> lambda_x, lambda_u;
+  sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
+  for (Index c = 0; c < b.x.cols(); ++c) {
+    GuidanceByRepulsion<double, 2, 4>::StateJacobian a;
+    GuidanceByRepulsion<double, 2, 4>::ControlJacobian control;
+    const GuidanceByRepulsion<double, 2, 4>::State x = b.x.col(c).cast<double>();
+    const GuidanceByRepulsion<double, 2, 4>::State lambda = b.lambda.col(c).cast<double>();
+    const GuidanceByRepulsion<double, 2, 4>::Control u = b.u.col(c).cast<double>();
+    reference.jacobians(x, u, a, control);
+    const Eigen::VectorXd expected_x = a.transpose() * lambda;
+    const Eigen::VectorXd expected_u = control.transpose() * lambda;
+    INFO("column " << c);
+    CHECK((lambda_x.col(c).cast<double>() - expected_x).norm() < 1e-5 * (1 + expected_x.norm()));
+    CHECK((lambda_u.col(c).cast<double>() - expected_u).norm() < 1e-5 * (1 + expected_u.norm()));
+  }
+}
+
+TEST_CASE("guidance batch: vjp_batch matches central differences of step_batch",
+          "[sim][guidance]") {
+  // ⟨λ, (P(x + εv, u + εw) − P(x − εv, u − εw)) / 2ε⟩ = ⟨Aᵀλ, v⟩ + ⟨Bᵀλ, w⟩ per column, in
+  // float: ε = 1e-2 keeps the rounding of the difference near 1e-5.
+  const GuidanceByRepulsion<float, 2, 4> sim;
+  sbptt::Rng rng(53);
+  const Index size = 21;
+  const Batch b = random_batch(sim, size, rng);
+  Matrix<float> v(sim.state_dim(), size), w(sim.control_dim(), size);
+  for (Index i = 0; i < v.size(); ++i) v(i) = static_cast<float>(rng.uniform(-0.25, 0.25));
+  for (Index i = 0; i < w.size(); ++i) w(i) = static_cast<float>(rng.uniform(-0.25, 0.25));
+  Matrix<float> lambda_x, lambda_u, plus, minus;
+  sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
+  const float eps = 1e-2F;
+  sim.step_batch(b.x + eps * v, b.u + eps * w, plus);
+  sim.step_batch(b.x - eps * v, b.u - eps * w, minus);
+  for (Index c = 0; c < size; ++c) {
+    const double difference =
+        b.lambda.col(c).cast<double>().dot((plus.col(c) - minus.col(c)).cast<double>()) /
+        (2.0 * eps);
+    const double adjoint = lambda_x.col(c).cast<double>().dot(v.col(c).cast<double>()) +
+                           lambda_u.col(c).cast<double>().dot(w.col(c).cast<double>());
+    INFO("column " << c);
+    CHECK(std::abs(difference - adjoint) < 2e-3 * (1 + std::abs(adjoint)));
+  }
+}
+
+TEST_CASE("guidance batch: a column's result does not depend on the other columns",
+          "[sim][guidance]") {
+  // Bit for bit: this keeps training independent of batch composition and threads.
+  const GuidanceByRepulsion<float, 2, 4> sim;
+  sbptt::Rng rng(54);
+  const Batch b = random_batch(sim, 21, rng);
+  Matrix<float> next, lambda_x, lambda_u;
+  sim.step_batch(b.x, b.u, next);
+  sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
+  for (Index c : {0, 5, 15, 16, 20}) {  // first, middle and last lane of full and partial blocks
+    const Index place = (c * 7) % 3;
+    Matrix<float> x = Matrix<float>::Zero(sim.state_dim(), 3);
+    Matrix<float> u = Matrix<float>::Zero(sim.control_dim(), 3);
+    Matrix<float> lambda = Matrix<float>::Zero(sim.state_dim(), 3);
+    x.col(place) = b.x.col(c);
+    u.col(place) = b.u.col(c);
+    lambda.col(place) = b.lambda.col(c);
+    Matrix<float> alone_next, alone_x, alone_u;
+    sim.step_batch(x, u, alone_next);
+    sim.vjp_batch(x, u, lambda, &alone_x, &alone_u);
+    INFO("column " << c << " alone at " << place);
+    CHECK(alone_next.col(place) == next.col(c));
+    CHECK(alone_x.col(place) == lambda_x.col(c));
+    CHECK(alone_u.col(place) == lambda_u.col(c));
+  }
+  Matrix<float> in_place = b.x;  // x_next may be x itself
+  sim.step_batch(in_place, b.u, in_place);
+  CHECK(in_place == next);
+}
+
+TEST_CASE("guidance batch: two agents on one spot stay finite, in a lane beside others",
+          "[sim][guidance]") {
+  // n = 0 at coincidence (guidance_forces.hpp): the lane's select must not let 0/0 through.
+  const GuidanceByRepulsion<float, 2, 4> sim;
+  sbptt::Rng rng(55);
+  Batch b = random_batch(sim, 5, rng);
+  b.x.block<2, 1>(4, 2) = b.x.block<2, 1>(0, 2);    // both drivers of sample 2 on one spot
+  b.x.block<2, 1>(12, 3) = b.x.block<2, 1>(8, 3);   // two evaders of sample 3
+  b.x.block<2, 1>(8, 4) = b.x.block<2, 1>(0, 4);    // a driver on an evader, sample 4
+  Matrix<float> next, lambda_x, lambda_u;
+  sim.step_batch(b.x, b.u, next);
+  sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
+  CHECK(next.allFinite());
+  CHECK(lambda_x.allFinite());
+  CHECK(lambda_u.allFinite());
+  check_against_per_sample(sim, b);
+}
+
+TEST_CASE("guidance batch: bad shapes are rejected with a message", "[sim][guidance]") {
+  const GuidanceByRepulsion<float, 2, 4> sim;
+  Matrix<float> out;
+  const Matrix<float> x = Matrix<float>::Zero(24, 4), u = Matrix<float>::Zero(4, 4);
+  CHECK_THROWS_WITH(sim.step_batch(Matrix<float>::Zero(23, 4), u, out),
+                    Catch::Contains("x has 23 rows; expected state_dim() = 24"));
+  CHECK_THROWS_WITH(sim.step_batch(x, Matrix<float>::Zero(4, 3), out),
+                    Catch::Contains("u is 4 x 3; expected 4 x 4"));
+  CHECK_THROWS_WITH(sim.vjp_batch(x, u, Matrix<float>::Zero(24, 3), &out, nullptr),
+                    Catch::Contains("lambda is 24 x 3; expected 24 x 4"));
+}

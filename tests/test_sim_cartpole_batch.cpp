@@ -9,6 +9,7 @@
 
 #include "sbptt/core/rng.hpp"
 #include "sbptt/sim/cartpole.hpp"
+#include "support/batch_simulator.hpp"
 
 namespace {
 
@@ -45,34 +46,12 @@ CartPoleOptions physical() {
   return options;
 }
 
+// Both are float: a few roundings of the sine and cosine apart.
 template <class Sim>
 void check_against_per_sample(const Sim& sim, Index size, sbptt::Rng& rng) {
   const Batch b = random_batch(sim.state_dim(), size, rng);
-  Matrix<float> next, lambda_x, lambda_u;
-  sim.step_batch(b.x, b.u, next);
-  sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
-  REQUIRE(next.rows() == sim.state_dim());
-  REQUIRE(next.cols() == size);
-  REQUIRE(lambda_u.cols() == size);
-  double step_error = 0, state_error = 0, control_error = 0;
-  for (Index c = 0; c < size; ++c) {
-    typename Sim::State x = b.x.col(c), lambda = b.lambda.col(c), expected, expected_x;
-    typename Sim::Control u = b.u.col(c), expected_u;
-    sim.step(x, u, expected);
-    sim.vjp(x, u, lambda, &expected_x, &expected_u);
-    step_error = std::max(step_error, static_cast<double>((next.col(c) - expected).norm() /
-                                                          (1 + expected.norm())));
-    state_error = std::max(state_error, static_cast<double>((lambda_x.col(c) - expected_x).norm() /
-                                                            (1 + expected_x.norm())));
-    control_error = std::max(control_error, static_cast<double>(std::abs(lambda_u(0, c) -
-                                                                         expected_u(0)) /
-                                                                (1 + std::abs(expected_u(0)))));
-  }
-  INFO(sim.poles() << " poles, batch " << size);
-  // Both are float: a few roundings of the sine and cosine apart.
-  CHECK(step_error < 2e-6);
-  CHECK(state_error < 2e-6);
-  CHECK(control_error < 2e-6);
+  INFO(sim.poles() << " poles");
+  sbptt::testing::check_matches_per_sample(sim, b.x, b.u, b.lambda, 2e-6);
 }
 
 // Aᵀλ and Bᵀλ of float vjp_batch against the analytic Jacobians of the double model at the same
@@ -151,33 +130,12 @@ TEST_CASE("cartpole batch: vjp_batch matches central differences of step_batch",
 
 TEST_CASE("cartpole batch: a column's result does not depend on the other columns",
           "[sim][cartpole]") {
-  // Bit for bit: this is what keeps training independent of batch composition and threads,
-  // and what lets the engine run both sweeps of the combined update in one call.
   const CartPole<float, 4> sim;
   sbptt::Rng rng(44);
   const Batch b = random_batch(sim.state_dim(), 21, rng);
-  Matrix<float> next, lambda_x, lambda_u;
-  sim.step_batch(b.x, b.u, next);
+  sbptt::testing::check_columns_independent(sim, b.x, b.u, b.lambda);
+  Matrix<float> lambda_x, lambda_u, only_u;  // lambda_x may be skipped
   sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
-  for (Index c : {0, 5, 15, 16, 20}) {  // first, middle and last lane of full and partial blocks
-    const Index place = (c * 7) % 3;
-    Matrix<float> x = Matrix<float>::Zero(sim.state_dim(), 3), u = Matrix<float>::Zero(1, 3);
-    Matrix<float> lambda = Matrix<float>::Zero(sim.state_dim(), 3);
-    x.col(place) = b.x.col(c);
-    u.col(place) = b.u.col(c);
-    lambda.col(place) = b.lambda.col(c);
-    Matrix<float> alone_next, alone_x, alone_u;
-    sim.step_batch(x, u, alone_next);
-    sim.vjp_batch(x, u, lambda, &alone_x, &alone_u);
-    INFO("column " << c << " alone at " << place);
-    CHECK(alone_next.col(place) == next.col(c));
-    CHECK(alone_x.col(place) == lambda_x.col(c));
-    CHECK(alone_u(0, place) == lambda_u(0, c));
-  }
-  Matrix<float> in_place = b.x;  // x_next may be x itself
-  sim.step_batch(in_place, b.u, in_place);
-  CHECK(in_place == next);
-  Matrix<float> only_u;  // lambda_x may be skipped
   sim.vjp_batch(b.x, b.u, b.lambda, nullptr, &only_u);
   CHECK(only_u == lambda_u);
 }

@@ -9,6 +9,7 @@
 
 #include "sbptt/core/rng.hpp"
 #include "sbptt/sim/guidance_by_repulsion.hpp"
+#include "support/batch_simulator.hpp"
 
 namespace {
 
@@ -45,31 +46,10 @@ GuidanceOptions intended() {
   return options;
 }
 
+// Both are float: a few roundings of the square roots and divisions apart.
 template <class Sim>
 void check_against_per_sample(const Sim& sim, const Batch& b) {
-  Matrix<float> next, lambda_x, lambda_u;
-  sim.step_batch(b.x, b.u, next);
-  sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
-  REQUIRE(next.rows() == sim.state_dim());
-  REQUIRE(next.cols() == b.x.cols());
-  REQUIRE(lambda_u.rows() == sim.control_dim());
-  double step_error = 0, state_error = 0, control_error = 0;
-  for (Index c = 0; c < b.x.cols(); ++c) {
-    typename Sim::State x = b.x.col(c), lambda = b.lambda.col(c), expected, expected_x;
-    typename Sim::Control u = b.u.col(c), expected_u;
-    sim.step(x, u, expected);
-    sim.vjp(x, u, lambda, &expected_x, &expected_u);
-    step_error = std::max(step_error, static_cast<double>((next.col(c) - expected).norm() /
-                                                          (1 + expected.norm())));
-    state_error = std::max(state_error, static_cast<double>((lambda_x.col(c) - expected_x).norm() /
-                                                            (1 + expected_x.norm())));
-    control_error = std::max(control_error, static_cast<double>((lambda_u.col(c) - expected_u).norm() /
-                                                                (1 + expected_u.norm())));
-  }
-  INFO("batch " << b.x.cols());
-  CHECK(step_error < 2e-6);
-  CHECK(state_error < 2e-6);
-  CHECK(control_error < 2e-6);
+  sbptt::testing::check_matches_per_sample(sim, b.x, b.u, b.lambda, 2e-6);
 }
 
 }  // namespace
@@ -139,32 +119,10 @@ TEST_CASE("guidance batch: vjp_batch matches central differences of step_batch",
 
 TEST_CASE("guidance batch: a column's result does not depend on the other columns",
           "[sim][guidance]") {
-  // Bit for bit: this keeps training independent of batch composition and threads.
   const GuidanceByRepulsion<float, 2, 4> sim;
   sbptt::Rng rng(54);
   const Batch b = random_batch(sim, 21, rng);
-  Matrix<float> next, lambda_x, lambda_u;
-  sim.step_batch(b.x, b.u, next);
-  sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
-  for (Index c : {0, 5, 15, 16, 20}) {  // first, middle and last lane of full and partial blocks
-    const Index place = (c * 7) % 3;
-    Matrix<float> x = Matrix<float>::Zero(sim.state_dim(), 3);
-    Matrix<float> u = Matrix<float>::Zero(sim.control_dim(), 3);
-    Matrix<float> lambda = Matrix<float>::Zero(sim.state_dim(), 3);
-    x.col(place) = b.x.col(c);
-    u.col(place) = b.u.col(c);
-    lambda.col(place) = b.lambda.col(c);
-    Matrix<float> alone_next, alone_x, alone_u;
-    sim.step_batch(x, u, alone_next);
-    sim.vjp_batch(x, u, lambda, &alone_x, &alone_u);
-    INFO("column " << c << " alone at " << place);
-    CHECK(alone_next.col(place) == next.col(c));
-    CHECK(alone_x.col(place) == lambda_x.col(c));
-    CHECK(alone_u.col(place) == lambda_u.col(c));
-  }
-  Matrix<float> in_place = b.x;  // x_next may be x itself
-  sim.step_batch(in_place, b.u, in_place);
-  CHECK(in_place == next);
+  sbptt::testing::check_columns_independent(sim, b.x, b.u, b.lambda);
 }
 
 TEST_CASE("guidance batch: two agents on one spot stay finite, in a lane beside others",

@@ -8,6 +8,7 @@
 
 #include "sbptt/core/rng.hpp"
 #include "sbptt/sim/schrodinger.hpp"
+#include "support/batch_simulator.hpp"
 
 namespace {
 
@@ -118,31 +119,10 @@ TEST_CASE("schrodinger batch: the step keeps each column's norm, and the state v
 
 TEST_CASE("schrodinger batch: a column's result does not depend on the other columns",
           "[sim][quantum]") {
-  // Bit for bit: this is what keeps training independent of batch composition and threads.
   const sbptt::Schrodinger1D<float, 32> sim;
   sbptt::Rng rng(12);
   const auto b = random_batch(sim, 21, rng);
-  Matrix<float> next, lambda_x, lambda_u;
-  sim.step_batch(b.x, b.u, next);
-  sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
-  for (Index c : {0, 5, 15, 16, 20}) {  // first, middle and last lane of full and partial blocks
-    const Index place = (c * 7) % 3;
-    Matrix<float> x = Matrix<float>::Zero(sim.state_dim(), 3), u = Matrix<float>::Zero(1, 3);
-    Matrix<float> lambda = Matrix<float>::Zero(sim.state_dim(), 3);
-    x.col(place) = b.x.col(c);
-    u.col(place) = b.u.col(c);
-    lambda.col(place) = b.lambda.col(c);
-    Matrix<float> alone_next, alone_x, alone_u;
-    sim.step_batch(x, u, alone_next);
-    sim.vjp_batch(x, u, lambda, &alone_x, &alone_u);
-    INFO("column " << c << " alone at " << place);
-    CHECK(alone_next.col(place) == next.col(c));
-    CHECK(alone_x.col(place) == lambda_x.col(c));
-    CHECK(alone_u(0, place) == lambda_u(0, c));
-  }
-  Matrix<float> in_place = b.x;  // x_next may be x itself
-  sim.step_batch(in_place, b.u, in_place);
-  CHECK(in_place == next);
+  sbptt::testing::check_columns_independent(sim, b.x, b.u, b.lambda);
 }
 
 TEST_CASE("schrodinger batch: bad shapes are rejected with a message", "[sim][quantum]") {

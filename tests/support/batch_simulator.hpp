@@ -1,0 +1,77 @@
+#pragma once
+// Checks shared by the tests of every BatchSimulator.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+
+#include "sbptt/core/types.hpp"
+
+namespace sbptt::testing {
+
+/// Bit for bit, a column's step_batch and vjp_batch results do not depend on the other
+/// columns: columns 0, 5, 15, 16 and 20 of the batch (x, u, lambda with 21 columns: the first,
+/// a middle and the last lane of a full 16-lane block, then of a partial one) against the same
+/// sample alone among zero columns, at another place. This is what keeps training independent
+/// of the batch's composition and the thread count, and what lets the engine hand both sweeps
+/// of the combined update to one call. Also: x_next may be x itself.
+template <class Sim, class Scalar>
+void check_columns_independent(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& u,
+                               const Matrix<Scalar>& lambda) {
+  REQUIRE(x.cols() == 21);
+  Matrix<Scalar> next, lambda_x, lambda_u;
+  sim.step_batch(x, u, next);
+  sim.vjp_batch(x, u, lambda, &lambda_x, &lambda_u);
+  for (Index c : {0, 5, 15, 16, 20}) {
+    const Index place = (c * 7) % 3;
+    Matrix<Scalar> x_alone = Matrix<Scalar>::Zero(x.rows(), 3);
+    Matrix<Scalar> u_alone = Matrix<Scalar>::Zero(u.rows(), 3);
+    Matrix<Scalar> lambda_alone = Matrix<Scalar>::Zero(lambda.rows(), 3);
+    x_alone.col(place) = x.col(c);
+    u_alone.col(place) = u.col(c);
+    lambda_alone.col(place) = lambda.col(c);
+    Matrix<Scalar> alone_next, alone_x, alone_u;
+    sim.step_batch(x_alone, u_alone, alone_next);
+    sim.vjp_batch(x_alone, u_alone, lambda_alone, &alone_x, &alone_u);
+    INFO("column " << c << " alone at " << place);
+    CHECK(alone_next.col(place) == next.col(c));
+    CHECK(alone_x.col(place) == lambda_x.col(c));
+    CHECK(alone_u.col(place) == lambda_u.col(c));
+  }
+  Matrix<Scalar> in_place = x;
+  sim.step_batch(in_place, u, in_place);
+  CHECK(in_place == next);
+}
+
+/// step_batch and vjp_batch against step and vjp column by column: the largest errors of
+/// x_next, Aᵀλ and Bᵀλ relative to 1 + the norm of the per-sample result, each below
+/// `tolerance`.
+template <class Sim, class Scalar>
+void check_matches_per_sample(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& u,
+                              const Matrix<Scalar>& lambda, double tolerance) {
+  Matrix<Scalar> next, lambda_x, lambda_u;
+  sim.step_batch(x, u, next);
+  sim.vjp_batch(x, u, lambda, &lambda_x, &lambda_u);
+  REQUIRE(next.rows() == sim.state_dim());
+  REQUIRE(next.cols() == x.cols());
+  REQUIRE(lambda_u.rows() == sim.control_dim());
+  REQUIRE(lambda_u.cols() == x.cols());
+  double step_error = 0, state_error = 0, control_error = 0;
+  auto relative = [](const auto& got, const auto& expected) {
+    return static_cast<double>((got - expected).norm() / (1 + expected.norm()));
+  };
+  for (Index c = 0; c < x.cols(); ++c) {
+    typename Sim::State xc = x.col(c), lambda_c = lambda.col(c), expected, expected_x;
+    typename Sim::Control uc = u.col(c), expected_u;
+    sim.step(xc, uc, expected);
+    sim.vjp(xc, uc, lambda_c, &expected_x, &expected_u);
+    step_error = std::max(step_error, relative(next.col(c), expected));
+    state_error = std::max(state_error, relative(lambda_x.col(c), expected_x));
+    control_error = std::max(control_error, relative(lambda_u.col(c), expected_u));
+  }
+  INFO("batch " << x.cols());
+  CHECK(step_error < tolerance);
+  CHECK(state_error < tolerance);
+  CHECK(control_error < tolerance);
+}
+
+}  // namespace sbptt::testing

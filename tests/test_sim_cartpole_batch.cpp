@@ -134,6 +134,7 @@ TEST_CASE("cartpole batch: a column's result does not depend on the other column
   sbptt::Rng rng(44);
   const Batch b = random_batch(sim.state_dim(), 21, rng);
   sbptt::testing::check_columns_independent(sim, b.x, b.u, b.lambda);
+  sbptt::testing::check_columns_independent(CartPole<float, 4>(physical()), b.x, b.u, b.lambda);
   Matrix<float> lambda_x, lambda_u, only_u;  // lambda_x may be skipped
   sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
   sim.vjp_batch(b.x, b.u, b.lambda, nullptr, &only_u);

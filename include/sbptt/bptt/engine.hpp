@@ -31,8 +31,10 @@
 /// thread count, and every batch sum is taken in a fixed order, so all results are bitwise
 /// identical for any number of threads. With more than one thread the controller's
 /// `backward` must be safe to call concurrently on one workspace, its `add_param_gradient`
-/// (both) concurrently with `backward_inputs` of another step (`Network`'s are), and the loss
-/// functor must be thread-safe (a `const` pure function).
+/// (both) concurrently with `backward_inputs` of another step, and the scaled
+/// `add_param_gradient` concurrently with itself on one workspace and one record, with
+/// different `scaled` buffers and gradients (the pair's two sweeps; `Network`'s are all of
+/// these), and the loss functor must be thread-safe (a `const` pure function).
 #include <cmath>
 #include <initializer_list>
 #include <memory>

@@ -120,8 +120,9 @@ concept SimulatorWithJacobians = Simulator<S> && detail::HasSimulatorJacobians<S
 /// - `void vjp_batch(const Matrix<Scalar>& X, const Matrix<Scalar>& U, const Matrix<Scalar>&
 ///   Lambda, Matrix<Scalar>* Lambda_x, Matrix<Scalar>* Lambda_u)`, `vjp` per column, a null
 ///   pointer skipping that product.
-/// Column b of a result may differ from `step` / `vjp` of column b by rounding but must not
-/// depend on the other columns. The engine then uses these for every rollout and sweep.
+/// Column b of a result may differ from `step` / `vjp` of column b by rounding but must depend
+/// neither on the other columns nor on b. The engine then uses these for every rollout and
+/// sweep, and for both sweeps of the combined update in one call of 2B columns.
 template <class S>
 concept BatchSimulator =
     Simulator<S> && requires(const S& sim, const Matrix<typename S::Scalar>& x,

@@ -338,6 +338,7 @@ private:
             Vector<Scalar>& buffer = (*scaled)[l];
             if (outer_product_kernel_applies<Scalar>(x.rows())) {
               const Index per_sample = x.cols() / batch;  // a conv layer's positions P
+              if (per_sample == 1) return spec.param_vjp(x, delta, g, scales);
               auto spread = detail::grow_map(buffer, per_sample, batch);
               spread = Eigen::Map<const Matrix<Scalar>>(scales, 1, batch).replicate(per_sample, 1);
               return spec.param_vjp(x, delta, g, buffer.data());

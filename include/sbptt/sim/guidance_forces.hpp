@@ -9,7 +9,10 @@
 /// ‖r‖ is not differentiable at r = 0 (two agents on the same spot). We take n = 0 there. That
 /// is not an arbitrary choice: the ρ-dependence of K enters multiplied by r, so K is C¹ at 0
 /// and its Jacobian tends to s(0) I from every direction; n = 0 gives exactly that limit, and
-/// nothing is divided by ρ, so no NaN can appear (and no 1/ρ blows up for ρ ≈ 1e-6).
+/// no result is divided by ρ, so no NaN can appear (and no 1/ρ blows up for ρ ≈ 1e-6). A
+/// block of samples in lanes does divide by ρ in every lane and then selects n = 0 where
+/// ρ = 0: the 0/0 of such a lane is computed and dropped (it would trap only if a program
+/// enabled floating-point exceptions).
 #include <cmath>
 #include <type_traits>
 #include <utility>
@@ -89,7 +92,7 @@ inline void validate_guidance_options(const GuidanceOptions& options) {
 /// lanes agree with the per-sample step to rounding anyway.
 template <class V, class A, class B, class C, class D>
 [[nodiscard]] V sum_of_products(const A& a, const B& b, const C& c, const D& d) {
-#if defined(__FP_FAST_FMA) || defined(__FP_FAST_FMAF)
+#if defined(FP_FAST_FMA) || defined(FP_FAST_FMAF) || defined(__FMA__)
   if constexpr (std::is_floating_point_v<V>) return std::fma(a, b, c * d);
 #endif
   return a * b + c * d;

@@ -142,7 +142,8 @@ public:
       a.template block<2, 2>(k, k + 2).diagonal().setConstant(dt_);
       a.template block<2, 2>(k + 2, k + 2).diagonal().setConstant(Scalar(1) - dt_ * friction(i));
     }
-    const Vec2 centre = center(x);
+    Vec2 centre;
+    center_values(x.data(), centre.x(), centre.y());
     for (Index d = 0; d < drivers_; ++d) {
       const Vec2 r = position(x, d) - centre;
       const Mat2 gain = dt_ * control_gain(u, d);
@@ -256,12 +257,6 @@ private:
     Mat2 m;
     m << u(2 * d), -u(2 * d + 1), u(2 * d + 1), u(2 * d);
     return m;
-  }
-
-  [[nodiscard]] Vec2 center(const State& x) const {
-    Vec2 s = Vec2::Zero();
-    for (Index e = drivers_; e < agents(); ++e) s += position(x, e);
-    return center_weight_ * s;
   }
 
   // The equations of `step` and `vjp` on the numbers of one sample (V = Scalar, pointers into

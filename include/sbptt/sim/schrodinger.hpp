@@ -220,7 +220,7 @@ public:
     const Lanes lanes(half_dt(), dx_);
     typename Lanes::Field psi;
     for (Index first = 0; first < x.cols(); first += Lanes::kLanes) {
-      const int count = lane_count(x.cols(), first);
+      const int count = detail::LaneRows<Scalar>::count(x.cols(), first);
       Lanes::load(x, first, count, psi);
       lanes.step(Lanes::load_controls(u, first, count), psi);
       Lanes::store(psi, first, count, x_next);
@@ -243,7 +243,7 @@ public:
     typename Lanes::Field psi, cotangent, propagated;
     typename Lanes::LaneValues control_cotangent;
     for (Index first = 0; first < x.cols(); first += Lanes::kLanes) {
-      const int count = lane_count(x.cols(), first);
+      const int count = detail::LaneRows<Scalar>::count(x.cols(), first);
       Lanes::load(x, first, count, psi);
       Lanes::load(lambda, first, count, cotangent);
       lanes.vjp(Lanes::load_controls(u, first, count), psi, cotangent,
@@ -316,10 +316,6 @@ public:
 private:
   using Lu = ConstantTridiagonalLu<Complex, Nx>;
   using Lanes = detail::SchrodingerLanes<Scalar, Nx == Eigen::Dynamic ? 1 : Nx>;
-
-  [[nodiscard]] static int lane_count(Index batch, Index first) {
-    return static_cast<int>(std::min<Index>(Lanes::kLanes, batch - first));
-  }
 
   [[nodiscard]] Scalar half_dt() const { return dt_ / Scalar(2); }
 

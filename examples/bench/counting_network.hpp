@@ -55,6 +55,16 @@ public:
     net_.forward(x, y, ws, packed);
     macs_.fetch_add(per_sample_ * x.cols(), std::memory_order_relaxed);
   }
+  /// The forward pass in parts: counted once for the whole batch here, as its parts cover the
+  /// batch once, so that the parts on several threads do not contend for the counter.
+  void size_forward(Index batch, Workspace& ws) const {
+    net_.size_forward(batch, ws);
+    macs_.fetch_add(per_sample_ * batch, std::memory_order_relaxed);
+  }
+  void forward_columns(const Matrix<S>& x, Index first, Matrix<S>& y, Workspace& ws,
+                       const PackedWeights& packed) const {
+    net_.forward_columns(x, first, y, ws, packed);
+  }
   /// Parameter VJP of every layer, input VJP of every layer but the first, and of the first
   /// one only when dX is asked for (exactly what `Network::backward` executes).
   void backward(const Workspace& ws, const Matrix<S>& dy, sbptt::Vector<S>& grad,
@@ -101,7 +111,9 @@ private:
   mutable std::atomic<long long> macs_{0};
 };
 
-static_assert(sbptt::SeedScalingController<CountingNetwork<float>>,
-              "bench must time the engine's split and shared-seed backward, as a Network gets it");
+static_assert(sbptt::SeedScalingController<CountingNetwork<float>> &&
+                  sbptt::ColumnSplitController<CountingNetwork<float>>,
+              "bench must time the engine's split and shared-seed backward and its forward pass "
+              "in parts, as a Network gets them");
 
 }  // namespace bench

@@ -20,7 +20,9 @@
 /// After the first call at a batch shape, `forward`, `reverse` and `regular_and_modified`
 /// allocate nothing (every buffer is kept and resized only when the shape changes).
 ///
-/// Threads (`set_threads`): the per-sample work of a step (simulator step and VJP, loss seeds;
+/// Threads (`set_threads`): with a `ColumnSplitController`, `forward` cuts the batch into one
+/// range of columns per thread and rolls each out from x_0 to x_m on its own thread; else the
+/// per-sample work of a step (simulator step and VJP, loss seeds;
 /// only the seeds for a `BatchSimulator`) is split over the samples; `evaluate` rolls out
 /// fixed chunks of `kEvaluateChunk` samples independently. A lone sweep (`reverse`) whose
 /// per-sample loops are too cheap to split hands the parameter products of a
@@ -156,6 +158,7 @@ public:
     const auto slots = static_cast<std::size_t>(threads);
     for (auto* scratch : {&forward_scratch_, &sweeps_[0].scratch, &sweeps_[1].scratch})
       scratch->assign(slots, Scratch(sim_.state_dim(), sim_.control_dim()));
+    forward_parts_.resize(slots);
   }
   [[nodiscard]] Index threads() const { return threads_; }
 
@@ -167,8 +170,14 @@ public:
     trajectory_.resize(steps_, sim_.state_dim(), sim_.control_dim(), batch);
     forward_non_finite_.reset();
     trajectory_.states[0] = initial_states;
-    note_non_finite(Quantity::State, 0, trajectory_.states[0]);
     packed_controller_.pack();
+    if constexpr (ColumnSplitController<Ctrl>) {
+      if (pool_ && batch > 1) {
+        roll_out_in_parts(std::min(threads_, batch));
+        return batch_loss();
+      }
+    }
+    note_non_finite(Quantity::State, 0, trajectory_.states[0]);
     for (Index n = 0; n < steps_; ++n) {
       const auto i = static_cast<std::size_t>(n);
       packed_controller_.forward(trajectory_.states[i], trajectory_.controls[i],
@@ -208,16 +217,8 @@ public:
     } else {
       for (Index k = 0; k < chunks; ++k) task(k, 0);
     }
-    // The first non-finite value in rollout order: by step, control before state, then sample.
-    forward_non_finite_.reset();
-    Index best = -1;
-    for (Index k = 0; k < chunks; ++k) {
-      const EvalChunk& chunk = chunks_[static_cast<std::size_t>(k)];
-      if (chunk.non_finite && (best < 0 || chunk.order < best)) {
-        best = chunk.order;
-        forward_non_finite_ = chunk.non_finite;
-      }
-    }
+    forward_non_finite_ = detail::first_in_rollout_order(
+        chunks, [&](Index k) -> auto& { return chunks_[static_cast<std::size_t>(k)].non_finite; });
     return detail::mean_of_samples(eval_losses_, steps_, forward_non_finite_);
   }
 
@@ -259,7 +260,7 @@ public:
   /// As above, reusing the buffers of `result` (no allocation once sized). With one control
   /// and a `SeedScalingController` both sweeps share one backward pass of the controller
   /// (shared_seed_sweeps.hpp); otherwise, with threads, the two sweeps run at the same time,
-  /// each exactly as it would alone.
+  /// each exactly as it would alone, and on one thread they go step by step together.
   void regular_and_modified(const Matrix<Scalar>& initial_states, GradientPair<Scalar>& result,
                             Index truncation = 0) {
     result.loss = forward(initial_states);
@@ -272,18 +273,17 @@ public:
         return;
       }
     }
-    auto task = [&](Index item, Index) {
-      if (item == 0) {
-        sweep(sweeps_[0], FlowMode::Full, result.regular, truncation, !pool_);
-      } else {
-        sweep(sweeps_[1], FlowMode::PhysicsOnly, result.modified, truncation, !pool_);
-      }
-    };
     if (pool_) {
+      auto task = [&](Index item, Index) {
+        if (item == 0) {
+          sweep(sweeps_[0], FlowMode::Full, result.regular, truncation, false);
+        } else {
+          sweep(sweeps_[1], FlowMode::PhysicsOnly, result.modified, truncation, false);
+        }
+      };
       pool_->run(2, task);
     } else {
-      task(0, 0);
-      task(1, 0);
+      sweep_pair(result, truncation);
     }
     finish_pair(result);
   }
@@ -348,19 +348,47 @@ private:
       }
       if (handoff == nullptr)
         packed_controller_.backward(trajectory_.workspaces[i], s.mu, gradient, input_adjoint);
-      if (physics) {
-        s.lambda.swap(s.propagated);
-        if (network) s.lambda += s.input_adjoint;
-      } else if (network) {
-        s.lambda = s.input_adjoint;
-      } else {
-        s.lambda.setZero();
-      }
+      advance(s, physics, network);
     }
     if constexpr (SplitBackwardController<Ctrl>) {
       if (handoff != nullptr) handoff->wait_added(steps_, add);
     }
     s.end(gradient);
+  }
+
+  /// λ_n of the file comment from the products of step n: A_nᵀλ_{n+1} when `physics`,
+  /// K_nᵀμ_n when `network`.
+  static void advance(Sweep& s, bool physics, bool network) {
+    if (physics) {
+      s.lambda.swap(s.propagated);
+      if (network) s.lambda += s.input_adjoint;
+    } else if (network) {
+      s.lambda = s.input_adjoint;
+    } else {
+      s.lambda.setZero();
+    }
+  }
+
+  /// The pair's Full (g_R) and PhysicsOnly (g_M) sweeps step by step together on one thread,
+  /// so that the simulator differentiates both in one call per step (`adjoint_products` of
+  /// two sweeps); each sweep computes what `sweep` computes alone, bit for bit.
+  void sweep_pair(GradientPair<Scalar>& result, Index truncation) {
+    Sweep& full = sweeps_[0];
+    Sweep& physics_only = sweeps_[1];
+    begin_sweep(full, result.regular, false);
+    begin_sweep(physics_only, result.modified, false);
+    for (Index n = steps_ - 1; n >= 0; --n) {
+      const auto& workspace = trajectory_.workspaces[static_cast<std::size_t>(n)];
+      const bool flows = !(truncation > 0 && n > 0 && n % truncation == 0);
+      adjoint_products({&full, &physics_only}, n, flows, true);
+      packed_controller_.backward(workspace, full.mu, result.regular,
+                                  flows ? &full.input_adjoint : nullptr);
+      packed_controller_.backward(workspace, physics_only.mu, result.modified, nullptr);
+      advance(full, flows, flows);
+      advance(physics_only, flows, false);
+    }
+    full.end(result.regular);
+    physics_only.end(result.modified);
   }
 
   /// The per-sample half of step n of each of `sweeps` (one, or the pair's two): λ_{n+1} += its
@@ -403,6 +431,50 @@ private:
     result.comparison = compare(result.modified, result.regular);
   }
 
+  /// The rollout of `forward` with the batch's columns cut into `parts` ranges, each rolled
+  /// out on its own thread from x_0 to x_m: the steps of a rollout wait on each other, its
+  /// samples do not. A sample's numbers do not depend on the samples beside it (the
+  /// controller's `forward_columns`, a `BatchSimulator`'s columns), so the trajectory is the
+  /// one-thread trajectory bit for bit.
+  void roll_out_in_parts(Index parts) {
+    const Index batch = trajectory_.batch();
+    for (auto& ws : trajectory_.workspaces) packed_controller_.size_forward(batch, ws);
+    auto first_of = [&](Index k) { return k * batch / parts; };
+    auto roll_out_part = [&](Index k, Index slot) {
+      const Index first = first_of(k);
+      detail::ForwardPart<Scalar>& part = forward_parts_[static_cast<std::size_t>(k)];
+      Scratch& scratch = forward_scratch_[static_cast<std::size_t>(slot)];
+      part.resize(steps_, sim_.state_dim(), sim_.control_dim(), first_of(k + 1) - first);
+      part.non_finite.value.reset();
+      part.states[0] = trajectory_.states[0].middleCols(first, first_of(k + 1) - first);
+      part.non_finite.note(Quantity::State, 0, part.states[0], first);
+      for (Index n = 0; n < steps_; ++n) {
+        const auto i = static_cast<std::size_t>(n);
+        Matrix<Scalar>& x = part.states[i];
+        packed_controller_.forward_columns(x, first, part.controls[i], trajectory_.workspaces[i]);
+        part.non_finite.note(Quantity::Control, n, part.controls[i], first);
+        detail::step_columns(sim_, x, part.controls[i], part.states[i + 1], [&](auto&& body) {
+          for (Index b = 0; b < x.cols(); ++b) body(b, scratch);
+        });
+        part.non_finite.note(Quantity::State, n + 1, part.states[i + 1], first);
+      }
+    };
+    pool_->run(parts, roll_out_part);
+    // Into the trajectory here, on one thread: a part writing its own columns there would
+    // share the cache lines at its edges with the next part's thread at every step.
+    for (Index k = 0; k < parts; ++k) {
+      const detail::ForwardPart<Scalar>& part = forward_parts_[static_cast<std::size_t>(k)];
+      const Index first = first_of(k), count = first_of(k + 1) - first;
+      for (std::size_t i = 0; i < part.controls.size(); ++i) {
+        trajectory_.controls[i].middleCols(first, count) = part.controls[i];
+        trajectory_.states[i + 1].middleCols(first, count) = part.states[i + 1];
+      }
+    }
+    forward_non_finite_ = detail::first_in_rollout_order(parts, [&](Index k) -> auto& {
+      return forward_parts_[static_cast<std::size_t>(k)].non_finite;
+    });
+  }
+
   /// Batch-mean loss of the stored trajectory.
   Scalar batch_loss() {
     const Index batch = trajectory_.batch();
@@ -442,6 +514,7 @@ private:
   Trajectory<Scalar, typename Ctrl::Workspace> trajectory_;
   std::optional<NonFinite> forward_non_finite_;
   std::vector<Scratch> forward_scratch_;
+  std::vector<detail::ForwardPart<Scalar>> forward_parts_;  ///< `forward` on several threads
   detail::ForkDecision fork_[3];  ///< per-sample loops: simulator step, VJPs, batch loss
   Sweep sweeps_[2];
   detail::PairedColumns<Scalar> paired_columns_;  ///< both sweeps' VJPs in one batch call

@@ -23,12 +23,42 @@ namespace sbptt::detail {
 
 /// Sets `slot` to the first non-finite entry of `values` (scanning sample by sample), with
 /// samples numbered from `first`; leaves it alone when every entry is finite.
-template <class Scalar>
-void note_first_non_finite(Quantity quantity, Index step, const Matrix<Scalar>& values,
+template <class Derived>
+void note_first_non_finite(Quantity quantity, Index step, const Eigen::DenseBase<Derived>& values,
                            std::optional<NonFinite>& slot, Index first = 0) {
   if (const auto at = first_non_finite(values))
     slot = NonFinite{quantity, step, first + at->column,
                      static_cast<double>(values(at->row, at->column))};
+}
+
+/// The first non-finite value that a rollout of some of a batch's samples met, with its place
+/// in rollout order (by step, the control c_n before the state x_{n+1}, then by sample), so
+/// that parts of a batch rolled out apart report what one rollout of the whole batch would.
+struct RolloutNonFinite {
+  std::optional<NonFinite> value;
+  Index order = 0;  ///< 2n for the control c_n, 2n − 1 for the state x_n
+
+  /// Notes the first non-finite entry of `values` (samples numbered from `first`) unless one
+  /// is already noted.
+  template <class Values>
+  void note(Quantity quantity, Index step, const Values& values, Index first) {
+    if (value) return;
+    note_first_non_finite(quantity, step, values, value, first);
+    if (value) order = quantity == Quantity::Control ? 2 * step : 2 * step - 1;
+  }
+};
+
+/// The first of `count` parts' values in rollout order, `part(k)` giving part k's
+/// `RolloutNonFinite`; parts cover the samples in order, so at one place the earlier part's
+/// value comes first.
+template <class Part>
+[[nodiscard]] std::optional<NonFinite> first_in_rollout_order(Index count, Part&& part) {
+  const RolloutNonFinite* first = nullptr;
+  for (Index k = 0; k < count; ++k) {
+    const RolloutNonFinite& p = part(k);
+    if (p.value && (first == nullptr || p.order < first->order)) first = &p;
+  }
+  return first != nullptr ? first->value : std::nullopt;
 }
 
 /// The first non-finite component of a gradient or parameter vector (step −1, `sample` =
@@ -207,17 +237,13 @@ struct ParamHandoffOf<C, true> {
 };
 
 /// One independently rolled-out chunk of `Engine::evaluate`: its states, controls, controller
-/// workspace and the first non-finite value it met, with that value's place in rollout order.
+/// workspace and the first non-finite value it met.
 template <class Scalar, class Workspace, class Scratch>
 struct EvaluationChunk {
   Matrix<Scalar> state, next, control;
   Workspace workspace;
   std::optional<Scratch> scratch;
-  std::optional<NonFinite> non_finite;
-  Index order = 0;  ///< 2n for the control c_n, 2n − 1 for the state x_n
-
-  /// Notes the first non-finite entry of `values` unless one is already noted.
-  void note(Quantity quantity, Index step, Index rank, const Matrix<Scalar>& values, Index first);
+  RolloutNonFinite non_finite;
 
   /// Rolls out `x0` (state_dim × b, samples first … first + b − 1 of the set) for `steps`
   /// steps with `controller` (packed) through `sim`, and sets `losses` (b) to each sample's
@@ -232,13 +258,13 @@ struct EvaluationChunk {
         objective.control_weight / static_cast<double>(steps * sim.control_dim()));
     if (!scratch) scratch.emplace(sim.state_dim(), sim.control_dim());
     Scratch& t = *scratch;
-    non_finite.reset();
+    non_finite.value.reset();
     state = x0;
     next.resize(sim.state_dim(), batch);
     losses.setZero();
     for (Index n = 0; n < steps; ++n) {
       controller.forward(state, control, workspace);
-      note(Quantity::Control, n, 2 * n, control, first);
+      non_finite.note(Quantity::Control, n, control, first);
       step_columns(sim, state, control, next, [&](auto&& body) {
         for (Index b = 0; b < batch; ++b) body(b, t);
       });
@@ -250,7 +276,7 @@ struct EvaluationChunk {
           losses(b) += w * objective.state_loss(t.x_next, static_cast<State*>(nullptr));
       }
       state.swap(next);
-      note(Quantity::State, n + 1, 2 * n + 1, state, first);
+      non_finite.note(Quantity::State, n + 1, state, first);
     }
   }
 };
@@ -307,14 +333,21 @@ private:
   double best_ns_ = 0;
 };
 
-template <class Scalar, class Workspace, class Scratch>
-void EvaluationChunk<Scalar, Workspace, Scratch>::note(Quantity quantity, Index step, Index rank,
-                                                      const Matrix<Scalar>& values,
-                                                      Index first) {
-  if (non_finite) return;
-  note_first_non_finite(quantity, step, values, non_finite, first);
-  if (non_finite) order = rank;
-}
+/// One thread's samples of `Engine::forward` done in parts: their states x_0 … x_m and
+/// controls c_0 … c_{m−1}, and the first non-finite value the part met.
+template <class Scalar>
+struct ForwardPart {
+  std::vector<Matrix<Scalar>> states, controls;
+  RolloutNonFinite non_finite;
+
+  /// Sizes the buffers for `steps` steps of `count` samples (allocates only when they change).
+  void resize(Index steps, Index state_dim, Index control_dim, Index count) {
+    states.resize(static_cast<std::size_t>(steps) + 1);
+    controls.resize(static_cast<std::size_t>(steps));
+    for (auto& x : states) x.resize(state_dim, count);
+    for (auto& c : controls) c.resize(control_dim, count);
+  }
+};
 
 /// Mean of per-sample losses, summed in sample order (thread-count independent); notes the
 /// first non-finite one in `slot` (at step `steps`) unless `slot` already holds a value.

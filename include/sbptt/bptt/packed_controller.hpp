@@ -43,6 +43,19 @@ public:
     }
   }
 
+  void size_forward(Index batch, Workspace& ws) const
+    requires ColumnSplitController<Ctrl>
+  {
+    controller_.size_forward(batch, ws);
+  }
+
+  void forward_columns(const Matrix<Scalar>& x, Index first, Matrix<Scalar>& y,
+                       Workspace& ws) const
+    requires ColumnSplitController<Ctrl>
+  {
+    controller_.forward_columns(x, first, y, ws, packed_);
+  }
+
   void backward(const Workspace& ws, const Matrix<Scalar>& dy, Vector<Scalar>& grad,
                 Matrix<Scalar>* dx) const {
     if constexpr (PackingController<Ctrl>) {

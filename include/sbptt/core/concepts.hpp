@@ -165,6 +165,22 @@ concept PackingController =
       c.backward(cws, x, grad, dx, cp);
     };
 
+/// A `PackingController` whose packed forward pass can be done in parts, as `Network`'s can:
+/// `void size_forward(Index B, Workspace& ws) const` sizes `ws` for B samples, then
+/// `void forward_columns(X, first, Y, ws, packed) const` does for the samples first … first +
+/// X.cols() − 1 what the packed `forward` of the whole batch does (Y: their outputs), bit for
+/// bit, and may run at once with calls on other samples. The engine then rolls out a batch's
+/// columns on several threads.
+template <class C>
+concept ColumnSplitController =
+    PackingController<C> &&
+    requires(const C& c, const typename C::PackedWeights& packed,
+             const Matrix<typename C::Scalar>& x, Matrix<typename C::Scalar>& y,
+             typename C::Workspace& ws, Index index) {
+      c.size_forward(index, ws);
+      c.forward_columns(x, index, y, ws, packed);
+    };
+
 /// A `PackingController` whose backward splits into two halves, as `Network`'s does:
 /// `using LayerAdjoints` (default-constructible), `void backward_inputs(ws, dY, dX, packed,
 /// adjoints) const`, which does what the packed `backward` does to `dX` and records what the

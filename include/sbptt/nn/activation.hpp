@@ -4,6 +4,7 @@
 /// Backward passes take the derivative from the stored layer *output* y rather than the
 /// pre-activation z: for tanh, f'(z) = 1 − y², so the workspace needs to keep only y and no
 /// second buffer per layer.
+#include <algorithm>
 #include <cmath>
 #include <string_view>
 #include <type_traits>
@@ -65,17 +66,49 @@ void tanh_in_place_double(Eigen::ArrayBase<Derived>& z) {
 
 }  // namespace detail
 
-/// Applies f in place to every entry of `z` (any shape); identity is a no-op. For double the
-/// tanh is `detail::tanh_in_place_double` (vectorised); for float Eigen's own.
-template <class Derived>
-void activate_in_place(Activation activation, Eigen::DenseBase<Derived>& z) {
-  if (activation != Activation::Tanh) return;
-  if constexpr (std::is_same_v<typename Derived::Scalar, double>) {
-    auto&& a = z.derived().array();
-    detail::tanh_in_place_double(a);
-  } else {
-    z.derived().array() = z.derived().array().tanh();
+namespace detail {
+
+/// tanh of the `registers` × `Lanes` entries at `z`, one SIMD register's worth at a time.
+/// Never inlined, so that every entry of every call runs the same machine code.
+template <class Scalar, int Lanes>
+[[gnu::noinline]] void tanh_registers(Scalar* z, Index registers) {
+  for (Index r = 0; r < registers; ++r) {
+    Eigen::Map<Eigen::Array<Scalar, Lanes, 1>> block(z + r * Lanes);
+    if constexpr (std::is_same_v<Scalar, double>) {
+      tanh_in_place_double(block);
+    } else {
+      block = block.tanh();
+    }
   }
+}
+
+}  // namespace detail
+
+/// Applies f in place to the `size` entries at `z`; identity is a no-op. For double the tanh is
+/// `detail::tanh_in_place_double`, for float Eigen's own. Every entry goes through the same
+/// code, in whole registers (the last one padded), whatever its place. A dynamic Eigen loop
+/// takes the entries before the first aligned address and after the last whole register one
+/// by one, in scalar code compiled apart, where the compiler is free to fuse multiply-adds
+/// differently; then a sample's outputs could depend on the columns evaluated beside it, which
+/// the engine's forward pass in parts must exclude (with GCC 12 the two paths measured equal).
+template <class Scalar>
+void activate_in_place(Activation activation, Scalar* z, Index size) {
+  if (activation != Activation::Tanh) return;
+  constexpr int lanes = Eigen::internal::packet_traits<Scalar>::size;
+  const Index whole = size / lanes;
+  detail::tanh_registers<Scalar, lanes>(z, whole);
+  const Index i = whole * lanes;
+  if (i == size) return;
+  alignas(64) Scalar tail[lanes] = {};
+  std::copy(z + i, z + size, tail);
+  detail::tanh_registers<Scalar, lanes>(tail, 1);
+  std::copy(tail, tail + (size - i), z + i);
+}
+
+/// The same for every entry of a contiguous matrix or array `z` (any shape).
+template <class Derived>
+void activate_in_place(Activation activation, Eigen::PlainObjectBase<Derived>& z) {
+  activate_in_place(activation, z.data(), z.size());
 }
 
 /// `delta = upstream ⊙ f'(z)`, with f' taken from the layer output `y` (f(z)).

@@ -70,16 +70,10 @@ struct Conv1d {
   /// window p of sample b with row c·K + j = x(p·s + j, c), matching the weight's row layout.
   /// \param x  inputs, (L·C_in) × B, position-major
   template <class Scalar>
-  void im2col(const Matrix<Scalar>& x, Matrix<Scalar>& columns) const {
-    detail::require(x.rows() == input_dim(), "Conv1d::im2col: x has ", x.rows(),
-                    " rows; expected input_dim() = ", input_dim());
-    const Index positions = output_length();
-    const Index window = window_size();
-    columns.resize(window, positions * x.cols());
+  void im2col(const Scalar* x, Index batch, Scalar* columns) const {
     // In memory a window is K positions of C_in channels (position-major); the weight wants
     // it channel-major (c·K + j), hence the small transpose.
-    for_each_window(x.cols(), columns.data(), x.data(),
-                    [&](Scalar* column, const Scalar* win, auto k) {
+    for_each_window(batch, columns, x, [&](Scalar* column, const Scalar* win, auto k) {
       for (Index c = 0; c < in_channels; ++c)
         for (Index j = 0; j < k; ++j) column[c * k + j] = win[j * in_channels + c];
     });
@@ -120,17 +114,17 @@ struct Conv1d {
   /// Y = f(conv(X) + b) for a batch.
   /// \param w        W with b, packed (packed_product.hpp; `Network::pack` makes it)
   /// \param x        inputs, (L·C_in) × B, position-major
-  /// \param y        outputs, resized to (P·C_out) × B, position-major
-  /// \param columns  im2col workspace, resized to (C_in·K) × (P·B); backward needs it
+  /// \param batch    B
+  /// \param y        outputs, (P·C_out) × B, position-major (overwritten)
+  /// \param columns  im2col workspace, (C_in·K) × (P·B) (overwritten); backward needs it
   template <class Scalar>
-  void forward(const PackedMatrix<Scalar>& w, const Matrix<Scalar>& x, Matrix<Scalar>& y,
-               Matrix<Scalar>& columns) const {
-    im2col(x, columns);
-    y.resize(output_dim(), x.cols());
+  void forward(const PackedMatrix<Scalar>& w, const Scalar* x, Index batch, Scalar* y,
+               Scalar* columns) const {
+    im2col(x, batch, columns);
     // A C_out × (P·B) column-major matrix has exactly the memory of the position-major
     // (P·C_out) × B output, so the product writes the result in place.
-    w.multiply(columns.data(), window_size(), columns.cols(), y.data(), out_channels);
-    activate_in_place(activation, y);
+    w.multiply(columns, window_size(), output_length() * batch, y, out_channels);
+    activate_in_place(activation, y, output_dim() * batch);
   }
 
   /// Adds the parameter VJP of a batch to `grad`.

@@ -44,14 +44,14 @@ struct Dense {
   }
 
   /// Y = f(W X + b) for a batch.
-  /// \param w  W with b, packed (packed_product.hpp; `Network::pack` makes it)
-  /// \param x  inputs, n_in × B
-  /// \param y  outputs, resized to n_out × B (no allocation when already that shape)
+  /// \param w      W with b, packed (packed_product.hpp; `Network::pack` makes it)
+  /// \param x      inputs, n_in × B, column-major
+  /// \param batch  B
+  /// \param y      outputs, n_out × B, column-major (overwritten; must not overlap `x`)
   template <class Scalar>
-  void forward(const PackedMatrix<Scalar>& w, const Matrix<Scalar>& x, Matrix<Scalar>& y) const {
-    y.resize(outputs, x.cols());
-    w.multiply(x.data(), inputs, x.cols(), y.data(), outputs);
-    activate_in_place(activation, y);
+  void forward(const PackedMatrix<Scalar>& w, const Scalar* x, Index batch, Scalar* y) const {
+    w.multiply(x, inputs, batch, y, outputs);
+    activate_in_place(activation, y, outputs * batch);
   }
 
   /// Adds the parameter VJP of a batch to `grad`.

@@ -166,6 +166,45 @@ public:
     forward_packed(x, y, ws, packed.layers_);
   }
 
+  /// Sizes `ws` for a forward pass of `batch` samples done by `forward_columns` in parts.
+  /// Allocates only when the batch or the network changed.
+  void size_forward(Index batch, Workspace& ws) const {
+    detail::require(batch > 0, "Network::size_forward: batch = ", batch,
+                    "; expected at least one sample");
+    const std::size_t count = layers_.size();
+    if (ws.outputs_.size() != count) {
+      ws.outputs_.resize(count);
+      ws.columns_.resize(count);
+    }
+    ws.input_.resize(input_dim(), batch);
+    for (std::size_t l = 0; l < count; ++l) {
+      ws.outputs_[l].resize(layer_output_dim(layers_[l]), batch);
+      if (const auto* conv = std::get_if<Conv1d>(&layers_[l]))
+        ws.columns_[l].resize(conv->window_size(), conv->output_length() * batch);
+    }
+    ws.batch_ = batch;
+  }
+
+  /// One part of the packed `forward`: samples `first` … `first` + X.cols() − 1 of the batch
+  /// that `ws` was sized for by `size_forward`. Sets `y` (output_dim() × X.cols()) and those
+  /// samples' columns of `ws`. A sample's outputs do not depend on the samples beside it
+  /// (packed_product.hpp, `activate_in_place`), so the parts give the whole batch's numbers bit
+  /// for bit, and calls on disjoint samples may run at once (the engine's forward pass on
+  /// several threads). X and Y belong to the caller's part, so that parts on different
+  /// threads share no memory but the workspace.
+  void forward_columns(const Matrix<Scalar>& x, Index first, Matrix<Scalar>& y, Workspace& ws,
+                       const PackedWeights& packed) const {
+    detail::require(ws.batch_ > 0, "Network::forward_columns: the workspace holds no batch; ",
+                    "expected size_forward(B, ws) first");
+    detail::require(first >= 0 && x.cols() > 0 && first + x.cols() <= ws.batch_,
+                    "Network::forward_columns: samples ", first, " … ", first + x.cols() - 1,
+                    "; expected a range within the ", ws.batch_,
+                    " samples the workspace was sized for (size_forward)");
+    check_input_rows(x, "forward_columns");
+    check_packed(packed.layers_, false, "forward_columns");
+    forward_range(x, first, y, ws, packed.layers_);
+  }
+
   /// Vector–Jacobian products at the batch recorded in `ws`.
   /// \param ws    filled by `forward` of this network (batch B)
   /// \param dy    output adjoint, output_dim() × B
@@ -226,29 +265,39 @@ public:
 private:
   void forward_packed(const Matrix<Scalar>& x, Matrix<Scalar>& y, Workspace& ws,
                       const detail::PackedLayers<Scalar>& packed) const {
-    detail::require(x.rows() == input_dim(), "Network::forward: X has ", x.rows(),
+    check_input_rows(x, "forward");
+    size_forward(x.cols(), ws);
+    forward_range(x, 0, y, ws, packed);
+  }
+
+  void check_input_rows(const Matrix<Scalar>& x, const char* caller) const {
+    detail::require(x.rows() == input_dim(), "Network::", caller, ": X has ", x.rows(),
                     " rows, expected input_dim() = ", input_dim(), " (one sample per column)");
-    const std::size_t count = layers_.size();
-    if (ws.outputs_.size() != count) {
-      ws.outputs_.resize(count);
-      ws.columns_.resize(count);
-    }
-    ws.input_ = x;
-    ws.batch_ = x.cols();
-    for (std::size_t l = 0; l < count; ++l) {
-      const Matrix<Scalar>& in = l == 0 ? ws.input_ : ws.outputs_[l - 1];
+  }
+
+  /// Y = N(X) for the samples first … first + X.cols() − 1 of the workspace's batch.
+  void forward_range(const Matrix<Scalar>& x, Index first, Matrix<Scalar>& y, Workspace& ws,
+                     const detail::PackedLayers<Scalar>& packed) const {
+    const Index count = x.cols();
+    ws.input_.middleCols(first, count) = x;
+    const Scalar* in = ws.input_.col(first).data();
+    for (std::size_t l = 0; l < layers_.size(); ++l) {
+      Scalar* out = ws.outputs_[l].col(first).data();
       const PackedMatrix<Scalar>& w = packed.weights[l];
       std::visit(
           [&](const auto& layer) {
             if constexpr (std::is_same_v<std::decay_t<decltype(layer)>, Conv1d>) {
-              layer.forward(w, in, ws.outputs_[l], ws.columns_[l]);
+              Matrix<Scalar>& columns = ws.columns_[l];
+              layer.forward(w, in, count, out,
+                            columns.data() + first * layer.output_length() * columns.rows());
             } else {
-              layer.forward(w, in, ws.outputs_[l]);
+              layer.forward(w, in, count, out);
             }
           },
           layers_[l]);
+      in = out;
     }
-    y = ws.outputs_.back();
+    y = ws.outputs_.back().middleCols(first, count);
   }
 
   /// Both halves, the layer adjoints kept in this thread's scratch.
@@ -452,5 +501,6 @@ static_assert(static_assert_controller<Network<float>>());
 static_assert(Controller<Network<double>> && Controller<Network<float>>);
 static_assert(PackingController<Network<double>> && PackingController<Network<float>>);
 static_assert(SeedScalingController<Network<double>> && SeedScalingController<Network<float>>);
+static_assert(ColumnSplitController<Network<double>> && ColumnSplitController<Network<float>>);
 
 }  // namespace sbptt

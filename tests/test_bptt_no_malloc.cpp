@@ -4,8 +4,9 @@
 // test_nn_no_malloc.cpp: an exception in the middle of an Eigen resize would leave the matrix
 // half-built, and the engine's buffers must stay usable for the check that the guard fires.)
 // A replaced global operator new counts every other heap allocation. Covers forward, both
-// reverse sweeps, the combined pair and evaluate, for the paper's cart pole (MLP) and quantum
-// (CNN) settings at batch 8, in float and double, with 1 and 2 threads.
+// reverse sweeps, the combined pair and evaluate, for the paper's cart pole (MLP), guidance
+// (MLP, 4 controls) and quantum (CNN) settings at batch 8, in float and double, with 1 and 2
+// threads.
 #include <atomic>
 #include <cstdlib>
 #include <new>
@@ -47,6 +48,7 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 #include <limits>
 
 #include "sbptt/objectives/cartpole.hpp"
+#include "sbptt/objectives/guidance.hpp"
 #include "sbptt/objectives/quantum.hpp"
 #include "sbptt/bptt/engine.hpp"
 #include "sbptt/core/finite_difference.hpp"
@@ -54,6 +56,7 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 #include "sbptt/nn/network.hpp"
 #include "support/networks.hpp"
 #include "sbptt/sim/cartpole.hpp"
+#include "sbptt/sim/guidance_by_repulsion.hpp"
 #include "sbptt/sim/schrodinger.hpp"
 
 using namespace sbptt;
@@ -151,6 +154,23 @@ TEMPLATE_TEST_CASE("engine: quantum control with the paper's CNN allocates nothi
   glorot_uniform(net, rng);
   Engine engine(sim, net, quantum_objective(sim, 4), 24);
   const Matrix<S> x0 = sim.initial_states(rng, 8);
+  for (const Index threads : {1, 2}) {
+    INFO("threads " << threads);
+    check_no_allocation(engine, x0, threads);
+  }
+}
+
+// Four controls: the pair's sweeps keep a backward pass each, run step by step together on one
+// thread (in float with both sweeps' VJPs in one call) and side by side on two.
+TEMPLATE_TEST_CASE("engine: guidance with the paper's MLP allocates nothing after warm-up",
+                   "[bptt][malloc]", float, double) {
+  using S = TestType;
+  const GuidanceByRepulsion<S, 2, 4> sim;
+  auto net = Network<S>::mlp(sim.state_dim(), {100, 100}, sim.control_dim());
+  Rng rng(5);
+  glorot_uniform(net, rng);
+  Engine engine(sim, net, guidance_objective(sim, 0.1), sim.steps());
+  const Matrix<S> x0 = guidance_initial_states(sim, rng, 8);
   for (const Index threads : {1, 2}) {
     INFO("threads " << threads);
     check_no_allocation(engine, x0, threads);

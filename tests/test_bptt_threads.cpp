@@ -16,6 +16,7 @@
 #include "sbptt/objectives/guidance.hpp"
 #include "sbptt/objectives/quantum.hpp"
 #include "sbptt/bptt/engine.hpp"
+#include "sbptt/bptt/losses.hpp"
 #include "sbptt/core/finite_difference.hpp"
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"
@@ -24,7 +25,6 @@
 #include "sbptt/sim/cartpole.hpp"
 #include "sbptt/sim/guidance_by_repulsion.hpp"
 #include "sbptt/sim/linear.hpp"
-#include "sbptt/bptt/losses.hpp"
 #include "sbptt/sim/schrodinger.hpp"
 #include "sbptt/train/trainer.hpp"
 
@@ -156,15 +156,18 @@ TEMPLATE_TEST_CASE("threads: cart pole results are bitwise identical for 1, 2 an
                             cartpole_objective<S, 2>(), 30, train, test, 5);
 }
 
-TEST_CASE("threads: guidance (continuous loss, regulariser) is bitwise identical",
-          "[bptt][threads]") {
+// In float guidance is a BatchSimulator: on one thread the pair's sweeps then share one call
+// of 2B columns per step (Engine::sweep_pair), against two calls of B on two threads.
+TEMPLATE_TEST_CASE("threads: guidance (continuous loss, regulariser) is bitwise identical",
+                   "[bptt][threads]", float, double) {
+  using S = TestType;
   GuidanceOptions options;
   options.steps = 20;
-  const GuidanceByRepulsion<double, 2, 4> sim(options);
+  const GuidanceByRepulsion<S, 2, 4> sim(options);
   Rng rng(43);
-  const Matrix<double> train = guidance_initial_states(sim, rng, 16);
-  const Matrix<double> test = guidance_initial_states(sim, rng, 40);
-  check_thread_independence(sim, seeded_mlp<double>(sim.state_dim(), sim.control_dim(), 8),
+  const Matrix<S> train = guidance_initial_states(sim, rng, 16);
+  const Matrix<S> test = guidance_initial_states(sim, rng, 40);
+  check_thread_independence(sim, seeded_mlp<S>(sim.state_dim(), sim.control_dim(), 8),
                             guidance_objective(sim, 0.1), 20, train, test, 8);
 }
 

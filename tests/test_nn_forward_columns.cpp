@@ -1,12 +1,15 @@
 // A network's forward pass in parts (`size_forward`, `forward_columns`), as the engine runs it
 // on several threads: every part, however the batch is cut, gives the numbers of each sample
 // evaluated alone (a batch of one), bit for bit, in the outputs and in every recorded layer
-// output; parts on two threads at once give the same; and the whole-batch forward pass is
-// within round-off of a long-double evaluation. Layer widths leave partial registers, so the
-// tanh runs on padded registers at every offset.
+// output, and a backward pass over the workspace filled in parts gives the whole batch's
+// (which reads the im2col matrices too); parts on two threads at once give the same. Being
+// equal to the sample alone says nothing of the sample alone being right, so the forward pass
+// is also held within round-off of a long-double evaluation. Layer widths leave partial
+// registers, so the tanh runs on padded registers at every offset.
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <thread>
 #include <utility>
@@ -82,36 +85,51 @@ TEMPLATE_TEST_CASE("forward in parts: every sample as if alone, bit for bit", "[
           REQUIRE(same<S>(ws.layer_output(l).col(b),
                           alone[static_cast<std::size_t>(b)].layer_output(l)));
     }
-    // The plain forward pass is the same too.
+    // The plain forward pass is the same too, and so is a backward pass over a workspace
+    // filled in parts.
     Matrix<S> whole;
-    typename Network<S>::Workspace whole_ws;
+    typename Network<S>::Workspace whole_ws, parts_ws;
     net.forward(x, whole, whole_ws, packed);
     REQUIRE(same<S>(whole, alone_y));
+    net.size_forward(11, parts_ws);
+    Matrix<S> part_y;
+    net.forward_columns(x.leftCols(4), 0, part_y, parts_ws, packed);
+    net.forward_columns(x.rightCols(7), 4, part_y, parts_ws, packed);
+    const Matrix<S> dy = random_matrix<S>(net.output_dim(), 11, 9, 1.0);
+    sbptt::Vector<S> whole_grad = sbptt::Vector<S>::Zero(net.num_params());
+    sbptt::Vector<S> parts_grad = whole_grad;
+    Matrix<S> whole_dx, parts_dx;
+    net.backward(whole_ws, dy, whole_grad, &whole_dx, packed);
+    net.backward(parts_ws, dy, parts_grad, &parts_dx, packed);
+    REQUIRE((whole_grad.array() == parts_grad.array()).all());
+    REQUIRE(same<S>(whole_dx, parts_dx));
   }
 }
 
 TEMPLATE_TEST_CASE("forward in parts on two threads at once equals one pass", "[nn][columns]",
                    float, double) {
   using S = TestType;
-  const auto nets = networks<S>();
-  const Network<S>& net = nets[1];
-  const Matrix<S> x = random_matrix<S>(net.input_dim(), 64, 4, 1.0);
-  typename Network<S>::PackedWeights packed;
-  net.pack(packed);
-  Matrix<S> whole;
-  typename Network<S>::Workspace whole_ws;
-  net.forward(x, whole, whole_ws, packed);
-  for (int repeat = 0; repeat < 20; ++repeat) {
-    typename Network<S>::Workspace ws;
-    net.size_forward(64, ws);
+  for (const auto& net : networks<S>()) {
+    INFO(net.describe());
+    const Matrix<S> x = random_matrix<S>(net.input_dim(), 64, 4, 1.0);
+    typename Network<S>::PackedWeights packed;
+    net.pack(packed);
+    Matrix<S> whole;
+    typename Network<S>::Workspace whole_ws;
+    net.forward(x, whole, whole_ws, packed);
     const Matrix<S> left = x.leftCols(29), right = x.rightCols(35);
-    Matrix<S> left_y, right_y;
-    std::thread other([&] { net.forward_columns(right, 29, right_y, ws, packed); });
-    net.forward_columns(left, 0, left_y, ws, packed);
-    other.join();
-    REQUIRE(same<S>(left_y, whole.leftCols(29)));
-    REQUIRE(same<S>(right_y, whole.rightCols(35)));
-    REQUIRE(same<S>(ws.layer_output(0), whole_ws.layer_output(0)));
+    for (int repeat = 0; repeat < 20; ++repeat) {
+      typename Network<S>::Workspace ws;
+      net.size_forward(64, ws);
+      Matrix<S> left_y, right_y;
+      std::thread other([&] { net.forward_columns(right, 29, right_y, ws, packed); });
+      net.forward_columns(left, 0, left_y, ws, packed);
+      other.join();
+      REQUIRE(same<S>(left_y, whole.leftCols(29)));
+      REQUIRE(same<S>(right_y, whole.rightCols(35)));
+      for (Index l = 0; l < net.num_layers(); ++l)
+        REQUIRE(same<S>(ws.layer_output(l), whole_ws.layer_output(l)));
+    }
   }
 }
 
@@ -154,7 +172,11 @@ TEST_CASE("forward in parts refuses an unsized workspace and a range outside the
   Matrix<double> y;
   REQUIRE_THROWS_WITH(net.forward_columns(x, 0, y, ws, packed),
                       Contains("expected size_forward(B, ws) first"));
-  REQUIRE_THROWS_WITH(net.size_forward(0, ws), Contains("batch = 0"));
+  REQUIRE_THROWS_WITH(net.size_forward(-1, ws), Contains("batch = -1"));
+  typename Network<double>::Workspace other;
+  Network<double>::mlp(5, {8}, 3).size_forward(6, other);
+  REQUIRE_THROWS_WITH(net.forward_columns(x, 0, y, other, packed),
+                      Contains("sized for another network"));
   net.size_forward(6, ws);
   REQUIRE_THROWS_WITH(net.forward_columns(x, 3, y, ws, packed),
                       Contains("samples 3 … 6") && Contains("within the 6 samples"));

@@ -13,10 +13,11 @@
 /// is a positive multiple of K, so no gradient crosses those states.
 ///
 /// Cost and memory: the controller runs once per step on the whole batch (one product per
-/// layer, never per sample); a `PackingController` packs its parameters once per rollout
+/// layer, never per sample; on several threads, once per step on each thread's part of it); a
+/// `PackingController` packs its parameters once per rollout
 /// (`forward`, `evaluate`), and the reverse sweeps use the packing of the last of those. The
 /// simulator, the loss and their VJPs run per sample, except that a `BatchSimulator` steps and
-/// differentiates the whole batch in one call on the calling thread (batch_physics.hpp).
+/// differentiates the whole batch (or a thread's part of it) in one call (batch_physics.hpp).
 /// After the first call at a batch shape, `forward`, `reverse` and `regular_and_modified`
 /// allocate nothing (every buffer is kept and resized only when the shape changes).
 ///
@@ -143,7 +144,8 @@ public:
   ///        losses for a `BatchSimulator`) is
   ///        split over the threads only when it takes at least this long on one thread
   ///        (timed on its first calls): a fork costs about a microsecond, more than a cheap
-  ///        simulator's whole batch. 0 splits every loop.
+  ///        simulator's whole batch. 0 splits every loop. The forward pass of a
+  ///        `ColumnSplitController` is always done in parts, with one fork per rollout.
   void set_threads(Index threads, double split_above_ns = 4000) {
     detail::require(threads >= 1, "Engine::set_threads: threads = ", threads,
                     "; expected at least 1");
@@ -346,14 +348,29 @@ private:
           handoff->recorded.store(k + 1, std::memory_order_release);
         }
       }
-      if (handoff == nullptr)
-        packed_controller_.backward(trajectory_.workspaces[i], s.mu, gradient, input_adjoint);
+      if (handoff == nullptr) network_backward(s, n, gradient, input_adjoint);
       advance(s, physics, network);
     }
     if constexpr (SplitBackwardController<Ctrl>) {
       if (handoff != nullptr) handoff->wait_added(steps_, add);
     }
     s.end(gradient);
+  }
+
+  /// grad += (∂N/∂θ)_nᵀ μ_n of sweep `s` and, when `dx` is set, dx = K_nᵀ μ_n. For a
+  /// `SplitBackwardController` through its two halves and the sweep's own `LayerAdjoints` (the
+  /// same numbers as `backward`), so that nothing of the controller's grows per thread: the
+  /// pair's sweeps run on whichever thread claims them, and a thread-local buffer would
+  /// allocate the first time a sweep lands on a new thread.
+  void network_backward(Sweep& s, Index n, Vector<Scalar>& gradient, Matrix<Scalar>* dx) {
+    const auto& workspace = trajectory_.workspaces[static_cast<std::size_t>(n)];
+    if constexpr (SplitBackwardController<Ctrl>) {
+      auto& adjoints = sweep_adjoints_[&s == &sweeps_[0] ? 0 : 1];
+      packed_controller_.backward_inputs(workspace, s.mu, dx, adjoints);
+      controller_.add_param_gradient(workspace, adjoints, gradient);
+    } else {
+      packed_controller_.backward(workspace, s.mu, gradient, dx);
+    }
   }
 
   /// λ_n of the file comment from the products of step n: A_nᵀλ_{n+1} when `physics`,
@@ -378,12 +395,10 @@ private:
     begin_sweep(full, result.regular, false);
     begin_sweep(physics_only, result.modified, false);
     for (Index n = steps_ - 1; n >= 0; --n) {
-      const auto& workspace = trajectory_.workspaces[static_cast<std::size_t>(n)];
       const bool flows = !(truncation > 0 && n > 0 && n % truncation == 0);
       adjoint_products({&full, &physics_only}, n, flows, true);
-      packed_controller_.backward(workspace, full.mu, result.regular,
-                                  flows ? &full.input_adjoint : nullptr);
-      packed_controller_.backward(workspace, physics_only.mu, result.modified, nullptr);
+      network_backward(full, n, result.regular, flows ? &full.input_adjoint : nullptr);
+      network_backward(physics_only, n, result.modified, nullptr);
       advance(full, flows, flows);
       advance(physics_only, flows, false);
     }
@@ -441,12 +456,12 @@ private:
     for (auto& ws : trajectory_.workspaces) packed_controller_.size_forward(batch, ws);
     auto first_of = [&](Index k) { return k * batch / parts; };
     auto roll_out_part = [&](Index k, Index slot) {
-      const Index first = first_of(k);
+      const Index first = first_of(k), count = first_of(k + 1) - first;
       detail::ForwardPart<Scalar>& part = forward_parts_[static_cast<std::size_t>(k)];
       Scratch& scratch = forward_scratch_[static_cast<std::size_t>(slot)];
-      part.resize(steps_, sim_.state_dim(), sim_.control_dim(), first_of(k + 1) - first);
+      part.resize(steps_, sim_.state_dim(), sim_.control_dim(), count);
       part.non_finite.value.reset();
-      part.states[0] = trajectory_.states[0].middleCols(first, first_of(k + 1) - first);
+      part.states[0] = trajectory_.states[0].middleCols(first, count);
       part.non_finite.note(Quantity::State, 0, part.states[0], first);
       for (Index n = 0; n < steps_; ++n) {
         const auto i = static_cast<std::size_t>(n);
@@ -454,14 +469,16 @@ private:
         packed_controller_.forward_columns(x, first, part.controls[i], trajectory_.workspaces[i]);
         part.non_finite.note(Quantity::Control, n, part.controls[i], first);
         detail::step_columns(sim_, x, part.controls[i], part.states[i + 1], [&](auto&& body) {
-          for (Index b = 0; b < x.cols(); ++b) body(b, scratch);
+          for (Index b = 0; b < count; ++b) body(b, scratch);
         });
         part.non_finite.note(Quantity::State, n + 1, part.states[i + 1], first);
       }
     };
     pool_->run(parts, roll_out_part);
     // Into the trajectory here, on one thread: a part writing its own columns there would
-    // share the cache lines at its edges with the next part's thread at every step.
+    // share the cache lines at its edges with the next part's thread at every step. The parts'
+    // copies are (m + 1)·state_dim·B + m·control_dim·B numbers (35 KiB for the paper's cart
+    // pole, beside its 694 KiB trajectory).
     for (Index k = 0; k < parts; ++k) {
       const detail::ForwardPart<Scalar>& part = forward_parts_[static_cast<std::size_t>(k)];
       const Index first = first_of(k), count = first_of(k + 1) - first;
@@ -517,6 +534,7 @@ private:
   std::vector<detail::ForwardPart<Scalar>> forward_parts_;  ///< `forward` on several threads
   detail::ForkDecision fork_[3];  ///< per-sample loops: simulator step, VJPs, batch loss
   Sweep sweeps_[2];
+  typename detail::LayerAdjointsOf<Ctrl>::Type sweep_adjoints_[2];  ///< `network_backward`
   detail::PairedColumns<Scalar> paired_columns_;  ///< both sweeps' VJPs in one batch call
   std::vector<EvalChunk> chunks_;
   Vector<Scalar> eval_losses_;

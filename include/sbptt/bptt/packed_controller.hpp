@@ -1,8 +1,9 @@
 #pragma once
 /// \file A controller as the engine calls it: with its parameters packed once per rollout when
-/// it is a `PackingController` (and plainly otherwise), and with its backward split into an
-/// input half and a parameter half when it is a `SplitBackwardController`. Implementation
-/// detail of `sbptt::Engine`.
+/// it is a `PackingController` (and plainly otherwise), with its forward pass in parts of the
+/// batch when it is a `ColumnSplitController`, and with its backward split into an input half
+/// and a parameter half when it is a `SplitBackwardController`. Implementation detail of
+/// `sbptt::Engine`.
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/types.hpp"
 
@@ -19,6 +20,16 @@ struct PackedWeightsOf {
 template <class C>
 struct PackedWeightsOf<C, true> {
   using Type = typename C::PackedWeights;
+};
+
+/// `C::LayerAdjoints` for a `SplitBackwardController`, else `Absent`.
+template <class C, bool = SplitBackwardController<C>>
+struct LayerAdjointsOf {
+  using Type = Absent;
+};
+template <class C>
+struct LayerAdjointsOf<C, true> {
+  using Type = typename C::LayerAdjoints;
 };
 
 /// `Ctrl` with its packed weights: `pack` before a rollout, then the calls of the rollout and

@@ -21,14 +21,19 @@ struct EntryIndex {
 /// vectorised sum when there is none: Σ 0·x is 0 for finite entries and NaN as soon as one is
 /// NaN or infinite (Eigen's `allFinite` compares entry by entry and stops early, which does
 /// not vectorise: 2.9 µs against 0.34 µs for the 11301 parameters of the cart pole's network).
+/// A program built with -ffinite-math-only (-ffast-math) lets the compiler assume that no NaN
+/// exists and drop the test; there Eigen's `isFinite`, written to survive that, is used.
 template <class Derived>
 [[nodiscard]] std::optional<EntryIndex> first_non_finite(const Eigen::DenseBase<Derived>& values) {
+#if defined(__FINITE_MATH_ONLY__) && __FINITE_MATH_ONLY__
+  if (values.derived().array().isFinite().all()) return std::nullopt;
+#else
   using Scalar = typename Derived::Scalar;
-  if (values.size() == 0 || !std::isnan((values.derived().array() * Scalar(0)).sum()))
-    return std::nullopt;
+  if (!std::isnan((values.derived().array() * Scalar(0)).sum())) return std::nullopt;
+#endif
   for (Index c = 0; c < values.cols(); ++c)
     for (Index r = 0; r < values.rows(); ++r)
-      if (!std::isfinite(values(r, c))) return EntryIndex{r, c};
+      if (!(Eigen::numext::isfinite)(values(r, c))) return EntryIndex{r, c};
   return std::nullopt;  // unreachable: allFinite was false
 }
 

@@ -64,10 +64,6 @@ void tanh_in_place_double(Eigen::ArrayBase<Derived>& z) {
                             x * (1.0 + s * (((p0 * s + p1) * s + p2) / (((s + q0) * s + q1) * s + q2))));
 }
 
-}  // namespace detail
-
-namespace detail {
-
 /// tanh of the `registers` × `Lanes` entries at `z`, one SIMD register's worth at a time.
 /// Never inlined, so that every entry of every call runs the same machine code.
 template <class Scalar, int Lanes>

@@ -13,7 +13,8 @@
 /// Memory: `forward` keeps what `backward` needs in the caller's `Workspace` (input copy,
 /// every layer's output, the im2col matrices) and resizes those buffers only when the batch
 /// size or the network changes. `backward` takes the workspace `const`, so its own temporaries
-/// (layer adjoints) live in thread-local buffers (network_scratch.hpp) that only ever grow:
+/// (layer adjoints) live in thread-local buffers (network_scratch.hpp) that only ever grow
+/// (the split halves keep them in the caller's `LayerAdjoints` instead):
 /// after the first call on a thread, repeated calls at the same sizes allocate nothing, and
 /// several threads may run `backward` on the same workspace at once (e.g. the two sweeps of
 /// the combined update).
@@ -45,10 +46,11 @@ class Network {
 public:
   using Scalar = ScalarType;
 
-  /// What `forward` records for `backward`. Default-constructible; one per concurrent forward.
+  /// What `forward` records for `backward`. Default-constructible; one per concurrent forward
+  /// pass (the parts of one pass in `forward_columns` share one).
   class Workspace {
   public:
-    /// B of the last forward pass (−1 before the first).
+    /// B of the last forward pass or `size_forward` (−1 before the first).
     [[nodiscard]] Index batch_size() const { return batch_; }
     /// Output of layer `l` (after its activation), output_dim(l) × B.
     [[nodiscard]] const Matrix<Scalar>& layer_output(Index l) const {
@@ -71,11 +73,14 @@ public:
   };
 
   /// The pre-activation adjoints Δ_l of every layer at one batch, as `backward_inputs`
-  /// records them for `add_param_gradient`. Default-constructible; buffers only grow.
+  /// records them for `add_param_gradient`, and that pass's other temporaries. Default-
+  /// constructible; buffers only grow. The temporaries live here rather than in the thread's
+  /// scratch, so that a caller whose calls move between threads (the engine's pair of sweeps,
+  /// claimed by whichever thread is free) allocates nothing after its first call.
   class LayerAdjoints {
   private:
     friend class Network;
-    std::vector<Vector<Scalar>> deltas_;
+    detail::NetworkScratch<Scalar> record_;  ///< deltas: the Δ_l
   };
 
   /// The layers' products packed from θ by `pack`: valid while θ is unchanged.
@@ -169,8 +174,8 @@ public:
   /// Sizes `ws` for a forward pass of `batch` samples done by `forward_columns` in parts.
   /// Allocates only when the batch or the network changed.
   void size_forward(Index batch, Workspace& ws) const {
-    detail::require(batch > 0, "Network::size_forward: batch = ", batch,
-                    "; expected at least one sample");
+    detail::require(batch >= 0, "Network::size_forward: batch = ", batch,
+                    "; expected a number of samples >= 0");
     const std::size_t count = layers_.size();
     if (ws.outputs_.size() != count) {
       ws.outputs_.resize(count);
@@ -194,8 +199,7 @@ public:
   /// threads share no memory but the workspace.
   void forward_columns(const Matrix<Scalar>& x, Index first, Matrix<Scalar>& y, Workspace& ws,
                        const PackedWeights& packed) const {
-    detail::require(ws.batch_ > 0, "Network::forward_columns: the workspace holds no batch; ",
-                    "expected size_forward(B, ws) first");
+    check_sized(ws);
     detail::require(first >= 0 && x.cols() > 0 && first + x.cols() <= ws.batch_,
                     "Network::forward_columns: samples ", first, " … ", first + x.cols() - 1,
                     "; expected a range within the ", ws.batch_,
@@ -233,7 +237,7 @@ public:
   void backward_inputs(const Workspace& ws, const Matrix<Scalar>& dy, Matrix<Scalar>* dx,
                        const PackedWeights& packed, LayerAdjoints& adjoints) const {
     check_packed(packed.layers_, true, "backward_inputs");
-    inputs_packed(ws, dy, dx, packed.layers_, adjoints.deltas_);
+    inputs_packed(ws, dy, dx, packed.layers_, adjoints.record_);
   }
 
   /// The second half: **adds** (∂N/∂θ)ᵀ dY to `grad` from what `backward_inputs` recorded
@@ -241,7 +245,7 @@ public:
   void add_param_gradient(const Workspace& ws, const LayerAdjoints& adjoints,
                           Vector<Scalar>& grad) const {
     check_recorded(ws, adjoints, grad);
-    params_from(ws, adjoints.deltas_, grad);
+    params_from(ws, adjoints.record_.deltas, grad);
   }
 
   /// The same for the seed dY·diag(s), `scales` = s (1 × B), from adjoints recorded with dY:
@@ -258,8 +262,9 @@ public:
     detail::require(&scaled != &adjoints,
                     "Network::add_param_gradient: scaled is the recorded adjoints; expected "
                     "another LayerAdjoints");
-    if (scaled.deltas_.size() < layers_.size()) scaled.deltas_.resize(layers_.size());
-    params_from(ws, adjoints.deltas_, grad, scales.data(), &scaled.deltas_);
+    auto& scaled_deltas = scaled.record_.deltas;
+    if (scaled_deltas.size() < layers_.size()) scaled_deltas.resize(layers_.size());
+    params_from(ws, adjoints.record_.deltas, grad, scales.data(), &scaled_deltas);
   }
 
 private:
@@ -268,6 +273,24 @@ private:
     check_input_rows(x, "forward");
     size_forward(x.cols(), ws);
     forward_range(x, 0, y, ws, packed);
+  }
+
+  /// Refuses a workspace that `size_forward` of this network did not size, before a part could
+  /// write past one of its buffers.
+  void check_sized(const Workspace& ws) const {
+    detail::require(ws.batch_ >= 0, "Network::forward_columns: the workspace holds no batch; ",
+                    "expected size_forward(B, ws) first");
+    bool sized = ws.outputs_.size() == layers_.size() && ws.input_.rows() == input_dim() &&
+                 ws.input_.cols() == ws.batch_;
+    for (std::size_t l = 0; sized && l < layers_.size(); ++l) {
+      sized = ws.outputs_[l].rows() == layer_output_dim(layers_[l]) &&
+              ws.outputs_[l].cols() == ws.batch_;
+      if (const auto* conv = std::get_if<Conv1d>(&layers_[l]))
+        sized = sized && ws.columns_[l].rows() == conv->window_size() &&
+                ws.columns_[l].cols() == conv->output_length() * ws.batch_;
+    }
+    detail::require(sized, "Network::forward_columns: the workspace was sized for another ",
+                    "network; expected size_forward(B, ws) of this one");
   }
 
   void check_input_rows(const Matrix<Scalar>& x, const char* caller) const {
@@ -280,9 +303,9 @@ private:
                      const detail::PackedLayers<Scalar>& packed) const {
     const Index count = x.cols();
     ws.input_.middleCols(first, count) = x;
-    const Scalar* in = ws.input_.col(first).data();
+    const Scalar* in = ws.input_.data() + first * ws.input_.rows();
     for (std::size_t l = 0; l < layers_.size(); ++l) {
-      Scalar* out = ws.outputs_[l].col(first).data();
+      Scalar* out = ws.outputs_[l].data() + first * ws.outputs_[l].rows();
       const PackedMatrix<Scalar>& w = packed.weights[l];
       std::visit(
           [&](const auto& layer) {
@@ -304,25 +327,26 @@ private:
   void backward_packed(const Workspace& ws, const Matrix<Scalar>& dy, Vector<Scalar>& grad,
                        Matrix<Scalar>* dx, const detail::PackedLayers<Scalar>& packed) const {
     check_grad_size(grad);
-    auto& deltas = detail::network_scratch<Scalar>().deltas;
-    inputs_packed(ws, dy, dx, packed, deltas);
-    params_from(ws, deltas, grad);
+    auto& scratch = detail::network_scratch<Scalar>();
+    inputs_packed(ws, dy, dx, packed, scratch);
+    params_from(ws, scratch.deltas, grad);
   }
 
-  /// Δ_l of every layer into `deltas` (grown, never shrunk) and, when `dx` is set, dX.
+  /// Δ_l of every layer into `scratch.deltas` (its buffers grown, never shrunk) and, when `dx`
+  /// is set, dX.
   /// Never inlined, like `params_from`: `backward` and the split halves must run the same
   /// machine code, or the compiler's contraction of a·b + c into FMA could differ between
   /// the inlined copies and the engine's results between thread counts.
   [[gnu::noinline]] void inputs_packed(const Workspace& ws, const Matrix<Scalar>& dy,
                                        Matrix<Scalar>* dx,
                                        const detail::PackedLayers<Scalar>& packed,
-                                       std::vector<Vector<Scalar>>& deltas) const {
+                                       detail::NetworkScratch<Scalar>& scratch) const {
     check_workspace(ws);
     detail::require(dy.rows() == output_dim() && dy.cols() == ws.batch_,
                     "Network::backward: dY is ", dy.rows(), " × ", dy.cols(), ", expected ",
                     output_dim(), " × ", ws.batch_, " (output_dim() × batch of the forward pass)");
+    auto& deltas = scratch.deltas;
     if (deltas.size() < layers_.size()) deltas.resize(layers_.size());
-    auto& scratch = detail::network_scratch<Scalar>();
     const Index batch = ws.batch_;
     const Scalar* upstream = dy.data();  // ∂L/∂(output of layer l)
     for (Index l = num_layers() - 1; l >= 0; --l) {
@@ -406,9 +430,10 @@ private:
                       const Vector<Scalar>& grad) const {
     check_workspace(ws);
     check_grad_size(grad);
-    bool recorded = adjoints.deltas_.size() >= layers_.size();
+    const auto& deltas = adjoints.record_.deltas;
+    bool recorded = deltas.size() >= layers_.size();
     for (std::size_t l = 0; recorded && l < layers_.size(); ++l)
-      recorded = adjoints.deltas_[l].size() >= layer_output_dim(layers_[l]) * ws.batch_;
+      recorded = deltas[l].size() >= layer_output_dim(layers_[l]) * ws.batch_;
     detail::require(recorded, "Network::add_param_gradient: the adjoints do not cover this ",
                     "workspace's batch; expected them recorded by backward_inputs at it");
   }

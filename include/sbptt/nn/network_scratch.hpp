@@ -1,8 +1,10 @@
 #pragma once
-/// \file The per-thread temporaries of `Network`: its packed weights when none are given and
-/// its backward pass's layer adjoints. Thread-local, because `backward` takes the workspace
-/// `const` and may run on several threads at once (network.hpp); the buffers only grow, so a
-/// thread allocates nothing after its first call at a shape.
+/// \file The temporaries of `Network`: its packed weights when none are given and its backward
+/// pass's layer adjoints. Thread-local for `backward`, because it takes the workspace `const`
+/// and may run on several threads at once (network.hpp); `backward_inputs` keeps the same
+/// buffers in the caller's `LayerAdjoints` instead, so that a caller moving between threads
+/// does not grow a new set on each. The buffers only grow, so nothing is allocated after the
+/// first call at a shape.
 #include <cstddef>
 #include <vector>
 
@@ -13,7 +15,8 @@ namespace sbptt {
 
 namespace detail {
 
-/// Per-thread temporaries of `Network::backward` (see the file comment for why).
+/// Temporaries of `Network`'s backward pass: a thread's for `backward`, a `LayerAdjoints`'
+/// for `backward_inputs` (see the file comment for why).
 template <class Scalar>
 struct NetworkScratch {
   Vector<Scalar> adjoint;  ///< input adjoint of a layer with an activation, before f'

@@ -1,14 +1,12 @@
-// The public checkers must catch what they exist to catch: a correct derivative passes at
-// round-off, and each kind of planted error (one Jacobian entry, the VJP, the controller's
-// parameter or input product) is reported in its own field at about its relative size.
+// The simulator checker must catch what it exists to catch: a correct derivative passes at
+// round-off, and each kind of planted error (one Jacobian entry, the VJP) is reported in its
+// own field at about its relative size.
 #include <catch2/catch.hpp>
 
 #include "sbptt/core/finite_difference.hpp"
 #include "sbptt/sim/linear.hpp"
-#include "polynomial_policy.hpp"
 
 using namespace sbptt;
-using sbptt::testing::PolynomialPolicy;
 
 namespace {
 
@@ -38,49 +36,6 @@ struct PlantedError : Linear {
     if (where == Where::Vjp && lambda_x) (*lambda_x)(0) += size * lambda(1);
   }
 };
-
-/// The toy policy with its parameter or input product scaled by (1 + size).
-struct WrongBackward : PolynomialPolicy<double> {
-  bool wrong_params, wrong_input;
-  double size;
-  WrongBackward(bool params, bool input, double s)
-      : PolynomialPolicy<double>({2, 1}), wrong_params(params), wrong_input(input), size(s) {}
-  void backward(const Workspace& ws, const Matrix<double>& dy, Vector<double>& grad,
-                Matrix<double>* dx) const {
-    Vector<double> own = Vector<double>::Zero(grad.size());
-    PolynomialPolicy<double>::backward(ws, dy, own, dx);
-    grad += wrong_params ? Vector<double>((1 + size) * own) : own;
-    if (wrong_input && dx) *dx *= 1 + size;
-  }
-};
-
-/// The toy policy with packed overloads (the packed weights are a copy of θ), one of them
-/// planted wrong by the factor (1 + size): what a user's packing controller can get wrong.
-struct WrongPacked : PolynomialPolicy<double> {
-  enum class Where { Nowhere, Forward, ParamVjp, InputVjp } where;
-  double size;
-  struct PackedWeights {
-    Vector<double> theta;
-  };
-  WrongPacked(Where w, double s) : PolynomialPolicy<double>({2, 1}), where(w), size(s) {}
-  using PolynomialPolicy<double>::forward;
-  using PolynomialPolicy<double>::backward;
-  void pack(PackedWeights& packed) const { packed.theta = params(); }
-  void forward(const Matrix<double>& x, Matrix<double>& y, Workspace& ws,
-               const PackedWeights& packed) const {
-    REQUIRE(packed.theta == params());  // packed after the last change of θ
-    forward(x, y, ws);
-    if (where == Where::Forward) y *= 1 + size;
-  }
-  void backward(const Workspace& ws, const Matrix<double>& dy, Vector<double>& grad,
-                Matrix<double>* dx, const PackedWeights&) const {
-    Vector<double> own = Vector<double>::Zero(grad.size());
-    backward(ws, dy, own, dx);
-    grad += where == Where::ParamVjp ? Vector<double>((1 + size) * own) : own;
-    if (where == Where::InputVjp && dx) *dx *= 1 + size;
-  }
-};
-static_assert(PackingController<WrongPacked>);
 
 }  // namespace
 
@@ -136,47 +91,3 @@ TEST_CASE("check_jacobians checks the VJP of a simulator that forms no Jacobians
   CHECK(wrong.vjp_error == Approx(1e-4 / 1.3).epsilon(1e-3));  // / max |A| = |x₁|
 }
 
-TEST_CASE("check_controller passes a correct controller and names each planted error",
-          "[core][finite_difference]") {
-  Matrix<double> inputs(1, 3);
-  inputs << -0.3, 0.8, 1.5;
-  for (bool params : {false, true}) {
-    for (bool input : {false, true}) {
-      WrongBackward policy(params, input, 1e-4);
-      policy.params() << 0.7, -1.2;
-      const auto check = check_controller(policy, inputs);
-      INFO("wrong params " << params << ", wrong input " << input);
-      if (params) CHECK(check.param_vjp_error == Approx(1e-4).epsilon(1e-2));
-      else CHECK(check.param_vjp_error < 1e-9);
-      if (input) CHECK(check.input_vjp_error == Approx(1e-4).epsilon(1e-2));
-      else CHECK(check.input_vjp_error < 1e-9);
-    }
-  }
-}
-
-TEST_CASE("check_controller checks a packing controller's packed overloads, the ones the engine "
-          "runs", "[core][finite_difference]") {
-  using Where = WrongPacked::Where;
-  Matrix<double> inputs(1, 3);
-  inputs << -0.3, 0.8, 1.5;
-  for (Where where : {Where::Nowhere, Where::Forward, Where::ParamVjp, Where::InputVjp}) {
-    WrongPacked policy(where, 1e-4);
-    policy.params() << 0.7, -1.2;
-    const auto check = check_controller(policy, inputs);
-    INFO("planted in " << static_cast<int>(where));
-    CHECK(check.has_packed);
-    CHECK(check.param_vjp_error < 1e-9);  // the plain path is right in every case
-    CHECK(check.input_vjp_error < 1e-9);
-    auto expect = [&](Where at, double error) {
-      if (where == at) CHECK(error == Approx(1e-4).epsilon(1e-2));
-      else CHECK(error < 1e-9);
-    };
-    expect(Where::Forward, check.packed_forward_error);
-    expect(Where::ParamVjp, check.packed_param_vjp_error);
-    expect(Where::InputVjp, check.packed_input_vjp_error);
-    if (where == Where::Nowhere) CHECK(check.worst() < 1e-9);
-    else CHECK(check.worst() == Approx(1e-4).epsilon(1e-2));
-  }
-  WrongBackward plain(false, false, 0);
-  CHECK_FALSE(check_controller(plain, inputs).has_packed);
-}

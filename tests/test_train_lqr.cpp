@@ -6,7 +6,7 @@
 #include <cmath>
 
 #include "sbptt/bptt/losses.hpp"
-#include "sbptt/core/finite_difference.hpp"
+#include "sbptt/core/controller_check.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/optim/adam.hpp"
 #include "sbptt/sim/linear.hpp"

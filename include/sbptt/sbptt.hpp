@@ -2,6 +2,7 @@
 /// \file The one include users need: every public header of sbptt.
 #include "sbptt/core/atomic_file.hpp"
 #include "sbptt/core/concepts.hpp"
+#include "sbptt/core/controller_check.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/file_identity.hpp"
 #include "sbptt/core/finite_difference.hpp"

@@ -1,17 +1,16 @@
 #pragma once
-/// \file Central finite differences, and the public checkers users run on their own
-/// simulators and controllers: the finite-difference twin of every analytic derivative.
+/// \file Central finite differences, and the public checker users run on their own
+/// simulators: the finite-difference twin of every analytic derivative (controllers:
+/// controller_check.hpp).
 ///
 /// Step: h_i = ∛ε · max(1, |x_i|), which balances truncation O(h²) against round-off O(ε/h).
 /// Errors are relative to the largest entry of the finite-difference reference (floored at
 /// √ε so that an all-zero derivative is compared absolutely).
 #include <algorithm>
 #include <cmath>
-#include <cstdint>
 #include <limits>
 
 #include "sbptt/core/concepts.hpp"
-#include "sbptt/core/rng.hpp"
 
 namespace sbptt {
 
@@ -151,91 +150,6 @@ template <SimulatorWithJacobians Sim>
   detail::vjp_transposes(sim, x, u, at, bt);
   return std::max(relative_error<Scalar>(at, Matrix<Scalar>(a).transpose()),
                   relative_error<Scalar>(bt, Matrix<Scalar>(b).transpose()));
-}
-
-/// Result of `check_controller`: worst relative errors of the two vector–Jacobian products,
-/// and for a `PackingController` of the overloads the engine calls (packed weights).
-template <class Scalar>
-struct ControllerCheck {
-  Scalar param_vjp_error = 0;  ///< backward's parameter product against finite differences
-  Scalar input_vjp_error = 0;  ///< backward's input product against finite differences
-  bool has_packed = false;     ///< the controller packs its weights; the fields below are set
-  Scalar packed_forward_error = 0;    ///< forward with packed weights against plain forward
-  Scalar packed_param_vjp_error = 0;  ///< packed backward's parameter product against FD
-  Scalar packed_input_vjp_error = 0;  ///< packed backward's input product against FD
-  [[nodiscard]] Scalar worst() const {
-    return std::max({param_vjp_error, input_vjp_error, packed_forward_error,
-                     packed_param_vjp_error, packed_input_vjp_error});
-  }
-};
-
-/// Checks `ctrl.backward` at the batch `inputs` (input_dim × B): both products are compared
-/// with central differences of s = ⟨dY, N(X; θ)⟩ for a seeded random output adjoint dY.
-/// A `PackingController` is checked a second time through its packed overloads, because those
-/// are what the engine runs: a user's packed path that disagrees with the plain one would
-/// otherwise train on a wrong gradient that every plain check passes.
-/// The parameters are perturbed in place and restored.
-template <Controller Ctrl>
-[[nodiscard]] ControllerCheck<typename Ctrl::Scalar> check_controller(
-    Ctrl& ctrl, const Matrix<typename Ctrl::Scalar>& inputs, std::uint64_t seed = 1,
-    typename Ctrl::Scalar step = default_fd_step<typename Ctrl::Scalar>()) {
-  using Scalar = typename Ctrl::Scalar;
-  Rng rng(seed);
-  Matrix<Scalar> outputs;
-  typename Ctrl::Workspace ws;
-  ctrl.forward(inputs, outputs, ws);
-  Matrix<Scalar> adjoint(outputs.rows(), outputs.cols());
-  for (Index i = 0; i < adjoint.size(); ++i) adjoint(i) = static_cast<Scalar>(rng.normal());
-
-  Vector<Scalar> grad = Vector<Scalar>::Zero(ctrl.num_params());
-  Matrix<Scalar> input_adjoint;
-  ctrl.backward(ws, adjoint, grad, &input_adjoint);
-
-  auto pairing = [&](const Matrix<Scalar>& x) {
-    typename Ctrl::Workspace probe_ws;
-    Matrix<Scalar> y;
-    ctrl.forward(x, y, probe_ws);
-    return (adjoint.array() * y.array()).sum();
-  };
-  const Vector<Scalar> theta = ctrl.params();
-  auto in_params = [&](const Vector<Scalar>& p, Vector<Scalar>& out) {
-    ctrl.params() = p;
-    out.resize(1);
-    out(0) = pairing(inputs);
-  };
-  const Matrix<Scalar> fd_params =
-      finite_difference_jacobian<Scalar>(in_params, theta, 1, step).transpose();
-  ctrl.params() = theta;
-
-  auto in_inputs = [&](const Vector<Scalar>& flat, Vector<Scalar>& out) {
-    out.resize(1);
-    out(0) = pairing(flat.reshaped(inputs.rows(), inputs.cols()));
-  };
-  const Vector<Scalar> flat_inputs = inputs.reshaped();
-  const Matrix<Scalar> fd_inputs =
-      finite_difference_jacobian<Scalar>(in_inputs, flat_inputs, 1, step).transpose();
-
-  ControllerCheck<Scalar> result;
-  result.param_vjp_error = relative_error<Scalar>(grad, fd_params);
-  result.input_vjp_error =
-      relative_error<Scalar>(Matrix<Scalar>(input_adjoint.reshaped()), fd_inputs);
-
-  if constexpr (PackingController<Ctrl>) {
-    result.has_packed = true;
-    typename Ctrl::PackedWeights packed;
-    ctrl.pack(packed);
-    typename Ctrl::Workspace packed_ws;
-    Matrix<Scalar> packed_outputs;
-    ctrl.forward(inputs, packed_outputs, packed_ws, packed);
-    result.packed_forward_error = relative_error<Scalar>(packed_outputs, outputs);
-    Vector<Scalar> packed_grad = Vector<Scalar>::Zero(ctrl.num_params());
-    Matrix<Scalar> packed_input_adjoint;
-    ctrl.backward(packed_ws, adjoint, packed_grad, &packed_input_adjoint, packed);
-    result.packed_param_vjp_error = relative_error<Scalar>(packed_grad, fd_params);
-    result.packed_input_vjp_error =
-        relative_error<Scalar>(Matrix<Scalar>(packed_input_adjoint.reshaped()), fd_inputs);
-  }
-  return result;
 }
 
 }  // namespace sbptt

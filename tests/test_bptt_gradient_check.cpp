@@ -3,6 +3,9 @@
 // gradient is wrong, or a simulator whose VJP is wrong, fails. The engine also rejects a
 // fixed-size State whose size disagrees with state_dim(). Quantum control runs the batched
 // simulator path (step_batch / vjp_batch) of the engine.
+#include <cmath>
+#include <limits>
+
 #include <catch2/catch.hpp>
 
 #include "sbptt/bptt/gradient_check.hpp"
@@ -158,4 +161,14 @@ TEST_CASE("The engine rejects a fixed-size State whose size disagrees with state
   const Objective<Loss> objective{Loss{Eigen::Vector4d::Zero()}};
   CHECK_THROWS_WITH(E(sim, network, objective, 5),
                     Catch::Contains("State holds 4 numbers but its state_dim() = 3"));
+}
+
+TEST_CASE("check_gradient's worst() is NaN when either error is NaN", "[bptt][gradient_check]") {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  sbptt::GradientCheck<double> check;
+  check.state_loss_error = nan;  // second: std::max(0, NaN) would drop it
+  CHECK(std::isnan(check.worst()));
+  check.state_loss_error = 0;
+  check.regular_error = nan;
+  CHECK(std::isnan(check.worst()));
 }

@@ -1,6 +1,9 @@
 // The simulator checker must catch what it exists to catch: a correct derivative passes at
 // round-off, and each kind of planted error (one Jacobian entry, the VJP) is reported in its
 // own field at about its relative size.
+#include <cmath>
+#include <limits>
+
 #include <catch2/catch.hpp>
 
 #include "sbptt/core/finite_difference.hpp"
@@ -91,3 +94,13 @@ TEST_CASE("check_jacobians checks the VJP of a simulator that forms no Jacobians
   CHECK(wrong.vjp_error == Approx(1e-4 / 1.3).epsilon(1e-3));  // / max |A| = |x₁|
 }
 
+
+TEST_CASE("check_jacobians' worst() is NaN when any derivative is NaN", "[core][finite_difference]") {
+  const Linear::State x(0.3, -0.7, 0.1);
+  const Linear::Control u = Linear::Control::Constant(0.4);
+  const auto check = check_jacobians(
+      PlantedError(PlantedError::Where::Vjp, std::numeric_limits<double>::quiet_NaN()), x, u);
+  CHECK(check.state_jacobian_error < 1e-9);
+  CHECK(std::isnan(check.vjp_error));
+  CHECK(std::isnan(check.worst()));
+}

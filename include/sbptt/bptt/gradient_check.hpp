@@ -44,7 +44,10 @@ struct GradientCheck {
   Scalar regular_error = 0;      ///< engine's R gradient against differences of L
   Scalar state_loss_error = 0;   ///< objective's ∂ℓ/∂x against differences of ℓ
   Index parameters_checked = 0;  ///< number of parameters compared
-  [[nodiscard]] Scalar worst() const { return std::max(regular_error, state_loss_error); }
+  /// The larger error, or NaN if either is NaN.
+  [[nodiscard]] Scalar worst() const {
+    return detail::worst_error({regular_error, state_loss_error});
+  }
 };
 
 /// Checks the engine's R gradient and the objective's state gradient at the current parameters

@@ -15,7 +15,6 @@
 /// train on a wrong gradient that every check of the plain path passes, so each is checked
 /// here against the same differences.
 #include <algorithm>
-#include <cmath>
 #include <cstdint>
 
 #include "sbptt/core/concepts.hpp"
@@ -48,17 +47,12 @@ struct ControllerCheck {
   /// The packed backward over a workspace filled in two ranges, every cut, against FD (both
   /// products): a range written at the wrong columns passes the forward check and fails here.
   Scalar column_split_backward_error = 0;
-  /// The largest error, or NaN if any is NaN (a product that produced NaN must not pass).
+  /// The largest error, or NaN if any is NaN.
   [[nodiscard]] Scalar worst() const {
-    Scalar largest = 0;
-    for (const Scalar error :
-         {param_vjp_error, input_vjp_error, packed_forward_error, packed_param_vjp_error,
-          packed_input_vjp_error, split_param_vjp_error, split_input_vjp_error,
-          scaled_param_vjp_error, column_split_forward_error, column_split_backward_error}) {
-      if (std::isnan(error)) return error;
-      largest = std::max(largest, error);
-    }
-    return largest;
+    return detail::worst_error(
+        {param_vjp_error, input_vjp_error, packed_forward_error, packed_param_vjp_error,
+         packed_input_vjp_error, split_param_vjp_error, split_input_vjp_error,
+         scaled_param_vjp_error, column_split_forward_error, column_split_backward_error});
   }
 };
 

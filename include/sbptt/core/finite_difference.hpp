@@ -8,6 +8,7 @@
 /// √ε so that an all-zero derivative is compared absolutely).
 #include <algorithm>
 #include <cmath>
+#include <initializer_list>
 #include <limits>
 
 #include "sbptt/core/concepts.hpp"
@@ -51,6 +52,18 @@ template <class Scalar>
 
 namespace detail {
 
+/// The largest of `errors`, or NaN if any is NaN: a check whose product gave NaN must not pass
+/// (std::max keeps its first argument when the second is NaN).
+template <class Scalar>
+[[nodiscard]] Scalar worst_error(std::initializer_list<Scalar> errors) {
+  Scalar largest = 0;
+  for (const Scalar error : errors) {
+    if (std::isnan(error)) return error;
+    largest = std::max(largest, error);
+  }
+  return largest;
+}
+
 /// Aᵀ (state_dim × state_dim) and Bᵀ (control_dim × state_dim) from `sim.vjp`, one unit adjoint
 /// per column.
 template <Simulator Sim>
@@ -87,7 +100,7 @@ struct JacobianCheck {
   Scalar vjp_error = 0;  ///< vjp against the finite-difference Aᵀ and Bᵀ, column by column
   bool has_jacobians = false;  ///< the simulator forms A and B (`SimulatorWithJacobians`)
   [[nodiscard]] Scalar worst() const {
-    return std::max({state_jacobian_error, control_jacobian_error, vjp_error});
+    return detail::worst_error({state_jacobian_error, control_jacobian_error, vjp_error});
   }
 };
 

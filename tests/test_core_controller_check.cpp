@@ -234,4 +234,10 @@ TEST_CASE("check_controller's worst() is NaN when any product is NaN", "[core][c
   CHECK(std::isnan(check.packed_input_vjp_error));
   CHECK(check.param_vjp_error < 1e-9);
   CHECK(std::isnan(check.worst()));
+  // The worst over the cuts of a batch keeps a NaN too.
+  PlantedNetwork net(small_network(), PlantedNetwork::Where::ColumnOutputs,
+                     std::numeric_limits<double>::quiet_NaN());
+  const auto parts = check_controller(net, small_batch());
+  CHECK(std::isnan(parts.column_split_forward_error));
+  CHECK(std::isnan(parts.worst()));
 }

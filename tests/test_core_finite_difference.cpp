@@ -104,3 +104,18 @@ TEST_CASE("check_jacobians' worst() is NaN when any derivative is NaN", "[core][
   CHECK(std::isnan(check.vjp_error));
   CHECK(std::isnan(check.worst()));
 }
+
+TEST_CASE("relative_error is NaN when either side holds a NaN anywhere", "[core][finite_difference]") {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  Matrix<double> reference(1, 20), analytic(1, 20);
+  reference.setConstant(1.0);
+  analytic.setConstant(1.0);
+  for (const Index at : {Index{0}, Index{7}, Index{19}}) {
+    INFO("NaN at " << at);
+    Matrix<double> bad = analytic;
+    bad(at) = nan;
+    CHECK(std::isnan(relative_error<double>(bad, reference)));
+    CHECK(std::isnan(relative_error<double>(analytic, bad)));
+  }
+  CHECK(relative_error<double>(analytic, reference) == 0);
+}

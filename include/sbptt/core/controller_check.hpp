@@ -14,8 +14,8 @@
 /// (`ColumnSplitController`). A user's optional path that disagrees with the plain one would
 /// train on a wrong gradient that every check of the plain path passes, so each is checked
 /// here against the same differences.
-#include <algorithm>
 #include <cstdint>
+#include <utility>
 
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/finite_difference.hpp"
@@ -40,7 +40,8 @@ struct ControllerCheck {
   Scalar split_input_vjp_error = 0;   ///< backward_inputs' input product against FD
   bool has_seed_scaling = false;      ///< `SeedScalingController`: the field below
   Scalar scaled_param_vjp_error = 0;  ///< the scaled parameter product (seed dY·diag(σ)) vs FD
-  bool has_column_split = false;      ///< `ColumnSplitController`: the two fields below
+  /// `ColumnSplitController`: the two fields below (no cut to check in a batch of one)
+  bool has_column_split = false;
   /// Outputs of the batch rolled forward in two ranges of columns, every cut, against the
   /// packed forward of the whole batch (0 when a sample does not depend on its neighbours).
   Scalar column_split_forward_error = 0;
@@ -155,14 +156,13 @@ template <Controller Ctrl>
                                packed);
           in_parts.middleCols(first, count) = part_outputs;
         }
-        result.column_split_forward_error =
-            std::max(result.column_split_forward_error,
-                     relative_error<Scalar>(in_parts, packed_outputs));
+        result.column_split_forward_error = detail::worst_error(
+            {result.column_split_forward_error, relative_error<Scalar>(in_parts, packed_outputs)});
         Vector<Scalar> parts_grad = Vector<Scalar>::Zero(ctrl.num_params());
         ctrl.backward(parts_ws, adjoint, parts_grad, &dx, packed);
         result.column_split_backward_error =
-            std::max({result.column_split_backward_error,
-                      relative_error<Scalar>(parts_grad, fd_params), input_error(dx)});
+            detail::worst_error({result.column_split_backward_error,
+                                 relative_error<Scalar>(parts_grad, fd_params), input_error(dx)});
       }
     }
   }

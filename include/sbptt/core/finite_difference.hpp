@@ -41,13 +41,15 @@ template <class Scalar, class Function>
   return jac;
 }
 
-/// max |analytic − reference| / max(max |reference|, √ε).
+/// max |analytic − reference| / max(max |reference|, √ε); NaN if either holds a NaN (Eigen's
+/// default maxCoeff may skip one).
 template <class Scalar>
 [[nodiscard]] Scalar relative_error(const Matrix<Scalar>& analytic, const Matrix<Scalar>& reference) {
   if (analytic.size() == 0) return Scalar(0);
   const Scalar floor = std::sqrt(std::numeric_limits<Scalar>::epsilon());
-  const Scalar scale = std::max(reference.cwiseAbs().maxCoeff(), floor);
-  return (analytic - reference).cwiseAbs().maxCoeff() / scale;
+  const Scalar largest = reference.cwiseAbs().template maxCoeff<Eigen::PropagateNaN>();
+  const Scalar scale = std::isnan(largest) ? largest : std::max(largest, floor);
+  return (analytic - reference).cwiseAbs().template maxCoeff<Eigen::PropagateNaN>() / scale;
 }
 
 namespace detail {

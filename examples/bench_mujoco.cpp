@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include <sbptt/core/finite_difference.hpp>
 #include <sbptt/core/instruction_set.hpp>
 #include <sbptt/core/rng.hpp>
 #include <sbptt/sim/cartpole.hpp>
@@ -121,7 +122,8 @@ void cartpole_rows(Index poles, const std::string& source, int repeats) {
       u(0) = 0.5;
       cart.jacobians(cart_states[s], u, a, b);
       probe.jacobians(mj_states[s], Vector<double>(u), a_fd, b_fd);
-      worst = std::max(worst, (pi * a * pi.transpose() - a_fd).cwiseAbs().maxCoeff());
+      worst = sbptt::worst_error(
+          {worst, (pi * a * pi.transpose() - a_fd).cwiseAbs().maxCoeff<Eigen::PropagateNaN>()});
     }
     std::printf("  eps %.0e: %.1e", eps, worst);
   }

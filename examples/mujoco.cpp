@@ -114,9 +114,9 @@ int check_derivatives(const MujocoSimulator<Scalar>& sim, const TaskOptions& o, 
     Vector<Scalar> u(sim.control_dim());
     for (Index k = 0; k < u.size(); ++k) u(k) = static_cast<Scalar>(rng.uniform(-1.0, 1.0));
     const auto check = check_jacobians(sim, Vector<Scalar>(states.col(j)), u);
-    worst_a = std::max(worst_a, check.state_jacobian_error);
-    worst_b = std::max(worst_b, check.control_jacobian_error);
-    worst_vjp = std::max(worst_vjp, check.vjp_error);
+    worst_a = worst_error({worst_a, check.state_jacobian_error});
+    worst_b = worst_error({worst_b, check.control_jacobian_error});
+    worst_vjp = worst_error({worst_vjp, check.vjp_error});
   }
   std::printf("mujoco: %s: worst relative error at 5 states: A %.3g, B %.3g, VJP %.3g\n",
               o.model.c_str(), static_cast<double>(worst_a), static_cast<double>(worst_b),

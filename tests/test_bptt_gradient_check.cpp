@@ -163,6 +163,18 @@ TEST_CASE("The engine rejects a fixed-size State whose size disagrees with state
                     Catch::Contains("State holds 4 numbers but its state_dim() = 3"));
 }
 
+TEST_CASE("check_gradient reports a NaN loss gradient as NaN", "[bptt][gradient_check]") {
+  const CartPole<double, 1> sim;
+  auto network = small_network<double>(4, 1, 1);
+  Rng rng(2);
+  const auto x0 = cartpole_initial_states(sim, rng, 3);
+  Objective<WrongUprightLoss> objective;
+  objective.state_loss.error = std::numeric_limits<double>::quiet_NaN();
+  const auto check = check_gradient(sim, network, objective, 20, x0);
+  CHECK(std::isnan(check.state_loss_error));
+  CHECK(std::isnan(check.worst()));
+}
+
 TEST_CASE("check_gradient's worst() is NaN when either error is NaN", "[bptt][gradient_check]") {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   sbptt::GradientCheck<double> check;

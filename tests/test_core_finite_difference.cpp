@@ -25,7 +25,7 @@ Linear linear_system() {
 
 /// The linear system with one planted error in A, B or the VJP.
 struct PlantedError : Linear {
-  enum class Where { Nowhere, StateJacobian, ControlJacobian, Vjp } where;
+  enum class Where { Nowhere, StateJacobian, ControlJacobian, Vjp, ControlVjp } where;
   double size;
   PlantedError(Where w, double s) : Linear(linear_system()), where(w), size(s) {}
   void jacobians(const State& x, const Control& u, StateJacobian& a, ControlJacobian& b) const {
@@ -37,6 +37,7 @@ struct PlantedError : Linear {
            Control* lambda_u) const {
     Linear::vjp(x, u, lambda, lambda_x, lambda_u);
     if (where == Where::Vjp && lambda_x) (*lambda_x)(0) += size * lambda(1);
+    if (where == Where::ControlVjp && lambda_u) (*lambda_u)(0) += size * lambda(0);
   }
 };
 
@@ -103,6 +104,11 @@ TEST_CASE("check_jacobians' worst() is NaN when any derivative is NaN", "[core][
   CHECK(check.state_jacobian_error < 1e-9);
   CHECK(std::isnan(check.vjp_error));
   CHECK(std::isnan(check.worst()));
+  // NaN in the VJP's control product only: the second of the two errors vjp_error joins.
+  const PlantedError control(PlantedError::Where::ControlVjp,
+                             std::numeric_limits<double>::quiet_NaN());
+  CHECK(std::isnan(check_jacobians(control, x, u).vjp_error));
+  CHECK(std::isnan(vjp_jacobian_mismatch(control, x, u)));
 }
 
 TEST_CASE("relative_error is NaN when either side holds a NaN anywhere", "[core][finite_difference]") {

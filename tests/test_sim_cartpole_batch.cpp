@@ -5,6 +5,7 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include "sbptt/core/rng.hpp"
@@ -88,6 +89,23 @@ TEST_CASE("cartpole batch: step_batch and vjp_batch equal step and vjp per colum
     check_against_per_sample(CartPole<float, 2>(physical()), size, rng);
   }
   check_against_per_sample(CartPole<float, 1>(), 5, rng);
+}
+
+TEST_CASE("cartpole batch: the per-column comparison reports a NaN column as NaN",
+          "[sim][cartpole]") {
+  // A batched step that writes NaN into one column past the first: the running worst over the
+  // columns must keep it (std::max(worst, NaN) keeps worst).
+  struct NanColumn : CartPole<float, 2> {
+    void step_batch(const Matrix<float>& x, const Matrix<float>& u, Matrix<float>& next) const {
+      CartPole<float, 2>::step_batch(x, u, next);
+      next(0, 3) = std::numeric_limits<float>::quiet_NaN();
+    }
+  };
+  sbptt::Rng rng(5);
+  const Batch b = random_batch(NanColumn().state_dim(), 8, rng);
+  const auto errors = sbptt::testing::per_sample_errors(NanColumn(), b.x, b.u, b.lambda);
+  CHECK(std::isnan(errors.step));
+  CHECK(errors.state < 2e-6);
 }
 
 TEST_CASE("cartpole batch: vjp_batch equals the analytic Jacobians' products in double",

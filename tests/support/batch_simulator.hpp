@@ -2,8 +2,7 @@
 // Checks shared by the tests of every BatchSimulator.
 #include <catch2/catch.hpp>
 
-#include <algorithm>
-
+#include "sbptt/core/finite_difference.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt::testing {
@@ -42,12 +41,16 @@ void check_columns_independent(const Sim& sim, const Matrix<Scalar>& x, const Ma
   CHECK(in_place == next);
 }
 
-/// step_batch and vjp_batch against step and vjp column by column: the largest errors of
-/// x_next, Aᵀλ and Bᵀλ relative to 1 + the norm of the per-sample result, each below
-/// `tolerance`.
+/// The largest errors of step_batch's x_next and vjp_batch's Aᵀλ and Bᵀλ against step and vjp
+/// column by column, each relative to 1 + the norm of the per-sample result; NaN if any column
+/// holds a NaN (worst_error: std::max would drop one).
+struct PerSampleErrors {
+  double step = 0, state = 0, control = 0;
+};
+
 template <class Sim, class Scalar>
-void check_matches_per_sample(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& u,
-                              const Matrix<Scalar>& lambda, double tolerance) {
+PerSampleErrors per_sample_errors(const Sim& sim, const Matrix<Scalar>& x,
+                                  const Matrix<Scalar>& u, const Matrix<Scalar>& lambda) {
   Matrix<Scalar> next, lambda_x, lambda_u;
   sim.step_batch(x, u, next);
   sim.vjp_batch(x, u, lambda, &lambda_x, &lambda_u);
@@ -55,7 +58,7 @@ void check_matches_per_sample(const Sim& sim, const Matrix<Scalar>& x, const Mat
   REQUIRE(next.cols() == x.cols());
   REQUIRE(lambda_u.rows() == sim.control_dim());
   REQUIRE(lambda_u.cols() == x.cols());
-  double step_error = 0, state_error = 0, control_error = 0;
+  PerSampleErrors errors;
   auto relative = [](const auto& got, const auto& expected) {
     return static_cast<double>((got - expected).norm() / (1 + expected.norm()));
   };
@@ -64,14 +67,22 @@ void check_matches_per_sample(const Sim& sim, const Matrix<Scalar>& x, const Mat
     typename Sim::Control uc = u.col(c), expected_u;
     sim.step(xc, uc, expected);
     sim.vjp(xc, uc, lambda_c, &expected_x, &expected_u);
-    step_error = std::max(step_error, relative(next.col(c), expected));
-    state_error = std::max(state_error, relative(lambda_x.col(c), expected_x));
-    control_error = std::max(control_error, relative(lambda_u.col(c), expected_u));
+    errors.step = worst_error({errors.step, relative(next.col(c), expected)});
+    errors.state = worst_error({errors.state, relative(lambda_x.col(c), expected_x)});
+    errors.control = worst_error({errors.control, relative(lambda_u.col(c), expected_u)});
   }
+  return errors;
+}
+
+/// Each of `per_sample_errors` below `tolerance`.
+template <class Sim, class Scalar>
+void check_matches_per_sample(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& u,
+                              const Matrix<Scalar>& lambda, double tolerance) {
+  const PerSampleErrors errors = per_sample_errors(sim, x, u, lambda);
   INFO("batch " << x.cols());
-  CHECK(step_error < tolerance);
-  CHECK(state_error < tolerance);
-  CHECK(control_error < tolerance);
+  CHECK(errors.step < tolerance);
+  CHECK(errors.state < tolerance);
+  CHECK(errors.control < tolerance);
 }
 
 }  // namespace sbptt::testing

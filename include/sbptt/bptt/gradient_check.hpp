@@ -46,7 +46,7 @@ struct GradientCheck {
   Index parameters_checked = 0;  ///< number of parameters compared
   /// The larger error, or NaN if either is NaN.
   [[nodiscard]] Scalar worst() const {
-    return detail::worst_error({regular_error, state_loss_error});
+    return worst_error({regular_error, state_loss_error});
   }
 };
 
@@ -120,7 +120,8 @@ template <class Sim, class Ctrl, class Loss>
       objective.state_loss(x, &grad);
       const Matrix<Scalar> fd = finite_difference_jacobian<Scalar>(loss_at, point, 1, step);
       const Matrix<Scalar> own = Vector<Scalar>(grad).transpose();
-      result.state_loss_error = std::max(result.state_loss_error, relative_error<Scalar>(own, fd));
+      result.state_loss_error =
+          worst_error({result.state_loss_error, relative_error<Scalar>(own, fd)});
     }
   }
   return result;

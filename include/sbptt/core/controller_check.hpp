@@ -50,7 +50,7 @@ struct ControllerCheck {
   Scalar column_split_backward_error = 0;
   /// The largest error, or NaN if any is NaN.
   [[nodiscard]] Scalar worst() const {
-    return detail::worst_error(
+    return worst_error(
         {param_vjp_error, input_vjp_error, packed_forward_error, packed_param_vjp_error,
          packed_input_vjp_error, split_param_vjp_error, split_input_vjp_error,
          scaled_param_vjp_error, column_split_forward_error, column_split_backward_error});
@@ -156,12 +156,12 @@ template <Controller Ctrl>
                                packed);
           in_parts.middleCols(first, count) = part_outputs;
         }
-        result.column_split_forward_error = detail::worst_error(
+        result.column_split_forward_error = worst_error(
             {result.column_split_forward_error, relative_error<Scalar>(in_parts, packed_outputs)});
         Vector<Scalar> parts_grad = Vector<Scalar>::Zero(ctrl.num_params());
         ctrl.backward(parts_ws, adjoint, parts_grad, &dx, packed);
         result.column_split_backward_error =
-            detail::worst_error({result.column_split_backward_error,
+            worst_error({result.column_split_backward_error,
                                  relative_error<Scalar>(parts_grad, fd_params), input_error(dx)});
       }
     }

@@ -52,10 +52,9 @@ template <class Scalar>
   return (analytic - reference).cwiseAbs().template maxCoeff<Eigen::PropagateNaN>() / scale;
 }
 
-namespace detail {
-
-/// The largest of `errors`, or NaN if any is NaN: a check whose product gave NaN must not pass
-/// (std::max keeps its first argument when the second is NaN).
+/// The largest of `errors` (≥ 0), or NaN if any is NaN: a check whose product gave NaN must not
+/// pass, and `std::max` keeps its first argument when the second is NaN. For a running worst:
+/// `worst = worst_error({worst, error})`.
 template <class Scalar>
 [[nodiscard]] Scalar worst_error(std::initializer_list<Scalar> errors) {
   Scalar largest = 0;
@@ -65,6 +64,8 @@ template <class Scalar>
   }
   return largest;
 }
+
+namespace detail {
 
 /// Aᵀ (state_dim × state_dim) and Bᵀ (control_dim × state_dim) from `sim.vjp`, one unit adjoint
 /// per column.
@@ -102,7 +103,7 @@ struct JacobianCheck {
   Scalar vjp_error = 0;  ///< vjp against the finite-difference Aᵀ and Bᵀ, column by column
   bool has_jacobians = false;  ///< the simulator forms A and B (`SimulatorWithJacobians`)
   [[nodiscard]] Scalar worst() const {
-    return detail::worst_error({state_jacobian_error, control_jacobian_error, vjp_error});
+    return worst_error({state_jacobian_error, control_jacobian_error, vjp_error});
   }
 };
 
@@ -145,8 +146,8 @@ template <Simulator Sim>
 
   Matrix<Scalar> at, bt;
   detail::vjp_transposes(sim, x, u, at, bt);
-  result.vjp_error = std::max(relative_error<Scalar>(at, fd_a.transpose()),
-                              relative_error<Scalar>(bt, fd_b.transpose()));
+  result.vjp_error = worst_error({relative_error<Scalar>(at, fd_a.transpose()),
+                                          relative_error<Scalar>(bt, fd_b.transpose())});
   return result;
 }
 
@@ -163,8 +164,8 @@ template <SimulatorWithJacobians Sim>
   sim.jacobians(x, u, a, b);
   Matrix<Scalar> at, bt;
   detail::vjp_transposes(sim, x, u, at, bt);
-  return std::max(relative_error<Scalar>(at, Matrix<Scalar>(a).transpose()),
-                  relative_error<Scalar>(bt, Matrix<Scalar>(b).transpose()));
+  return worst_error({relative_error<Scalar>(at, Matrix<Scalar>(a).transpose()),
+                              relative_error<Scalar>(bt, Matrix<Scalar>(b).transpose())});
 }
 
 }  // namespace sbptt

@@ -61,11 +61,21 @@ struct WrongPacked : PolynomialPolicy<double> {
 static_assert(PackingController<WrongPacked>);
 
 /// A `Network` with every optional path of the engine, one of them wrong: its result scaled
-/// by (1 + size), or (Where::ColumnPlace) a range of columns also written into the workspace
-/// at column 0, which leaves the outputs right and the recorded activations wrong.
+/// by (1 + size); or (ColumnPlace) a range of columns also written into the workspace at
+/// column 0, or (ColumnUnwritten) not written into it at all, which leaves the outputs right
+/// and the recorded activations wrong; or (SplitInputUnwritten) dX never written.
 class PlantedNetwork {
 public:
-  enum class Where { Nowhere, SplitParams, SplitInput, ScaledParams, ColumnOutputs, ColumnPlace };
+  enum class Where {
+    Nowhere,
+    SplitParams,
+    SplitInput,
+    SplitInputUnwritten,
+    ScaledParams,
+    ColumnOutputs,
+    ColumnPlace,
+    ColumnUnwritten
+  };
   using Scalar = double;
   using Workspace = Network<double>::Workspace;
   using PackedWeights = Network<double>::PackedWeights;
@@ -99,6 +109,11 @@ public:
   void size_forward(Index batch, Workspace& ws) const { net_.size_forward(batch, ws); }
   void forward_columns(const Matrix<double>& x, Index first, Matrix<double>& y, Workspace& ws,
                        const PackedWeights& packed) const {
+    if (where_ == Where::ColumnUnwritten && first > 0) {
+      Workspace own;  // the outputs, without the workspace's columns
+      net_.forward(x, y, own, packed);
+      return;
+    }
     net_.forward_columns(x, first, y, ws, packed);
     if (first == 0) return;
     if (where_ == Where::ColumnOutputs) y *= 1 + size_;
@@ -106,7 +121,8 @@ public:
   }
   void backward_inputs(const Workspace& ws, const Matrix<double>& dy, Matrix<double>* dx,
                        const PackedWeights& packed, LayerAdjoints& adjoints) const {
-    net_.backward_inputs(ws, dy, dx, packed, adjoints);
+    const bool write_dx = where_ != Where::SplitInputUnwritten;
+    net_.backward_inputs(ws, dy, write_dx ? dx : nullptr, packed, adjoints);
     if (where_ == Where::SplitInput && dx != nullptr) *dx *= 1 + size_;
   }
   void add_param_gradient(const Workspace& ws, const LayerAdjoints& adjoints,
@@ -195,21 +211,23 @@ TEST_CASE("check_controller checks the engine's optional paths of a network, eac
   using Where = PlantedNetwork::Where;
   const double size = 1e-4;
   for (Where where : {Where::Nowhere, Where::SplitParams, Where::SplitInput,
-                      Where::ScaledParams, Where::ColumnOutputs, Where::ColumnPlace}) {
+                      Where::SplitInputUnwritten, Where::ScaledParams, Where::ColumnOutputs,
+                      Where::ColumnPlace, Where::ColumnUnwritten}) {
     INFO("planted in " << static_cast<int>(where));
     PlantedNetwork net(small_network(), where, size);
     const auto check = check_controller(net, small_batch());
     CHECK((check.has_packed && check.has_split_backward && check.has_seed_scaling &&
            check.has_column_split));
     // The plain and packed paths are the network's own in every case.
-    CHECK(std::max({check.param_vjp_error, check.input_vjp_error, check.packed_forward_error,
-                    check.packed_param_vjp_error, check.packed_input_vjp_error}) < 1e-8);
+    CHECK(worst_error({check.param_vjp_error, check.input_vjp_error, check.packed_forward_error,
+                       check.packed_param_vjp_error, check.packed_input_vjp_error}) < 1e-8);
     auto expect = [&](Where at, double error) {
       if (where == at) CHECK(error == Approx(size).epsilon(1e-2));
       else CHECK(error < 1e-8);
     };
     expect(Where::SplitParams, check.split_param_vjp_error);
-    expect(Where::SplitInput, check.split_input_vjp_error);
+    if (where == Where::SplitInputUnwritten) CHECK(std::isinf(check.split_input_vjp_error));
+    else expect(Where::SplitInput, check.split_input_vjp_error);
     expect(Where::ScaledParams, check.scaled_param_vjp_error);
     if (where == Where::ColumnOutputs) {
       // size · |y_b| / max |y| over the columns past the cut: at most size
@@ -218,7 +236,8 @@ TEST_CASE("check_controller checks the engine's optional paths of a network, eac
     } else {
       CHECK(check.column_split_forward_error == 0);  // a network's parts: bit for bit
     }
-    if (where == Where::ColumnPlace) CHECK(check.column_split_backward_error > 1e-2);
+    if (where == Where::ColumnPlace || where == Where::ColumnUnwritten)
+      CHECK(check.column_split_backward_error > 1e-2);
     else CHECK(check.column_split_backward_error < 1e-8);
     if (where == Where::Nowhere) CHECK(check.worst() < 1e-8);
     else CHECK(check.worst() > 0.5 * size);

@@ -95,7 +95,6 @@ TEST_CASE("check_jacobians checks the VJP of a simulator that forms no Jacobians
   CHECK(wrong.vjp_error == Approx(1e-4 / 1.3).epsilon(1e-3));  // / max |A| = |x₁|
 }
 
-
 TEST_CASE("check_jacobians' worst() is NaN when any derivative is NaN", "[core][finite_difference]") {
   const Linear::State x(0.3, -0.7, 0.1);
   const Linear::Control u = Linear::Control::Constant(0.4);
@@ -124,4 +123,7 @@ TEST_CASE("relative_error is NaN when either side holds a NaN anywhere", "[core]
     CHECK(std::isnan(relative_error<double>(analytic, bad)));
   }
   CHECK(relative_error<double>(analytic, reference) == 0);
+  // A product never written (empty) or of another shape is infinitely wrong, not right.
+  CHECK(std::isinf(relative_error<double>(Matrix<double>(), reference)));
+  CHECK(std::isinf(relative_error<double>(analytic.transpose(), reference)));
 }

@@ -102,6 +102,7 @@ TEST_CASE("dense backward equals central finite differences", "[nn][dense]") {
       const auto x = random_batch<double>(net.input_dim(), batch, ++seed);
       const auto check = sbptt::check_controller(net, x, seed);
       CHECK(check.worst() <= 1e-6);  // every path the engine may take
+      CHECK(check.has_column_split == (batch > 1));  // a batch of 1 has no cut
       CHECK(check.column_split_forward_error == 0);
     }
   }
@@ -113,6 +114,7 @@ TEST_CASE("the paper's MLP backward equals central finite differences", "[nn][de
   sbptt::glorot_uniform(net, rng);  // last kernel random, so the input VJP is not trivially 0
   const auto check = sbptt::check_controller(net, random_batch<double>(10, 5, 8), 9);
   CHECK(check.worst() <= 1e-6);  // every path the engine may take
+  CHECK(check.has_column_split);
   CHECK(check.column_split_forward_error == 0);
 }
 

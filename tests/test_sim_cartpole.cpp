@@ -309,9 +309,13 @@ TEST_CASE("CartPole: float rollout stays within 1e-4 of double", "[sim][cartpole
 // sample. A few units in the last place of the largest entry allow that and nothing else.
 template <class A, class B>
 bool equal_to_rounding(const A& dynamic, const B& fixed) {
-  const double scale = std::max(1.0, Eigen::MatrixXd(fixed).cwiseAbs().maxCoeff());
+  // PropagateNaN: a NaN on either side fails (Eigen's default maxCoeff may skip one).
+  const double scale =
+      std::max(1.0, Eigen::MatrixXd(fixed).cwiseAbs().maxCoeff<Eigen::PropagateNaN>());
   return dynamic.rows() == fixed.rows() && dynamic.cols() == fixed.cols() &&
-         (Eigen::MatrixXd(dynamic) - Eigen::MatrixXd(fixed)).cwiseAbs().maxCoeff() <=
+         (Eigen::MatrixXd(dynamic) - Eigen::MatrixXd(fixed))
+                 .cwiseAbs()
+                 .maxCoeff<Eigen::PropagateNaN>() <=
              4 * std::numeric_limits<double>::epsilon() * scale;
 }
 

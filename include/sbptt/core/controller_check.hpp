@@ -15,6 +15,7 @@
 /// train on a wrong gradient that every check of the plain path passes, so each is checked
 /// here against the same differences.
 #include <cstdint>
+#include <initializer_list>
 #include <utility>
 
 #include "sbptt/core/concepts.hpp"
@@ -40,7 +41,7 @@ struct ControllerCheck {
   Scalar split_input_vjp_error = 0;   ///< backward_inputs' input product against FD
   bool has_seed_scaling = false;      ///< `SeedScalingController`: the field below
   Scalar scaled_param_vjp_error = 0;  ///< the scaled parameter product (seed dY·diag(σ)) vs FD
-  /// `ColumnSplitController`: the two fields below (no cut to check in a batch of one)
+  /// `ColumnSplitController` and a batch of at least 2 (a cut to check): the fields below
   bool has_column_split = false;
   /// Outputs of the batch rolled forward in two ranges of columns, every cut, against the
   /// packed forward of the whole batch (0 when a sample does not depend on its neighbours).
@@ -116,22 +117,23 @@ template <Controller Ctrl>
     typename Ctrl::PackedWeights packed;
     ctrl.pack(packed);
     typename Ctrl::Workspace packed_ws;
-    Matrix<Scalar> packed_outputs, dx;
+    Matrix<Scalar> packed_outputs, packed_dx;
     ctrl.forward(inputs, packed_outputs, packed_ws, packed);
     result.packed_forward_error = relative_error<Scalar>(packed_outputs, outputs);
     Vector<Scalar> packed_grad = Vector<Scalar>::Zero(ctrl.num_params());
-    ctrl.backward(packed_ws, adjoint, packed_grad, &dx, packed);
+    ctrl.backward(packed_ws, adjoint, packed_grad, &packed_dx, packed);
     result.packed_param_vjp_error = relative_error<Scalar>(packed_grad, fd_params);
-    result.packed_input_vjp_error = input_error(dx);
+    result.packed_input_vjp_error = input_error(packed_dx);
 
     if constexpr (SplitBackwardController<Ctrl>) {
       result.has_split_backward = true;
       typename Ctrl::LayerAdjoints recorded;
-      ctrl.backward_inputs(packed_ws, adjoint, &dx, packed, recorded);
+      Matrix<Scalar> split_dx;  // its own: a call that never writes it must not pass
+      ctrl.backward_inputs(packed_ws, adjoint, &split_dx, packed, recorded);
       Vector<Scalar> split_grad = Vector<Scalar>::Zero(ctrl.num_params());
       ctrl.add_param_gradient(packed_ws, recorded, split_grad);
       result.split_param_vjp_error = relative_error<Scalar>(split_grad, fd_params);
-      result.split_input_vjp_error = input_error(dx);
+      result.split_input_vjp_error = input_error(split_dx);
 
       if constexpr (SeedScalingController<Ctrl>) {
         result.has_seed_scaling = true;
@@ -146,10 +148,15 @@ template <Controller Ctrl>
     }
 
     if constexpr (ColumnSplitController<Ctrl>) {
-      result.has_column_split = true;
+      result.has_column_split = batch > 1;
+      Matrix<Scalar> part_outputs, in_parts(outputs.rows(), batch), other_outputs;
+      // Other inputs, rolled forward into the workspace before every cut: a column that the
+      // parts leave unwritten then holds another sample's numbers, as it would in the engine
+      // (the last rollout's), not this sample's from an earlier cut.
+      const Matrix<Scalar> other_inputs = (Scalar(-0.5) * inputs.array() + Scalar(0.25)).matrix();
       typename Ctrl::Workspace parts_ws;
-      Matrix<Scalar> part_outputs, in_parts(outputs.rows(), batch);
       for (Index cut = 1; cut < batch; ++cut) {
+        ctrl.forward(other_inputs, other_outputs, parts_ws, packed);
         ctrl.size_forward(batch, parts_ws);
         for (const auto& [first, count] : {std::pair{Index{0}, cut}, {cut, batch - cut}}) {
           ctrl.forward_columns(inputs.middleCols(first, count), first, part_outputs, parts_ws,
@@ -159,10 +166,11 @@ template <Controller Ctrl>
         result.column_split_forward_error = worst_error(
             {result.column_split_forward_error, relative_error<Scalar>(in_parts, packed_outputs)});
         Vector<Scalar> parts_grad = Vector<Scalar>::Zero(ctrl.num_params());
-        ctrl.backward(parts_ws, adjoint, parts_grad, &dx, packed);
+        Matrix<Scalar> parts_dx;
+        ctrl.backward(parts_ws, adjoint, parts_grad, &parts_dx, packed);
         result.column_split_backward_error =
             worst_error({result.column_split_backward_error,
-                                 relative_error<Scalar>(parts_grad, fd_params), input_error(dx)});
+                         relative_error<Scalar>(parts_grad, fd_params), input_error(parts_dx)});
       }
     }
   }

@@ -42,9 +42,11 @@ template <class Scalar, class Function>
 }
 
 /// max |analytic − reference| / max(max |reference|, √ε); NaN if either holds a NaN (Eigen's
-/// default maxCoeff may skip one).
+/// default maxCoeff may skip one), infinity if their shapes differ (a product never written).
 template <class Scalar>
 [[nodiscard]] Scalar relative_error(const Matrix<Scalar>& analytic, const Matrix<Scalar>& reference) {
+  if (analytic.rows() != reference.rows() || analytic.cols() != reference.cols())
+    return std::numeric_limits<Scalar>::infinity();
   if (analytic.size() == 0) return Scalar(0);
   const Scalar floor = std::sqrt(std::numeric_limits<Scalar>::epsilon());
   const Scalar largest = reference.cwiseAbs().template maxCoeff<Eigen::PropagateNaN>();
@@ -147,7 +149,7 @@ template <Simulator Sim>
   Matrix<Scalar> at, bt;
   detail::vjp_transposes(sim, x, u, at, bt);
   result.vjp_error = worst_error({relative_error<Scalar>(at, fd_a.transpose()),
-                                          relative_error<Scalar>(bt, fd_b.transpose())});
+                                  relative_error<Scalar>(bt, fd_b.transpose())});
   return result;
 }
 
@@ -165,7 +167,7 @@ template <SimulatorWithJacobians Sim>
   Matrix<Scalar> at, bt;
   detail::vjp_transposes(sim, x, u, at, bt);
   return worst_error({relative_error<Scalar>(at, Matrix<Scalar>(a).transpose()),
-                              relative_error<Scalar>(bt, Matrix<Scalar>(b).transpose())});
+                      relative_error<Scalar>(bt, Matrix<Scalar>(b).transpose())});
 }
 
 }  // namespace sbptt

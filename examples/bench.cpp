@@ -19,6 +19,9 @@
 //   GFLOP/s      GFLOP / time; %peak: that over the peak of this run (an n×n Eigen matrix
 //                product on one core, same scalar, best of several sizes and repeats)
 //   ms Nt, xNt   the same epoch with --threads N threads, and the speed-up over 1 thread
+//   rt ns        right after those epochs, the round trip of a cache line between two
+//                threads (bench/rows.hpp): the machine's cost of a hand-off, which varies
+//                (docs/benchmarks.md, eleventh run); "-" with one thread
 //   sim ns       one simulator step plus one full VJP (Aᵀλ and Bᵀλ) per sample, on the
 //                states of the last training batch (the per-sample work of the engine;
 //                for a BatchSimulator, the batched calls' time over the batch size)
@@ -40,6 +43,7 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -207,11 +211,11 @@ int main(int argc, char** argv) {
                       [once] { return quantum_row<float, 256>(once, Method::Regular); }});
     }
 
-    std::printf("%-14s %-6s %-1s %4s %5s %6s %9s %7s %7s %6s %9s %5s %8s %8s %7s\n", "task",
-                "scalar", "m", "Nx", "steps", "params", "ms/epoch", "GFLOP", "GFLOP/s", "%peak",
-                ("ms " + std::to_string(settings.threads) + "t").c_str(),
-                ("x" + std::to_string(settings.threads) + "t").c_str(), "sim ns", "trajKiB",
-                "RSS MiB");
+    std::printf("%-14s %-6s %-1s %4s %5s %6s %9s %7s %7s %6s %9s %5s %6s %8s %8s %7s\n",
+                "task", "scalar", "m", "Nx", "steps", "params", "ms/epoch", "GFLOP", "GFLOP/s",
+                "%peak", ("ms " + std::to_string(settings.threads) + "t").c_str(),
+                ("x" + std::to_string(settings.threads) + "t").c_str(), "rt ns", "sim ns",
+                "trajKiB", "RSS MiB");
     std::vector<Row> rows;
     for (const auto& job : jobs) {
       Row row{job.task, job.scalar, std::string(1, job.method), in_child(job.run)};
@@ -224,12 +228,14 @@ int main(int argc, char** argv) {
       }
       const double p = peak[job.scalar == "float" ? 0 : 1];
       const double gflops = r.gflop / (r.ms_epoch / 1e3);
-      std::printf("%-14s %-6s %-1s %4lld %5lld %6lld %9.1f %7.3f %7.2f %5.1f%% %9.1f %5.2f %8.0f "
-                  "%8.0f %7.1f\n",
+      const std::string round_trip =
+          r.round_trip_ns > 0 ? std::to_string(std::lround(r.round_trip_ns)) : "-";
+      std::printf("%-14s %-6s %-1s %4lld %5lld %6lld %9.1f %7.3f %7.2f %5.1f%% %9.1f %5.2f %6s "
+                  "%8.0f %8.0f %7.1f\n",
                   job.task.c_str(), job.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
                   r.params, r.ms_epoch, r.gflop, gflops, 100 * gflops / p, r.ms_threads,
-                  r.ms_epoch / r.ms_threads, r.sim_ns, r.trajectory_bytes / 1024,
-                  r.rss_kib / 1024);
+                  r.ms_epoch / r.ms_threads, round_trip.c_str(), r.sim_ns,
+                  r.trajectory_bytes / 1024, r.rss_kib / 1024);
       std::fflush(stdout);
       rows.push_back(row);
     }

@@ -6,11 +6,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <exception>
 #include <functional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <sbptt/sbptt.hpp>
@@ -40,6 +42,7 @@ struct Settings {
 struct RowResult {
   long long nx = 0, steps = 0, params = 0;  ///< state size (Nx for quantum), horizon, θ size
   double ms_epoch = 0, gflop = 0, ms_threads = 0, sim_ns = 0;
+  double round_trip_ns = 0;  ///< `cross_core_round_trip_ns` after the N-thread epochs (0: none)
   double trajectory_bytes = 0, rss_kib = 0;
   int ok = 0;
   char error[200] = {};
@@ -71,6 +74,41 @@ double measure_peak() {
     }
   }
   return best;
+}
+
+/// Median over batches of the time of one round trip of a cache line between two threads,
+/// each waiting for the other's store: the price of every hand-off between the engine's
+/// threads. On the machine of docs/benchmarks.md (eleventh run) it swings between about 80
+/// and 400 ns from one minute to the next, and the two-thread speed-ups swing with it, so
+/// every row prints the round trip measured right after its threaded epochs. The first batch
+/// is left out: it waits for the new thread to start, which took up to 16 ms there.
+inline double cross_core_round_trip_ns() {
+  constexpr int kBatches = 11;
+  constexpr int kTrips = 2000;  // per batch
+  alignas(64) std::atomic<int> ball{0};
+  // Spins, yielding now and then so that it also ends on a machine with one free core.
+  const auto wait_for = [&](int value) {
+    for (int spins = 0; ball.load(std::memory_order_acquire) != value; ++spins)
+      if (spins % 4096 == 4095) std::this_thread::yield();
+  };
+  std::thread partner([&] {
+    for (int i = 0; i < kBatches * kTrips; ++i) {
+      wait_for(2 * i + 1);
+      ball.store(2 * i + 2, std::memory_order_release);
+    }
+  });
+  std::vector<double> ns;
+  for (int batch = 0; batch < kBatches; ++batch) {
+    const double start = now_ms();
+    for (int i = batch * kTrips; i < (batch + 1) * kTrips; ++i) {
+      ball.store(2 * i + 1, std::memory_order_release);
+      wait_for(2 * i + 2);
+    }
+    if (batch > 0) ns.push_back((now_ms() - start) * 1e6 / kTrips);
+  }
+  partner.join();
+  std::nth_element(ns.begin(), ns.begin() + static_cast<std::ptrdiff_t>(ns.size() / 2), ns.end());
+  return ns[ns.size() / 2];
 }
 
 /// ns per sample of `step` + full `vjp` over the stored trajectory of the engine.
@@ -139,6 +177,7 @@ RowResult measure(const Settings& settings, const Sim& sim,
       r.trajectory_bytes = static_cast<double>(trainer.engine().trajectory().bytes());
     } else {
       r.ms_threads = best;
+      r.round_trip_ns = cross_core_round_trip_ns();
     }
     if (settings.threads == 1) r.ms_threads = r.ms_epoch;
     if (settings.threads == 1) break;

@@ -1,7 +1,8 @@
 // CartPole's batched step and vjp (float samples in SIMD lanes): against the per-sample step and
 // vjp, against the analytic Jacobians in double (themselves checked against finite differences
 // in test_sim_cartpole.cpp), against central differences of the batched step itself, and
-// independence from the other columns, for the reference and the physical model.
+// independence from the other columns, for the reference and the physical model; the lane
+// layouts of the reference model against each other.
 #include <catch2/catch.hpp>
 
 #include <cmath>
@@ -157,6 +158,37 @@ TEST_CASE("cartpole batch: a column's result does not depend on the other column
   sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
   sim.vjp_batch(b.x, b.u, b.lambda, nullptr, &only_u);
   CHECK(only_u == lambda_u);
+}
+
+TEST_CASE("cartpole batch: a lane per pole and sample gives the lane per sample's numbers",
+          "[sim][cartpole]") {
+  // Fewer samples than a block take a lane per pole and sample when that needs fewer blocks
+  // (4 samples of 4 poles: one); a full block of 16 keeps a lane per sample. Every count and
+  // place of a few samples must give, bit for bit, what the same samples give in the full
+  // block, for pole counts that fill a block with 1, 2, 3, 4 or 5 samples and for one (17)
+  // that cannot share a block.
+  for (const Index poles : {1, 2, 3, 4, 5, 8, 17}) {
+    const CartPole<float, Eigen::Dynamic> sim(poles);
+    sbptt::Rng rng(45);
+    const Batch b = random_batch(sim.state_dim(), 16, rng);
+    Matrix<float> next, lambda_x, lambda_u;
+    sim.step_batch(b.x, b.u, next);
+    sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
+    for (const Index count : {1, 2, 3, 4, 5, 7, 8, 9, 12, 15}) {
+      for (const Index first : {Index{0}, 16 - count}) {
+        const Matrix<float> x = b.x.middleCols(first, count);
+        const Matrix<float> u = b.u.middleCols(first, count);
+        const Matrix<float> lambda = b.lambda.middleCols(first, count);
+        Matrix<float> part_next, part_x, part_u;
+        sim.step_batch(x, u, part_next);
+        sim.vjp_batch(x, u, lambda, &part_x, &part_u);
+        INFO(poles << " poles, samples " << first << " … " << first + count - 1);
+        CHECK(part_next == next.middleCols(first, count));
+        CHECK(part_x == lambda_x.middleCols(first, count));
+        CHECK(part_u == lambda_u.middleCols(first, count));
+      }
+    }
+  }
 }
 
 TEST_CASE("cartpole batch: bad shapes are rejected with a message", "[sim][cartpole]") {

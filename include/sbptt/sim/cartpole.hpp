@@ -226,8 +226,10 @@ public:
   /// state_dim × B; it may be x itself). Float only: the samples run side by side in SIMD lanes
   /// (lane_rows.hpp) through the same pole equations as `step`, with Eigen's vectorised sine
   /// and cosine, which round differently from std::sin and std::cos, so the two agree to
-  /// rounding, not bit for bit. A column's result does not depend on the other columns. The
-  /// physical model runs `step`'s equations column by column. (In double Eigen has no
+  /// rounding, not bit for bit. A column's result does not depend on the other columns. A
+  /// block of fewer samples than lanes takes a lane per pole and sample where that needs fewer
+  /// blocks than one per pole (`pole_lanes_pay`), with the same numbers. The physical model
+  /// runs `step`'s equations column by column. (In double Eigen has no
   /// vectorised sine: lanes measured slower than `step` per sample, 797 against 467 ns for 8
   /// samples of 4 poles, so double keeps the per-sample path.)
   void step_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, Matrix<Scalar>& x_next) const
@@ -242,6 +244,11 @@ public:
       if (options_.model == CartPoleModel::Physical) {
         for (Index b = first; b < first + count; ++b)
           physical_step(x.col(b), u(0, b), x_next.col(b));
+        continue;
+      }
+      if (pole_lanes_pay(count)) {
+        for (int done = 0; done < count; done += pole_lane_samples())
+          step_pole_lanes(x, u, x_next, first + done, std::min(pole_lane_samples(), count - done));
         continue;
       }
       auto load = [&](const Matrix<Scalar>& m, Index row) {
@@ -292,6 +299,12 @@ public:
                          control_out);
           }
         }
+        continue;
+      }
+      if (pole_lanes_pay(count)) {
+        for (int done = 0; done < count; done += pole_lane_samples())
+          vjp_pole_lanes(x, u, lambda, lambda_x, lambda_u, first + done,
+                         std::min(pole_lane_samples(), count - done));
         continue;
       }
       auto load = [&](const Matrix<Scalar>& m, Index row) {
@@ -505,6 +518,109 @@ private:
                           cart_adj * ml_over_m_ * t.q_omega;
     }
     return pole_adj * t.accel_force + cart_adj * ml_over_m_ * t.q_force;
+  }
+
+  /// Samples per block with one lane per pole and sample (lane b·P + i), 0 if P > a block.
+  [[nodiscard]] int pole_lane_samples() const {
+    return static_cast<int>(detail::LaneRows<Scalar>::kLanes / poles_);
+  }
+
+  /// Whether `count` samples of the reference model fill fewer blocks with a lane per pole
+  /// and sample than the P blocks (one per pole) of a lane per sample: a part of a batch
+  /// split over threads (4 samples of 4 poles: 1 block instead of 4), the paper's batch of 8
+  /// (2 instead of 4). Every lane computes what it computes in the other layout, and the sums
+  /// over the poles are taken per sample in pole order in both, so the two give the same
+  /// numbers bit for bit (tests/test_sim_cartpole.cpp).
+  [[nodiscard]] bool pole_lanes_pay(int count) const {
+    const int per_block = pole_lane_samples();
+    return per_block > 0 && (count + per_block - 1) / per_block < poles_;
+  }
+
+  /// Row `offset` (0: θ_i, 1: θ̇_i) of every pole of samples first … first + count − 1 of `m`
+  /// into lanes b·P + i; the other lanes are 0, as in `LaneRows::load`.
+  template <class Values>
+  void load_pole_lanes(const Matrix<Scalar>& m, Index offset, Index first, int count,
+                       Values& v) const {
+    v.setZero();
+    for (int b = 0; b < count; ++b)
+      for (Index i = 0; i < poles_; ++i) v(b * poles_ + i) = m(2 + 2 * i + offset, first + b);
+  }
+
+  template <class Values>
+  void store_pole_lanes(const Values& v, Matrix<Scalar>& m, Index offset, Index first,
+                        int count) const {
+    for (int b = 0; b < count; ++b)
+      for (Index i = 0; i < poles_; ++i) m(2 + 2 * i + offset, first + b) = v(b * poles_ + i);
+  }
+
+  /// Each sample's value (`per_sample`, lane b) in all of its pole lanes b·P + i.
+  template <class Values>
+  [[nodiscard]] Values spread_to_poles(const Values& per_sample, int count) const {
+    Values v = Values::Zero();
+    for (int b = 0; b < count; ++b)
+      for (Index i = 0; i < poles_; ++i) v(b * poles_ + i) = per_sample(b);
+    return v;
+  }
+
+  /// `sum` (lane b: sample b) += the pole lanes b·P + i of `terms`, in pole order.
+  template <class Values>
+  void add_pole_lanes(const Values& terms, int count, Values& sum) const {
+    for (int b = 0; b < count; ++b)
+      for (Index i = 0; i < poles_; ++i) sum(b) += terms(b * poles_ + i);
+  }
+
+  /// `step_batch` of the reference model for samples first … first + count − 1, a lane per
+  /// pole and sample.
+  void step_pole_lanes(const Matrix<Scalar>& x, const Matrix<Scalar>& u, Matrix<Scalar>& x_next,
+                       Index first, int count) const {
+    using Lanes = detail::LaneRows<Scalar>;
+    using LaneValues = typename Lanes::Values;
+    LaneValues theta, omega, position, velocity;
+    load_pole_lanes(x, 0, first, count, theta);
+    load_pole_lanes(x, 1, first, count, omega);
+    const LaneValues force = Lanes::load(u, 0, first, count);
+    const LaneValues q = reference_pole_step(theta, omega, spread_to_poles(force, count),
+                                             position, velocity);
+    store_pole_lanes(position, x_next, 0, first, count);
+    store_pole_lanes(velocity, x_next, 1, first, count);
+    LaneValues q_sum = LaneValues::Zero();
+    add_pole_lanes(q, count, q_sum);
+    reference_cart_step(Lanes::load(x, 0, first, count), Lanes::load(x, 1, first, count), force,
+                        q_sum, position, velocity);
+    Lanes::store(position, x_next, 0, first, count);
+    Lanes::store(velocity, x_next, 1, first, count);
+  }
+
+  /// `vjp_batch` of the reference model for samples first … first + count − 1, a lane per
+  /// pole and sample.
+  void vjp_pole_lanes(const Matrix<Scalar>& x, const Matrix<Scalar>& u,
+                      const Matrix<Scalar>& lambda, Matrix<Scalar>* lambda_x,
+                      Matrix<Scalar>* lambda_u, Index first, int count) const {
+    using Lanes = detail::LaneRows<Scalar>;
+    using LaneValues = typename Lanes::Values;
+    const LaneValues force = Lanes::load(u, 0, first, count);
+    const LaneValues lambda_position = Lanes::load(lambda, 0, first, count);
+    const LaneValues lambda_velocity = Lanes::load(lambda, 1, first, count);
+    const Scalar dt2 = dt_ * dt_;
+    const LaneValues cart_adj = dt2 * lambda_position + dt_ * lambda_velocity;
+    LaneValues force_adj = inv_total_mass_ * cart_adj;
+    LaneValues theta, omega, lambda_theta, lambda_omega, theta_out, omega_out;
+    load_pole_lanes(x, 0, first, count, theta);
+    load_pole_lanes(x, 1, first, count, omega);
+    load_pole_lanes(lambda, 0, first, count, lambda_theta);
+    load_pole_lanes(lambda, 1, first, count, lambda_omega);
+    const LaneValues force_terms = reference_pole_vjp(
+        theta, omega, spread_to_poles(force, count), lambda_theta, lambda_omega,
+        spread_to_poles(cart_adj, count), lambda_x ? &theta_out : nullptr,
+        lambda_x ? &omega_out : nullptr);
+    add_pole_lanes(force_terms, count, force_adj);
+    if (lambda_x != nullptr) {
+      store_pole_lanes(theta_out, *lambda_x, 0, first, count);
+      store_pole_lanes(omega_out, *lambda_x, 1, first, count);
+      Lanes::store(lambda_position, *lambda_x, 0, first, count);
+      Lanes::store(dt_ * lambda_position + lambda_velocity, *lambda_x, 1, first, count);
+    }
+    if (lambda_u != nullptr) Lanes::store(force_adj, *lambda_u, 0, first, count);
   }
 
   void check_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, const char* caller) const {

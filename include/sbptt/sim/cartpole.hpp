@@ -33,6 +33,10 @@
 /// E the kinematic part of the integrator, and G = (dt², dt) per position/velocity pair.
 /// Hence A = E + G ∂a/∂x, B = G ∂a/∂F, and Aᵀλ = Eᵀλ + (∂a/∂x)ᵀ Gᵀλ, which needs only the
 /// per-pole partials of θ̈_i and ẍ: O(P) work, and no N × N matrix.
+///
+/// The equations live in cartpole_reference.hpp and cartpole_physical.hpp, the batched float
+/// path in cartpole_lanes.hpp; this header holds the simulator, its task's loss and its
+/// initial states.
 #include <cmath>
 #include <numbers>
 #include <type_traits>
@@ -42,7 +46,9 @@
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/core/types.hpp"
-#include "sbptt/sim/lane_rows.hpp"
+#include "sbptt/sim/cartpole_lanes.hpp"
+#include "sbptt/sim/cartpole_physical.hpp"
+#include "sbptt/sim/cartpole_reference.hpp"
 
 namespace sbptt {
 
@@ -69,14 +75,6 @@ namespace detail {
 constexpr int cartpole_state_size(int poles) {
   return poles == Eigen::Dynamic ? Eigen::Dynamic : 2 + 2 * poles;
 }
-
-/// One pole's angular acceleration θ̈ and its contribution q = θ̇² sin θ − θ̈ cos θ to the cart
-/// sum, with their partial derivatives in θ, θ̇ and F.
-template <class Scalar>
-struct PoleTerms {
-  Scalar accel, accel_theta, accel_omega, accel_force;
-  Scalar q, q_theta, q_omega, q_force;
-};
 
 }  // namespace detail
 
@@ -128,13 +126,19 @@ public:
                     "expected m < total_mass = ", options.total_mass, " (a cart of positive mass)");
     options_ = options;
     dt_ = static_cast<Scalar>(options.horizon / static_cast<double>(options.steps));
-    gravity_ = static_cast<Scalar>(options.gravity);
-    mass_ratio_ = static_cast<Scalar>(options.pole_mass / options.total_mass);
-    inv_total_mass_ = static_cast<Scalar>(1.0 / options.total_mass);
-    half_length_ = static_cast<Scalar>(options.half_length);
-    ml_over_m_ = static_cast<Scalar>(options.pole_mass * options.half_length / options.total_mass);
-    pole_mass_ = static_cast<Scalar>(options.pole_mass);
-    physical_total_mass_ = static_cast<Scalar>(
+    reference_.dt = dt_;
+    reference_.gravity = static_cast<Scalar>(options.gravity);
+    reference_.mass_ratio = static_cast<Scalar>(options.pole_mass / options.total_mass);
+    reference_.inv_total_mass = static_cast<Scalar>(1.0 / options.total_mass);
+    reference_.half_length = static_cast<Scalar>(options.half_length);
+    reference_.ml_over_m =
+        static_cast<Scalar>(options.pole_mass * options.half_length / options.total_mass);
+    physical_.poles = poles;
+    physical_.dt = dt_;
+    physical_.gravity = reference_.gravity;
+    physical_.half_length = reference_.half_length;
+    physical_.pole_mass = static_cast<Scalar>(options.pole_mass);
+    physical_.total_mass = static_cast<Scalar>(
         options.total_mass + static_cast<double>(poles - 1) * options.pole_mass);
   }
 
@@ -149,14 +153,14 @@ public:
   void step(const State& x, const Control& u, State& x_next) const {
     check_size(x, "x");
     x_next.resize(state_dim());
-    if (options_.model == CartPoleModel::Physical) return physical_step(x, u(0), x_next);
+    if (options_.model == CartPoleModel::Physical) return physical_.step(x, u(0), x_next);
     const Scalar force = u(0);
     Scalar q_sum(0);
     for (Index i = 0; i < poles_; ++i) {
       const Index k = 2 + 2 * i;
-      q_sum += reference_pole_step(x(k), x(k + 1), force, x_next(k), x_next(k + 1));
+      q_sum += reference_.pole_step(x(k), x(k + 1), force, x_next(k), x_next(k + 1));
     }
-    reference_cart_step(x(0), x(1), force, q_sum, x_next(0), x_next(1));
+    reference_.cart_step(x(0), x(1), force, q_sum, x_next(0), x_next(1));
   }
 
   /// A = ∂x_next/∂x (state_dim × state_dim), B = ∂x_next/∂F (state_dim × 1), analytic.
@@ -169,11 +173,12 @@ public:
     a(0, 0) = Scalar(1);
     a(0, 1) = dt_;
     a(1, 1) = Scalar(1);
-    if (options_.model == CartPoleModel::Physical) return physical_jacobians(x, u, a, b);
-    Scalar cart_force = inv_total_mass_;  // ∂ẍ/∂F, completed by the pole sums below
+    if (options_.model == CartPoleModel::Physical) return physical_.jacobians(x, u(0), a, b);
+    const Scalar ml_over_m = reference_.ml_over_m;
+    Scalar cart_force = reference_.inv_total_mass;  // ∂ẍ/∂F, completed by the pole sums below
     for (Index i = 0; i < poles_; ++i) {
       const Index k = 2 + 2 * i;
-      const auto t = pole_terms(x(k), x(k + 1), u(0));
+      const auto t = reference_.pole_terms(x(k), x(k + 1), u(0));
       // Pole rows: θ' = θ + dt θ̇ + dt² θ̈, θ̇' = θ̇ + dt θ̈.
       a(k, k) = Scalar(1) + dt2 * t.accel_theta;
       a(k, k + 1) = dt_ + dt2 * t.accel_omega;
@@ -182,13 +187,13 @@ public:
       b(k) = dt2 * t.accel_force;
       b(k + 1) = dt_ * t.accel_force;
       // Cart rows: ẍ depends on pole i through q_i only.
-      const Scalar cart_theta = ml_over_m_ * t.q_theta;
-      const Scalar cart_omega = ml_over_m_ * t.q_omega;
+      const Scalar cart_theta = ml_over_m * t.q_theta;
+      const Scalar cart_omega = ml_over_m * t.q_omega;
       a(0, k) = dt2 * cart_theta;
       a(0, k + 1) = dt2 * cart_omega;
       a(1, k) = dt_ * cart_theta;
       a(1, k + 1) = dt_ * cart_omega;
-      cart_force += ml_over_m_ * t.q_force;
+      cart_force += ml_over_m * t.q_force;
     }
     b(0) = dt2 * cart_force;
     b(1) = dt_ * cart_force;
@@ -203,17 +208,17 @@ public:
     if (lambda_x == nullptr && lambda_u == nullptr) return;
     if (lambda_x != nullptr) lambda_x->resize(state_dim());
     if (options_.model == CartPoleModel::Physical)
-      return physical_vjp(x, u(0), lambda, lambda_x,
-                          lambda_u == nullptr ? nullptr : &(*lambda_u)(0));
+      return physical_.vjp(x, u(0), lambda, lambda_x,
+                           lambda_u == nullptr ? nullptr : &(*lambda_u)(0));
     const Scalar dt2 = dt_ * dt_;
     // Gᵀλ: the adjoint of each acceleration (ẍ first, then θ̈_i per pole).
     const Scalar cart_adj = dt2 * lambda(0) + dt_ * lambda(1);
-    Scalar force_adj = inv_total_mass_ * cart_adj;
+    Scalar force_adj = reference_.inv_total_mass * cart_adj;
     for (Index i = 0; i < poles_; ++i) {
       const Index k = 2 + 2 * i;
-      force_adj += reference_pole_vjp(x(k), x(k + 1), u(0), lambda(k), lambda(k + 1), cart_adj,
-                                      lambda_x ? &(*lambda_x)(k) : nullptr,
-                                      lambda_x ? &(*lambda_x)(k + 1) : nullptr);
+      force_adj += reference_.pole_vjp(x(k), x(k + 1), u(0), lambda(k), lambda(k + 1), cart_adj,
+                                       lambda_x ? &(*lambda_x)(k) : nullptr,
+                                       lambda_x ? &(*lambda_x)(k + 1) : nullptr);
     }
     if (lambda_x != nullptr) {
       (*lambda_x)(0) = lambda(0);
@@ -228,43 +233,24 @@ public:
   /// and cosine, which round differently from std::sin and std::cos, so the two agree to
   /// rounding, not bit for bit. A column's result does not depend on the other columns. A
   /// block of fewer samples than lanes takes a lane per pole and sample where that needs fewer
-  /// blocks than one per pole (`pole_lanes_pay`), with the same numbers. The physical model
-  /// runs `step`'s equations column by column. (In double Eigen has no
-  /// vectorised sine: lanes measured slower than `step` per sample, 797 against 467 ns for 8
-  /// samples of 4 poles, so double keeps the per-sample path.)
+  /// passes than one per pole, with the same numbers (cartpole_lanes.hpp). The physical model
+  /// runs `step`'s equations column by column. (In double Eigen has no vectorised sine: lanes
+  /// measured slower than `step` per sample, 797 against 467 ns for 8 samples of 4 poles, so
+  /// double keeps the per-sample path.)
   void step_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, Matrix<Scalar>& x_next) const
     requires std::is_same_v<Scalar, float>
   {
     using Lanes = detail::LaneRows<Scalar>;
-    using LaneValues = typename Lanes::Values;
     check_batch(x, u, "step_batch");
     x_next.resize(state_dim(), x.cols());
     for (Index first = 0; first < x.cols(); first += Lanes::kLanes) {
       const int count = Lanes::count(x.cols(), first);
       if (options_.model == CartPoleModel::Physical) {
         for (Index b = first; b < first + count; ++b)
-          physical_step(x.col(b), u(0, b), x_next.col(b));
-        continue;
+          physical_.step(x.col(b), u(0, b), x_next.col(b));
+      } else {
+        detail::CartPoleLanes<Scalar>{reference_, poles_}.step(x, u, x_next, first, count);
       }
-      if (pole_lanes_pay(count)) {
-        for (int done = 0; done < count; done += pole_lane_samples())
-          step_pole_lanes(x, u, x_next, first + done, std::min(pole_lane_samples(), count - done));
-        continue;
-      }
-      auto load = [&](const Matrix<Scalar>& m, Index row) {
-        return Lanes::load(m, row, first, count);
-      };
-      const LaneValues force = load(u, 0);
-      LaneValues q_sum = LaneValues::Zero(), position, velocity;
-      for (Index i = 0; i < poles_; ++i) {
-        const Index k = 2 + 2 * i;
-        q_sum += reference_pole_step(load(x, k), load(x, k + 1), force, position, velocity);
-        Lanes::store(position, x_next, k, first, count);
-        Lanes::store(velocity, x_next, k + 1, first, count);
-      }
-      reference_cart_step(load(x, 0), load(x, 1), force, q_sum, position, velocity);
-      Lanes::store(position, x_next, 0, first, count);
-      Lanes::store(velocity, x_next, 1, first, count);
     }
   }
 
@@ -276,7 +262,6 @@ public:
     requires std::is_same_v<Scalar, float>
   {
     using Lanes = detail::LaneRows<Scalar>;
-    using LaneValues = typename Lanes::Values;
     check_batch(x, u, "vjp_batch");
     detail::require(lambda.rows() == state_dim() && lambda.cols() == x.cols(),
                     "CartPole::vjp_batch: lambda is ", lambda.rows(), " x ", lambda.cols(),
@@ -285,344 +270,27 @@ public:
                     "another matrix");
     if (lambda_x != nullptr) lambda_x->resize(state_dim(), x.cols());
     if (lambda_u != nullptr) lambda_u->resize(1, x.cols());
-    const Scalar dt2 = dt_ * dt_;
     for (Index first = 0; first < x.cols(); first += Lanes::kLanes) {
       const int count = Lanes::count(x.cols(), first);
-      if (options_.model == CartPoleModel::Physical) {
-        for (Index b = first; b < first + count; ++b) {
-          Scalar* control_out = lambda_u ? &(*lambda_u)(0, b) : nullptr;
-          if (lambda_x != nullptr) {
-            auto column = lambda_x->col(b);
-            physical_vjp(x.col(b), u(0, b), lambda.col(b), &column, control_out);
-          } else {
-            physical_vjp(x.col(b), u(0, b), lambda.col(b), static_cast<State*>(nullptr),
-                         control_out);
-          }
+      if (options_.model != CartPoleModel::Physical) {
+        detail::CartPoleLanes<Scalar>{reference_, poles_}.vjp(x, u, lambda, lambda_x, lambda_u,
+                                                              first, count);
+        continue;
+      }
+      for (Index b = first; b < first + count; ++b) {
+        Scalar* control_out = lambda_u ? &(*lambda_u)(0, b) : nullptr;
+        if (lambda_x != nullptr) {
+          auto column = lambda_x->col(b);
+          physical_.vjp(x.col(b), u(0, b), lambda.col(b), &column, control_out);
+        } else {
+          physical_.vjp(x.col(b), u(0, b), lambda.col(b), static_cast<State*>(nullptr),
+                        control_out);
         }
-        continue;
       }
-      if (pole_lanes_pay(count)) {
-        for (int done = 0; done < count; done += pole_lane_samples())
-          vjp_pole_lanes(x, u, lambda, lambda_x, lambda_u, first + done,
-                         std::min(pole_lane_samples(), count - done));
-        continue;
-      }
-      auto load = [&](const Matrix<Scalar>& m, Index row) {
-        return Lanes::load(m, row, first, count);
-      };
-      const LaneValues force = load(u, 0), lambda_position = load(lambda, 0);
-      const LaneValues lambda_velocity = load(lambda, 1);
-      const LaneValues cart_adj = dt2 * lambda_position + dt_ * lambda_velocity;
-      LaneValues force_adj = inv_total_mass_ * cart_adj, theta_out, omega_out;
-      for (Index i = 0; i < poles_; ++i) {
-        const Index k = 2 + 2 * i;
-        force_adj += reference_pole_vjp(load(x, k), load(x, k + 1), force, load(lambda, k),
-                                        load(lambda, k + 1), cart_adj,
-                                        lambda_x ? &theta_out : nullptr,
-                                        lambda_x ? &omega_out : nullptr);
-        if (lambda_x == nullptr) continue;
-        Lanes::store(theta_out, *lambda_x, k, first, count);
-        Lanes::store(omega_out, *lambda_x, k + 1, first, count);
-      }
-      if (lambda_x != nullptr) {
-        Lanes::store(lambda_position, *lambda_x, 0, first, count);
-        Lanes::store(dt_ * lambda_position + lambda_velocity, *lambda_x, 1, first, count);
-      }
-      if (lambda_u != nullptr) Lanes::store(force_adj, *lambda_u, 0, first, count);
     }
   }
 
 private:
-  /// ẍ of the physical model and its partials in θ_i, θ̇_i (into `d_theta`, `d_omega` when
-  /// not null) and F. The pole accelerations follow as ¾ (g sin θ_i − ẍ cos θ_i) / l.
-  using PoleVector = Eigen::Matrix<Scalar, Poles, 1>;  ///< one entry per pole
-
-  template <class X>
-  Scalar physical_cart_accel(const X& x, Scalar force, PoleVector* d_theta = nullptr,
-                             PoleVector* d_omega = nullptr, Scalar* d_force = nullptr) const {
-    using std::cos, std::sin;
-    const Scalar m = pole_mass_, l = half_length_, g = gravity_, quarter3 = Scalar(0.75);
-    Scalar numer = force, denom = physical_total_mass_;
-    for (Index i = 0; i < poles_; ++i) {
-      const Scalar s = sin(x(2 + 2 * i)), c = cos(x(2 + 2 * i)), w = x(3 + 2 * i);
-      numer += m * l * w * w * s - quarter3 * m * g * s * c;
-      denom -= quarter3 * m * c * c;
-    }
-    const Scalar accel = numer / denom;
-    if (d_force != nullptr) *d_force = Scalar(1) / denom;
-    if (d_theta == nullptr) return accel;
-    for (Index i = 0; i < poles_; ++i) {
-      const Scalar s = sin(x(2 + 2 * i)), c = cos(x(2 + 2 * i)), w = x(3 + 2 * i);
-      const Scalar numer_theta = m * l * w * w * c - quarter3 * m * g * (c * c - s * s);
-      const Scalar denom_theta = Scalar(2) * quarter3 * m * c * s;
-      (*d_theta)(i) = (numer_theta - accel * denom_theta) / denom;
-      (*d_omega)(i) = Scalar(2) * m * l * w * s / denom;
-    }
-    return accel;
-  }
-
-  /// ẍ of the physical model with all its partials.
-  struct PhysicalPartials {
-    Scalar cart_accel, d_force;
-    PoleVector d_theta, d_omega;
-  };
-  template <class X>
-  [[nodiscard]] PhysicalPartials physical_partials(const X& x, Scalar force) const {
-    PhysicalPartials p;
-    p.d_theta.resize(poles_);
-    p.d_omega.resize(poles_);
-    p.cart_accel = physical_cart_accel(x, force, &p.d_theta, &p.d_omega, &p.d_force);
-    return p;
-  }
-
-  /// `X`, `Y`: a State or a batch's column (`step_batch`).
-  template <class X, class Y>
-  void physical_step(const X& x, Scalar force, Y&& x_next) const {
-    using std::cos, std::sin;
-    const Scalar cart_accel = physical_cart_accel(x, force);
-    const Scalar k = Scalar(0.75) / half_length_;
-    for (Index i = 0; i < poles_; ++i) {
-      const Index j = 2 + 2 * i;
-      const Scalar accel = k * (gravity_ * sin(x(j)) - cart_accel * cos(x(j)));
-      x_next(j + 1) = x(j + 1) + dt_ * accel;
-      x_next(j) = x(j) + dt_ * x_next(j + 1);
-    }
-    x_next(1) = x(1) + dt_ * cart_accel;
-    x_next(0) = x(0) + dt_ * x_next(1);
-  }
-
-  /// Rows of A and B below the kinematic entries the caller set. ∂θ̈_i/∂θ_j =
-  /// k (δ_ij (g cos θ_i + ẍ sin θ_i) − cos θ_i ∂ẍ/∂θ_j), k = ¾ / l: dense through ẍ.
-  void physical_jacobians(const State& x, const Control& u, StateJacobian& a,
-                          ControlJacobian& b) const {
-    using std::cos, std::sin;
-    // A named struct, not a structured binding: clang before 16 cannot capture bindings.
-    const PhysicalPartials p = physical_partials(x, u(0));
-    const Scalar dt2 = dt_ * dt_, k = Scalar(0.75) / half_length_;
-    auto rows = [&](Index r, Scalar own_theta, Scalar own_omega, Scalar gain) {
-      // Position row r and velocity row r + 1 of an acceleration gain·ẍ + own terms.
-      for (Index j = 0; j < poles_; ++j) {
-        const Index col = 2 + 2 * j;
-        const Scalar theta = gain * p.d_theta(j) + (col == r ? own_theta : Scalar(0));
-        const Scalar omega = gain * p.d_omega(j) + (col == r ? own_omega : Scalar(0));
-        a(r, col) += dt2 * theta;
-        a(r, col + 1) += dt2 * omega;
-        a(r + 1, col) += dt_ * theta;
-        a(r + 1, col + 1) += dt_ * omega;
-      }
-      b(r) = dt2 * gain * p.d_force;
-      b(r + 1) = dt_ * gain * p.d_force;
-    };
-    rows(0, Scalar(0), Scalar(0), Scalar(1));
-    for (Index i = 0; i < poles_; ++i) {
-      const Index r = 2 + 2 * i;
-      const Scalar s = sin(x(r)), c = cos(x(r));
-      a(r, r) = Scalar(1);
-      a(r, r + 1) = dt_;
-      a(r + 1, r + 1) = Scalar(1);
-      rows(r, k * (gravity_ * c + p.cart_accel * s), Scalar(0), -k * c);
-    }
-  }
-
-  /// Aᵀλ and Bᵀλ in O(P): the pole adjoints reach ẍ through one sum, Σ_i k cos θ_i ā_i.
-  /// `lambda_x`: sized by the caller. `X`, `L`, `LX`: a State or a batch's column.
-  template <class X, class L, class LX>
-  void physical_vjp(const X& x, Scalar force, const L& lambda, LX* lambda_x,
-                    Scalar* lambda_u) const {
-    using std::cos, std::sin;
-    const auto [cart_accel, d_force, d_theta, d_omega] = physical_partials(x, force);
-    const Scalar dt2 = dt_ * dt_, k = Scalar(0.75) / half_length_;
-    Scalar cart_adj = dt2 * lambda(0) + dt_ * lambda(1);  // adjoint of ẍ, completed below
-    for (Index i = 0; i < poles_; ++i) {
-      const Index r = 2 + 2 * i;
-      cart_adj -= k * cos(x(r)) * (dt2 * lambda(r) + dt_ * lambda(r + 1));
-    }
-    if (lambda_u != nullptr) *lambda_u = cart_adj * d_force;
-    if (lambda_x == nullptr) return;
-    (*lambda_x)(0) = lambda(0);
-    (*lambda_x)(1) = dt_ * lambda(0) + lambda(1);
-    for (Index i = 0; i < poles_; ++i) {
-      const Index r = 2 + 2 * i;
-      const Scalar pole_adj = dt2 * lambda(r) + dt_ * lambda(r + 1);
-      const Scalar own = k * (gravity_ * cos(x(r)) + cart_accel * sin(x(r)));
-      (*lambda_x)(r) = lambda(r) + pole_adj * own + cart_adj * d_theta(i);
-      (*lambda_x)(r + 1) = dt_ * lambda(r) + lambda(r + 1) + cart_adj * d_omega(i);
-    }
-  }
-
-  /// θ̈ of one pole and its cart term q, with partials (quotient rule on N / D). `V` is
-  /// `Scalar` for one sample, or a lane array for a block of samples (`step_batch`).
-  template <class V>
-  [[nodiscard]] detail::PoleTerms<V> pole_terms(const V& theta, const V& omega,
-                                                const V& force) const {
-    using std::cos, std::sin;
-    const V s = sin(theta);
-    const V c = cos(theta);
-    const V w2 = omega * omega;
-    // A = (F + m l θ̇² s)/M; ml_over_m_ = m l / M.
-    const V push = inv_total_mass_ * force + ml_over_m_ * w2 * s;
-    const V push_theta = ml_over_m_ * w2 * c;
-    const V push_omega = Scalar(2) * ml_over_m_ * omega * s;
-    const V numer = gravity_ * s - c * push;
-    const V numer_theta = gravity_ * c + s * push - c * push_theta;
-    const V denom = half_length_ * (Scalar(4) / Scalar(3) - mass_ratio_ * c * c);
-    const V denom_theta = Scalar(2) * half_length_ * mass_ratio_ * c * s;
-    const V inv_denom = Scalar(1) / denom;
-
-    detail::PoleTerms<V> t;
-    t.accel = numer * inv_denom;
-    t.accel_theta = (numer_theta - t.accel * denom_theta) * inv_denom;
-    t.accel_omega = -c * push_omega * inv_denom;
-    t.accel_force = -c * inv_total_mass_ * inv_denom;
-    t.q = w2 * s - t.accel * c;
-    t.q_theta = w2 * c - t.accel_theta * c + t.accel * s;
-    t.q_omega = Scalar(2) * omega * s - t.accel_omega * c;
-    t.q_force = -t.accel_force * c;
-    return t;
-  }
-
-  /// Pole i of the reference step: θ̇' = θ̇ + dt θ̈, θ' = θ + dt θ̇'. Returns its cart term q_i.
-  /// Every read of the pole happens before its writes, so the outputs may alias the inputs.
-  template <class V>
-  V reference_pole_step(const V& theta, const V& omega, const V& force, V& theta_next,
-                        V& omega_next) const {
-    const auto t = pole_terms(theta, omega, force);
-    const V theta_now = theta;
-    omega_next = omega + dt_ * t.accel;
-    theta_next = theta_now + dt_ * omega_next;
-    return t.q;
-  }
-
-  /// The cart of the reference step, from the poles' sum Σ q_i: ẍ = F/M + (m l/M) Σ q_i.
-  template <class V>
-  void reference_cart_step(const V& position, const V& velocity, const V& force, const V& q_sum,
-                           V& position_next, V& velocity_next) const {
-    const V position_now = position;
-    velocity_next = velocity + dt_ * (inv_total_mass_ * force + ml_over_m_ * q_sum);
-    position_next = position_now + dt_ * velocity_next;
-  }
-
-  /// Pole i of the reference vjp, with ā_x = cart_adj the adjoint of ẍ (Gᵀλ): its rows of Aᵀλ
-  /// (when `lambda_theta_out` is not null) and its term of Bᵀλ (returned).
-  template <class V>
-  V reference_pole_vjp(const V& theta, const V& omega, const V& force, const V& lambda_theta,
-                       const V& lambda_omega, const V& cart_adj, V* lambda_theta_out,
-                       V* lambda_omega_out) const {
-    const auto t = pole_terms(theta, omega, force);
-    const Scalar dt2 = dt_ * dt_;
-    const V pole_adj = dt2 * lambda_theta + dt_ * lambda_omega;
-    if (lambda_theta_out != nullptr) {
-      *lambda_theta_out =
-          lambda_theta + pole_adj * t.accel_theta + cart_adj * ml_over_m_ * t.q_theta;
-      *lambda_omega_out = dt_ * lambda_theta + lambda_omega + pole_adj * t.accel_omega +
-                          cart_adj * ml_over_m_ * t.q_omega;
-    }
-    return pole_adj * t.accel_force + cart_adj * ml_over_m_ * t.q_force;
-  }
-
-  /// Samples per block with one lane per pole and sample (lane b·P + i), 0 if P > a block.
-  [[nodiscard]] int pole_lane_samples() const {
-    return static_cast<int>(detail::LaneRows<Scalar>::kLanes / poles_);
-  }
-
-  /// Whether `count` samples of the reference model fill fewer blocks with a lane per pole
-  /// and sample than the P blocks (one per pole) of a lane per sample: a part of a batch
-  /// split over threads (4 samples of 4 poles: 1 block instead of 4), the paper's batch of 8
-  /// (2 instead of 4). Every lane computes what it computes in the other layout, and the sums
-  /// over the poles are taken per sample in pole order in both, so the two give the same
-  /// numbers bit for bit (tests/test_sim_cartpole.cpp).
-  [[nodiscard]] bool pole_lanes_pay(int count) const {
-    const int per_block = pole_lane_samples();
-    return per_block > 0 && (count + per_block - 1) / per_block < poles_;
-  }
-
-  /// Row `offset` (0: θ_i, 1: θ̇_i) of every pole of samples first … first + count − 1 of `m`
-  /// into lanes b·P + i; the other lanes are 0, as in `LaneRows::load`.
-  template <class Values>
-  void load_pole_lanes(const Matrix<Scalar>& m, Index offset, Index first, int count,
-                       Values& v) const {
-    v.setZero();
-    for (int b = 0; b < count; ++b)
-      for (Index i = 0; i < poles_; ++i) v(b * poles_ + i) = m(2 + 2 * i + offset, first + b);
-  }
-
-  template <class Values>
-  void store_pole_lanes(const Values& v, Matrix<Scalar>& m, Index offset, Index first,
-                        int count) const {
-    for (int b = 0; b < count; ++b)
-      for (Index i = 0; i < poles_; ++i) m(2 + 2 * i + offset, first + b) = v(b * poles_ + i);
-  }
-
-  /// Each sample's value (`per_sample`, lane b) in all of its pole lanes b·P + i.
-  template <class Values>
-  [[nodiscard]] Values spread_to_poles(const Values& per_sample, int count) const {
-    Values v = Values::Zero();
-    for (int b = 0; b < count; ++b)
-      for (Index i = 0; i < poles_; ++i) v(b * poles_ + i) = per_sample(b);
-    return v;
-  }
-
-  /// `sum` (lane b: sample b) += the pole lanes b·P + i of `terms`, in pole order.
-  template <class Values>
-  void add_pole_lanes(const Values& terms, int count, Values& sum) const {
-    for (int b = 0; b < count; ++b)
-      for (Index i = 0; i < poles_; ++i) sum(b) += terms(b * poles_ + i);
-  }
-
-  /// `step_batch` of the reference model for samples first … first + count − 1, a lane per
-  /// pole and sample.
-  void step_pole_lanes(const Matrix<Scalar>& x, const Matrix<Scalar>& u, Matrix<Scalar>& x_next,
-                       Index first, int count) const {
-    using Lanes = detail::LaneRows<Scalar>;
-    using LaneValues = typename Lanes::Values;
-    LaneValues theta, omega, position, velocity;
-    load_pole_lanes(x, 0, first, count, theta);
-    load_pole_lanes(x, 1, first, count, omega);
-    const LaneValues force = Lanes::load(u, 0, first, count);
-    const LaneValues q = reference_pole_step(theta, omega, spread_to_poles(force, count),
-                                             position, velocity);
-    store_pole_lanes(position, x_next, 0, first, count);
-    store_pole_lanes(velocity, x_next, 1, first, count);
-    LaneValues q_sum = LaneValues::Zero();
-    add_pole_lanes(q, count, q_sum);
-    reference_cart_step(Lanes::load(x, 0, first, count), Lanes::load(x, 1, first, count), force,
-                        q_sum, position, velocity);
-    Lanes::store(position, x_next, 0, first, count);
-    Lanes::store(velocity, x_next, 1, first, count);
-  }
-
-  /// `vjp_batch` of the reference model for samples first … first + count − 1, a lane per
-  /// pole and sample.
-  void vjp_pole_lanes(const Matrix<Scalar>& x, const Matrix<Scalar>& u,
-                      const Matrix<Scalar>& lambda, Matrix<Scalar>* lambda_x,
-                      Matrix<Scalar>* lambda_u, Index first, int count) const {
-    using Lanes = detail::LaneRows<Scalar>;
-    using LaneValues = typename Lanes::Values;
-    const LaneValues force = Lanes::load(u, 0, first, count);
-    const LaneValues lambda_position = Lanes::load(lambda, 0, first, count);
-    const LaneValues lambda_velocity = Lanes::load(lambda, 1, first, count);
-    const Scalar dt2 = dt_ * dt_;
-    const LaneValues cart_adj = dt2 * lambda_position + dt_ * lambda_velocity;
-    LaneValues force_adj = inv_total_mass_ * cart_adj;
-    LaneValues theta, omega, lambda_theta, lambda_omega, theta_out, omega_out;
-    load_pole_lanes(x, 0, first, count, theta);
-    load_pole_lanes(x, 1, first, count, omega);
-    load_pole_lanes(lambda, 0, first, count, lambda_theta);
-    load_pole_lanes(lambda, 1, first, count, lambda_omega);
-    const LaneValues force_terms = reference_pole_vjp(
-        theta, omega, spread_to_poles(force, count), lambda_theta, lambda_omega,
-        spread_to_poles(cart_adj, count), lambda_x ? &theta_out : nullptr,
-        lambda_x ? &omega_out : nullptr);
-    add_pole_lanes(force_terms, count, force_adj);
-    if (lambda_x != nullptr) {
-      store_pole_lanes(theta_out, *lambda_x, 0, first, count);
-      store_pole_lanes(omega_out, *lambda_x, 1, first, count);
-      Lanes::store(lambda_position, *lambda_x, 0, first, count);
-      Lanes::store(dt_ * lambda_position + lambda_velocity, *lambda_x, 1, first, count);
-    }
-    if (lambda_u != nullptr) Lanes::store(force_adj, *lambda_u, 0, first, count);
-  }
-
   void check_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, const char* caller) const {
     detail::require(x.rows() == state_dim(), "CartPole::", caller, ": x has ", x.rows(),
                     " rows; expected state_dim() = ", state_dim(), " (one sample per column)");
@@ -641,8 +309,9 @@ private:
 
   Index poles_;
   Options options_{};
-  Scalar dt_{}, gravity_{}, mass_ratio_{}, inv_total_mass_{}, half_length_{}, ml_over_m_{};
-  Scalar pole_mass_{}, physical_total_mass_{};  ///< m and M_P of the physical model
+  Scalar dt_{};
+  detail::CartPoleReference<Scalar> reference_;
+  detail::CartPolePhysical<Scalar, Poles> physical_;
 };
 
 /// Final-state loss ℓ(x) = 1 − mean_i cos θ_i (0 when every pole is upright, 2 when all hang).

@@ -8,7 +8,7 @@
 #include <cmath>
 
 #include "sbptt/core/rng.hpp"
-#include "sbptt/sim/guidance_by_repulsion.hpp"
+#include "sbptt/sim/guidance_task.hpp"
 #include "support/batch_simulator.hpp"
 
 namespace {

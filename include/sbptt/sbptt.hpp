@@ -17,6 +17,7 @@
 #include "sbptt/sim/cartpole.hpp"
 #include "sbptt/sim/guidance_by_repulsion.hpp"
 #include "sbptt/sim/guidance_forces.hpp"
+#include "sbptt/sim/guidance_task.hpp"
 #include "sbptt/sim/integrators.hpp"
 #include "sbptt/sim/linear.hpp"
 #include "sbptt/sim/schrodinger.hpp"

@@ -8,7 +8,7 @@
 
 #include "sbptt/core/error.hpp"
 #include "sbptt/bptt/objective.hpp"
-#include "sbptt/sim/guidance_by_repulsion.hpp"
+#include "sbptt/sim/guidance_task.hpp"
 
 namespace sbptt {
 

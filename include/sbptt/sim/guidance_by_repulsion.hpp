@@ -29,17 +29,16 @@
 /// `vjp_values`) for one sample or, in float with fixed agent counts, a block of 16 samples
 /// in SIMD lanes (`step_batch`, `vjp_batch`). The options, the pair forces and their
 /// Jacobians are in `guidance_forces.hpp`, with how two agents on the same spot are handled
-/// (finite values, continuous Jacobians).
+/// (finite values, continuous Jacobians); the paper's loss and initial states in
+/// `guidance_task.hpp`.
 #include <array>
 #include <cmath>
 #include <cstddef>
-#include <numbers>
 #include <type_traits>
 
 #include <Eigen/Core>
 
 #include "sbptt/core/error.hpp"
-#include "sbptt/core/rng.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/sim/guidance_forces.hpp"
 #include "sbptt/sim/lane_rows.hpp"
@@ -444,76 +443,5 @@ private:
   Scalar dt_{}, epsilon_{}, driver_friction_{}, evader_friction_{}, spreading_{}, repulsion_{};
   Scalar flocking_{}, flocking_offset_{}, flocking_range_{}, center_weight_{};
 };
-
-/// Physics loss ℓ(x) = Σ_e ‖p_e‖² / (2E): the mean over evaders and coordinates of p², i.e.
-/// ‖p_e‖²/2 averaged over evaders (target at the origin, as hard-coded in the reference).
-template <class ScalarT = double, int Drivers = 2, int Evaders = 4>
-class GuidanceLoss {
-public:
-  using Scalar = ScalarT;
-  using State = typename GuidanceByRepulsion<Scalar, Drivers, Evaders>::State;
-
-  GuidanceLoss()
-    requires(Drivers != Eigen::Dynamic && Evaders != Eigen::Dynamic)
-      : drivers_(Drivers), evaders_(Evaders) {}
-
-  /// Agent counts at run time; throws InvalidArgument unless both are ≥ 1.
-  GuidanceLoss(Index drivers, Index evaders) : drivers_(drivers), evaders_(evaders) {
-    detail::require(drivers >= 1 && evaders >= 1, "GuidanceLoss: drivers = ", drivers,
-                    ", evaders = ", evaders, ", expected both >= 1");
-  }
-
-  /// Returns ℓ(x) (x: 4(D+E)); if `grad` is not null sets *grad = ∂ℓ/∂x (p_e / E on evader
-  /// positions, 0 elsewhere). Throws InvalidArgument on a wrong state size.
-  Scalar operator()(const State& x, State* grad) const {
-    const Index n = 4 * (drivers_ + evaders_);
-    detail::require(x.size() == n, "GuidanceLoss: state size ", x.size(), ", expected ", n);
-    const Scalar inv_e = Scalar(1) / static_cast<Scalar>(evaders_);
-    if (grad != nullptr) grad->setZero(n);
-    Scalar sum(0);
-    for (Index e = drivers_; e < drivers_ + evaders_; ++e) {
-      const auto p = x.template segment<2>(4 * e);
-      sum += p.squaredNorm();
-      if (grad != nullptr) grad->template segment<2>(4 * e) = inv_e * p;
-    }
-    return Scalar(0.5) * inv_e * sum;
-  }
-
-private:
-  Index drivers_, evaders_;
-};
-
-/// Draws `count` initial states of the paper's distribution (state_dim × count, one sample per
-/// column; all velocities 0). Per sample, in this order: each driver radius ~ U[3, 4) (uniform
-/// in r, not in area) then angle ~ U[0, 2π); the evader group centre radius ~ U[1, 2) then
-/// angle; then each evader's offset (x, y) ~ U[−0.5, 0.5)².
-template <class Scalar, int Drivers, int Evaders>
-[[nodiscard]] Matrix<Scalar> guidance_initial_states(
-    const GuidanceByRepulsion<Scalar, Drivers, Evaders>& sim, Rng& rng, Index count) {
-  detail::require(count >= 0, "guidance_initial_states: count = ", count, ", expected >= 0");
-  constexpr double two_pi = 2.0 * std::numbers::pi;
-  Matrix<Scalar> states = Matrix<Scalar>::Zero(sim.state_dim(), count);
-  const auto polar = [&](double r_low, double r_high, double& px, double& py) {
-    const double radius = rng.uniform(r_low, r_high);
-    const double angle = rng.uniform(0.0, two_pi);
-    px = radius * std::cos(angle);
-    py = radius * std::sin(angle);
-  };
-  for (Index j = 0; j < count; ++j) {
-    double px = 0, py = 0;
-    for (Index d = 0; d < sim.drivers(); ++d) {
-      polar(3.0, 4.0, px, py);
-      states(4 * d, j) = static_cast<Scalar>(px);
-      states(4 * d + 1, j) = static_cast<Scalar>(py);
-    }
-    double cx = 0, cy = 0;
-    polar(1.0, 2.0, cx, cy);
-    for (Index e = sim.drivers(); e < sim.agents(); ++e) {
-      states(4 * e, j) = static_cast<Scalar>(cx + rng.uniform(-0.5, 0.5));
-      states(4 * e + 1, j) = static_cast<Scalar>(cy + rng.uniform(-0.5, 0.5));
-    }
-  }
-  return states;
-}
 
 }  // namespace sbptt

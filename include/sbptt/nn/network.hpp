@@ -32,6 +32,7 @@
 #include "sbptt/nn/activation.hpp"
 #include "sbptt/nn/layer.hpp"
 #include "sbptt/nn/network_scratch.hpp"
+#include "sbptt/nn/network_workspace.hpp"
 #include "sbptt/nn/outer_product.hpp"
 #include "sbptt/nn/packed_product.hpp"
 
@@ -46,49 +47,12 @@ class Network {
 public:
   using Scalar = ScalarType;
 
-  /// What `forward` records for `backward`. Default-constructible; one per concurrent forward
-  /// pass (the parts of one pass in `forward_columns` share one).
-  class Workspace {
-  public:
-    /// B of the last forward pass or `size_forward` (−1 before the first).
-    [[nodiscard]] Index batch_size() const { return batch_; }
-    /// Output of layer `l` (after its activation), output_dim(l) × B.
-    [[nodiscard]] const Matrix<Scalar>& layer_output(Index l) const {
-      return outputs_.at(static_cast<std::size_t>(l));
-    }
-    /// Bytes of the recorded matrices: the input, every layer output and the im2col matrices.
-    [[nodiscard]] std::size_t bytes() const {
-      std::size_t entries = static_cast<std::size_t>(input_.size());
-      for (const auto& m : outputs_) entries += static_cast<std::size_t>(m.size());
-      for (const auto& m : columns_) entries += static_cast<std::size_t>(m.size());
-      return entries * sizeof(Scalar);
-    }
-
-  private:
-    friend class Network;
-    Matrix<Scalar> input_;                // X, input_dim × B
-    std::vector<Matrix<Scalar>> outputs_;  // per layer, output_dim × B
-    std::vector<Matrix<Scalar>> columns_;  // per conv layer the im2col matrix, else empty
-    Index batch_ = -1;
-  };
-
-  /// The pre-activation adjoints Δ_l of every layer at one batch, as `backward_inputs`
-  /// records them for `add_param_gradient`, and that pass's other temporaries. Default-
-  /// constructible; buffers only grow. The temporaries live here rather than in the thread's
-  /// scratch, so that a caller whose calls move between threads (the engine's pair of sweeps,
-  /// claimed by whichever thread is free) allocates nothing after its first call.
-  class LayerAdjoints {
-  private:
-    friend class Network;
-    detail::NetworkScratch<Scalar> record_;  ///< deltas: the Δ_l
-  };
-
+  /// What `forward` records for `backward` (network_workspace.hpp).
+  using Workspace = NetworkWorkspace<Scalar>;
+  /// The layer adjoints that `backward_inputs` records for `add_param_gradient`.
+  using LayerAdjoints = NetworkLayerAdjoints<Scalar>;
   /// The layers' products packed from θ by `pack`: valid while θ is unchanged.
-  class PackedWeights {
-  private:
-    friend class Network;
-    detail::PackedLayers<Scalar> layers_;
-  };
+  using PackedWeights = NetworkPackedWeights<Scalar>;
 
   /// A network of the given layers (input to output), parameters zero.
   /// Throws `InvalidArgument` if the list is empty, a layer is malformed, or consecutive sizes
@@ -98,7 +62,7 @@ public:
     Index offset = 0;
     for (std::size_t l = 0; l < layers_.size(); ++l) {
       std::visit([](const auto& layer) { layer.validate(); }, layers_[l]);
-      if (l > 0) check_chain(l);
+      if (l > 0) detail::check_layers_chain(layers_[l - 1], layers_[l], l);
       offsets_.push_back(offset);
       offset += layer_num_params(layers_[l]);
     }
@@ -167,7 +131,7 @@ public:
   /// The same with θ as packed by `pack` (which must have seen the current θ).
   void forward(const Matrix<Scalar>& x, Matrix<Scalar>& y, Workspace& ws,
                const PackedWeights& packed) const {
-    check_packed(packed.layers_, false, "forward");
+    check_packed(packed, false, "forward");
     forward_packed(x, y, ws, packed.layers_);
   }
 
@@ -199,13 +163,13 @@ public:
   /// threads share no memory but the workspace.
   void forward_columns(const Matrix<Scalar>& x, Index first, Matrix<Scalar>& y, Workspace& ws,
                        const PackedWeights& packed) const {
-    check_sized(ws);
+    ws.require_sized_for(*this);
     detail::require(first >= 0 && x.cols() > 0 && first + x.cols() <= ws.batch_,
                     "Network::forward_columns: samples ", first, " … ", first + x.cols() - 1,
                     "; expected a range within the ", ws.batch_,
                     " samples the workspace was sized for (size_forward)");
     check_input_rows(x, "forward_columns");
-    check_packed(packed.layers_, false, "forward_columns");
+    check_packed(packed, false, "forward_columns");
     forward_range(x, first, y, ws, packed.layers_);
   }
 
@@ -226,7 +190,7 @@ public:
   /// The same with θ as packed by `pack` (which must have seen the current θ).
   void backward(const Workspace& ws, const Matrix<Scalar>& dy, Vector<Scalar>& grad,
                 Matrix<Scalar>* dx, const PackedWeights& packed) const {
-    check_packed(packed.layers_, true, "backward");
+    check_packed(packed, true, "backward");
     backward_packed(ws, dy, grad, dx, packed.layers_);
   }
 
@@ -236,7 +200,7 @@ public:
   /// while this half of the next step proceeds; the sum is `backward`'s, bit for bit.
   void backward_inputs(const Workspace& ws, const Matrix<Scalar>& dy, Matrix<Scalar>* dx,
                        const PackedWeights& packed, LayerAdjoints& adjoints) const {
-    check_packed(packed.layers_, true, "backward_inputs");
+    check_packed(packed, true, "backward_inputs");
     inputs_packed(ws, dy, dx, packed.layers_, adjoints.record_);
   }
 
@@ -273,24 +237,6 @@ private:
     check_input_rows(x, "forward");
     size_forward(x.cols(), ws);
     forward_range(x, 0, y, ws, packed);
-  }
-
-  /// Refuses a workspace that `size_forward` of this network did not size, before a part could
-  /// write past one of its buffers.
-  void check_sized(const Workspace& ws) const {
-    detail::require(ws.batch_ >= 0, "Network::forward_columns: the workspace holds no batch; ",
-                    "expected size_forward(B, ws) first");
-    bool sized = ws.outputs_.size() == layers_.size() && ws.input_.rows() == input_dim() &&
-                 ws.input_.cols() == ws.batch_;
-    for (std::size_t l = 0; sized && l < layers_.size(); ++l) {
-      sized = ws.outputs_[l].rows() == layer_output_dim(layers_[l]) &&
-              ws.outputs_[l].cols() == ws.batch_;
-      if (const auto* conv = std::get_if<Conv1d>(&layers_[l]))
-        sized = sized && ws.columns_[l].rows() == conv->window_size() &&
-                ws.columns_[l].cols() == conv->output_length() * ws.batch_;
-    }
-    detail::require(sized, "Network::forward_columns: the workspace was sized for another ",
-                    "network; expected size_forward(B, ws) of this one");
   }
 
   void check_input_rows(const Matrix<Scalar>& x, const char* caller) const {
@@ -341,7 +287,7 @@ private:
                                        Matrix<Scalar>* dx,
                                        const detail::PackedLayers<Scalar>& packed,
                                        detail::NetworkScratch<Scalar>& scratch) const {
-    check_workspace(ws);
+    ws.require_filled_by(*this);
     detail::require(dy.rows() == output_dim() && dy.cols() == ws.batch_,
                     "Network::backward: dY is ", dy.rows(), " × ", dy.cols(), ", expected ",
                     output_dim(), " × ", ws.batch_, " (output_dim() × batch of the forward pass)");
@@ -428,14 +374,9 @@ private:
 
   void check_recorded(const Workspace& ws, const LayerAdjoints& adjoints,
                       const Vector<Scalar>& grad) const {
-    check_workspace(ws);
+    ws.require_filled_by(*this);
     check_grad_size(grad);
-    const auto& deltas = adjoints.record_.deltas;
-    bool recorded = deltas.size() >= layers_.size();
-    for (std::size_t l = 0; recorded && l < layers_.size(); ++l)
-      recorded = deltas[l].size() >= layer_output_dim(layers_[l]) * ws.batch_;
-    detail::require(recorded, "Network::add_param_gradient: the adjoints do not cover this ",
-                    "workspace's batch; expected them recorded by backward_inputs at it");
+    adjoints.require_recorded_for(layers_, ws.batch_);
   }
 
   void check_grad_size(const Vector<Scalar>& grad) const {
@@ -451,7 +392,7 @@ private:
       packed.transposed.resize(packed.count);
     }
     for (std::size_t l = 0; l < layers_.size(); ++l) {
-      const Index rows = weight_rows(l);
+      const Index rows = layer_weight_rows(layers_[l]);
       const Index cols = layer_weight_count(layers_[l]) / rows;
       const Scalar* theta = params_.data() + offsets_[l];
       if (weights) packed.weights[l].pack(theta, rows, cols, false, theta + rows * cols);
@@ -459,61 +400,15 @@ private:
     }
   }
 
-  /// Refuses packed weights whose shapes are not this network's (those of another network,
-  /// or none), before a product could read or write past a buffer. Weights packed from
-  /// another network of the same shapes cannot be told apart: that is the caller's contract.
-  void check_packed(const detail::PackedLayers<Scalar>& packed, bool transposed,
-                    const char* caller) const {
+  /// Refuses packed weights that are not this network's (network_workspace.hpp).
+  void check_packed(const PackedWeights& packed, bool transposed, const char* caller) const {
     check_params_size();
-    bool matches = packed.count == layers_.size();
-    for (std::size_t l = 0; matches && l < layers_.size(); ++l) {
-      const Index rows = weight_rows(l);
-      const Index cols = layer_weight_count(layers_[l]) / rows;
-      const PackedMatrix<Scalar>& m = transposed ? packed.transposed[l] : packed.weights[l];
-      matches = transposed ? m.rows() == cols && m.cols() == rows
-                           : m.rows() == rows && m.cols() == cols;
-    }
-    detail::require(matches, "Network::", caller, ": the packed weights do not fit this ",
-                    "network's layers; expected weights packed by pack() of this network");
-  }
-
-  [[nodiscard]] Index weight_rows(std::size_t l) const {
-    return std::visit([](const auto& layer) { return layer.weight_rows(); }, layers_[l]);
-  }
-
-  void check_chain(std::size_t l) const {
-    const Layer& previous = layers_[l - 1];
-    const Layer& current = layers_[l];
-    detail::require(layer_output_dim(previous) == layer_input_dim(current), "Network: layer ",
-                    l, " (", layer_describe(current), ") expects ", layer_input_dim(current),
-                    " inputs, but layer ", l - 1, " (", layer_describe(previous), ") produces ",
-                    layer_output_dim(previous));
-    // Equal totals with a different positions × channels split would silently reinterpret
-    // the memory; that is never what a conv stack means.
-    const auto* a = std::get_if<Conv1d>(&previous);
-    const auto* b = std::get_if<Conv1d>(&current);
-    if (a != nullptr && b != nullptr) {
-      detail::require(a->output_length() == b->length && a->out_channels == b->in_channels,
-                      "Network: layer ", l, " (", b->describe(), ") expects ", b->length,
-                      " positions × ", b->in_channels, " channels, but layer ", l - 1, " (",
-                      a->describe(), ") produces ", a->output_length(), " × ", a->out_channels);
-    }
+    packed.require_fit(layers_, transposed, caller);
   }
 
   void check_params_size() const {
     detail::require(params_.size() == num_params(), "Network: params() has ", params_.size(),
                     " entries, expected num_params() = ", num_params());
-  }
-
-  void check_workspace(const Workspace& ws) const {
-    detail::require(ws.batch_ >= 0, "Network::backward: the workspace holds no forward pass");
-    bool matches = ws.outputs_.size() == layers_.size() && ws.input_.rows() == input_dim();
-    for (std::size_t l = 0; matches && l < layers_.size(); ++l)
-      matches = ws.outputs_[l].rows() == layer_output_dim(layers_[l]);
-    if (!matches)  // describe() only on failure: backward must not build strings per call
-      throw InvalidArgument(detail::concat("Network::backward: the workspace was filled by a "
-                                           "different network (layer sizes differ from ",
-                                           describe(), ")"));
   }
 
   std::vector<Layer> layers_;

@@ -51,6 +51,7 @@
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/bptt/engine_buffers.hpp"
+#include "sbptt/bptt/forward_in_parts.hpp"
 #include "sbptt/bptt/packed_controller.hpp"
 #include "sbptt/bptt/shared_seed_sweeps.hpp"
 #include "sbptt/core/parallel.hpp"
@@ -160,7 +161,7 @@ public:
     const auto slots = static_cast<std::size_t>(threads);
     for (auto* scratch : {&forward_scratch_, &sweeps_[0].scratch, &sweeps_[1].scratch})
       scratch->assign(slots, Scratch(sim_.state_dim(), sim_.control_dim()));
-    forward_parts_.resize(slots);
+    forward_in_parts_.resize(slots);
   }
   [[nodiscard]] Index threads() const { return threads_; }
 
@@ -175,7 +176,7 @@ public:
     packed_controller_.pack();
     if constexpr (ColumnSplitController<Ctrl>) {
       if (pool_ && batch > 1) {
-        roll_out_in_parts(std::min(threads_, batch));
+        forward_in_parts_.run(*this, std::min(threads_, batch));
         return batch_loss();
       }
     }
@@ -298,6 +299,8 @@ private:
   using Handoff = typename detail::ParamHandoffOf<Ctrl>::Type;
   template <class Adjoints, class S>
   friend class detail::SharedSeedSweeps;
+  template <class S>
+  friend class detail::ForwardInParts;
 
   /// Adds the parameter products recorded in `slot` of the hand-off to `gradient`.
   void add_params(Handoff& h, std::size_t slot, Vector<Scalar>& gradient) const {
@@ -446,52 +449,6 @@ private:
     result.comparison = compare(result.modified, result.regular);
   }
 
-  /// The rollout of `forward` with the batch's columns cut into `parts` ranges, each rolled
-  /// out on its own thread from x_0 to x_m: the steps of a rollout wait on each other, its
-  /// samples do not. A sample's numbers do not depend on the samples beside it (the
-  /// controller's `forward_columns`, a `BatchSimulator`'s columns), so the trajectory is the
-  /// one-thread trajectory bit for bit.
-  void roll_out_in_parts(Index parts) {
-    const Index batch = trajectory_.batch();
-    for (auto& ws : trajectory_.workspaces) packed_controller_.size_forward(batch, ws);
-    auto first_of = [&](Index k) { return k * batch / parts; };
-    auto roll_out_part = [&](Index k, Index slot) {
-      const Index first = first_of(k), count = first_of(k + 1) - first;
-      detail::ForwardPart<Scalar>& part = forward_parts_[static_cast<std::size_t>(k)];
-      Scratch& scratch = forward_scratch_[static_cast<std::size_t>(slot)];
-      part.resize(steps_, sim_.state_dim(), sim_.control_dim(), count);
-      part.non_finite.value.reset();
-      part.states[0] = trajectory_.states[0].middleCols(first, count);
-      part.non_finite.note(Quantity::State, 0, part.states[0], first);
-      for (Index n = 0; n < steps_; ++n) {
-        const auto i = static_cast<std::size_t>(n);
-        Matrix<Scalar>& x = part.states[i];
-        packed_controller_.forward_columns(x, first, part.controls[i], trajectory_.workspaces[i]);
-        part.non_finite.note(Quantity::Control, n, part.controls[i], first);
-        detail::step_columns(sim_, x, part.controls[i], part.states[i + 1], [&](auto&& body) {
-          for (Index b = 0; b < count; ++b) body(b, scratch);
-        });
-        part.non_finite.note(Quantity::State, n + 1, part.states[i + 1], first);
-      }
-    };
-    pool_->run(parts, roll_out_part);
-    // Into the trajectory here, on one thread: a part writing its own columns there would
-    // share the cache lines at its edges with the next part's thread at every step. The parts'
-    // copies are (m + 1)·state_dim·B + m·control_dim·B numbers (35 KiB for the paper's cart
-    // pole, beside its 694 KiB trajectory).
-    for (Index k = 0; k < parts; ++k) {
-      const detail::ForwardPart<Scalar>& part = forward_parts_[static_cast<std::size_t>(k)];
-      const Index first = first_of(k), count = first_of(k + 1) - first;
-      for (std::size_t i = 0; i < part.controls.size(); ++i) {
-        trajectory_.controls[i].middleCols(first, count) = part.controls[i];
-        trajectory_.states[i + 1].middleCols(first, count) = part.states[i + 1];
-      }
-    }
-    forward_non_finite_ = detail::first_in_rollout_order(parts, [&](Index k) -> auto& {
-      return forward_parts_[static_cast<std::size_t>(k)].non_finite;
-    });
-  }
-
   /// Batch-mean loss of the stored trajectory.
   Scalar batch_loss() {
     const Index batch = trajectory_.batch();
@@ -531,7 +488,7 @@ private:
   Trajectory<Scalar, typename Ctrl::Workspace> trajectory_;
   std::optional<NonFinite> forward_non_finite_;
   std::vector<Scratch> forward_scratch_;
-  std::vector<detail::ForwardPart<Scalar>> forward_parts_;  ///< `forward` on several threads
+  detail::ForwardInParts<Scalar> forward_in_parts_;  ///< `forward` on several threads
   detail::ForkDecision fork_[3];  ///< per-sample loops: simulator step, VJPs, batch loss
   Sweep sweeps_[2];
   typename detail::LayerAdjointsOf<Ctrl>::Type sweep_adjoints_[2];  ///< `network_backward`

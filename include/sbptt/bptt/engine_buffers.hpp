@@ -333,22 +333,6 @@ private:
   double best_ns_ = 0;
 };
 
-/// One thread's samples of `Engine::forward` done in parts: their states x_0 … x_m and
-/// controls c_0 … c_{m−1}, and the first non-finite value the part met.
-template <class Scalar>
-struct ForwardPart {
-  std::vector<Matrix<Scalar>> states, controls;
-  RolloutNonFinite non_finite;
-
-  /// Sizes the buffers for `steps` steps of `count` samples (allocates only when they change).
-  void resize(Index steps, Index state_dim, Index control_dim, Index count) {
-    states.resize(static_cast<std::size_t>(steps) + 1);
-    controls.resize(static_cast<std::size_t>(steps));
-    for (auto& x : states) x.resize(state_dim, count);
-    for (auto& c : controls) c.resize(control_dim, count);
-  }
-};
-
 /// Mean of per-sample losses, summed in sample order (thread-count independent); notes the
 /// first non-finite one in `slot` (at step `steps`) unless `slot` already holds a value.
 template <class Scalar>

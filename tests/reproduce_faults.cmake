@@ -140,19 +140,6 @@ check("interrupted while plotting: the figure is kept" interrupted MATCHES "\na.
 check("interrupted while plotting: no temporary figure is left" NOT interrupted MATCHES "\\.tmp\\.")
 
 # --- 4. fsync before a file counts ---------------------------------------------------------------
-find_program(STRACE strace)
-if(NOT STRACE)
-  message(STATUS "strace not found; the fsync order is not checked")
-  return()
-endif()
-if(SANITIZED)  # LeakSanitizer aborts a program that runs under ptrace
-  message(STATUS "sanitizer build: the fsync order is not checked under strace")
-  return()
-endif()
-execute_process(COMMAND "${STRACE}" -f -y -e trace=fsync,linkat,rename,renameat,renameat2
-                -o "${WORK_DIR}/trace" "${REPRODUCE}" ${grid} --seeds 1 --out "${WORK_DIR}/traced"
-                RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
-check("the traced sweep exits 0" rc EQUAL 0)
 # The runner is the first process in the trace; the fake programs' own renames are theirs.
 file(WRITE "${WORK_DIR}/fsync_order.awk" [=[
 # Names are compared by their last component: strace -y shows resolved paths.
@@ -186,12 +173,19 @@ $1 != runner || /resumed>/ { next }
 }
 END { print renames " renames checked"; exit bad }
 ]=])
-# The check itself, on two traces written here: an fsync that strace split into
-# "<unfinished ...>" and "<... fsync resumed>" (as it does when another process's call comes
-# between) counts; a rename without any fsync fails.
+# The check itself, on traces written here (it needs neither strace nor an unsanitized build):
+# an fsync that strace split into "<unfinished ...>" and "<... fsync resumed>" (as it does when
+# another process's call comes between) counts; a split fsync of another file, or none, fails.
 set(split_fsync [=[
 7 fsync(7</w/out/#10978501>(deleted) <unfinished ...>
 8 --- SIGCHLD {si_signo=SIGCHLD, si_code=CLD_EXITED, si_pid=9, si_uid=0, si_status=0} ---
+7 <... fsync resumed>)              = 0
+7 linkat(AT_FDCWD</w>, "/proc/self/fd/7", AT_FDCWD</w>, "/w/out/summary.csv.tmp.7.3", AT_SYMLINK_FOLLOW) = 0
+7 rename("/w/out/summary.csv.tmp.7.3", "/w/out/summary.csv") = 0
+7 fsync(7</w/out>) = 0
+]=])
+set(other_fd [=[
+7 fsync(5</w/out/#10978500>(deleted) <unfinished ...>
 7 <... fsync resumed>)              = 0
 7 linkat(AT_FDCWD</w>, "/proc/self/fd/7", AT_FDCWD</w>, "/w/out/summary.csv.tmp.7.3", AT_SYMLINK_FOLLOW) = 0
 7 rename("/w/out/summary.csv.tmp.7.3", "/w/out/summary.csv") = 0
@@ -204,6 +198,7 @@ set(no_fsync [=[
 ]=])
 file(WRITE "${WORK_DIR}/trace_split_fsync" "${split_fsync}")
 file(WRITE "${WORK_DIR}/trace_no_fsync" "${no_fsync}")
+file(WRITE "${WORK_DIR}/trace_other_fd" "${other_fd}")
 execute_process(COMMAND awk -f "${WORK_DIR}/fsync_order.awk" "${WORK_DIR}/trace_split_fsync"
                 RESULT_VARIABLE rc OUTPUT_VARIABLE order)
 check("the fsync-order check counts an fsync that strace split in two (${order})"
@@ -212,6 +207,24 @@ execute_process(COMMAND awk -f "${WORK_DIR}/fsync_order.awk" "${WORK_DIR}/trace_
                 RESULT_VARIABLE rc OUTPUT_VARIABLE order)
 check("the fsync-order check fails a rename without an fsync (${order})"
       NOT rc EQUAL 0 AND order MATCHES "renamed summary.csv.tmp.7.3 without an fsync")
+execute_process(COMMAND awk -f "${WORK_DIR}/fsync_order.awk" "${WORK_DIR}/trace_other_fd"
+                RESULT_VARIABLE rc OUTPUT_VARIABLE order)
+check("the fsync-order check fails a rename after an fsync of another file (${order})"
+      NOT rc EQUAL 0 AND order MATCHES "renamed summary.csv.tmp.7.3 without an fsync")
+
+find_program(STRACE strace)
+if(NOT STRACE)
+  message(STATUS "strace not found; the fsync order is not checked")
+  return()
+endif()
+if(SANITIZED)  # LeakSanitizer aborts a program that runs under ptrace
+  message(STATUS "sanitizer build: the fsync order is not checked under strace")
+  return()
+endif()
+execute_process(COMMAND "${STRACE}" -f -y -e trace=fsync,linkat,rename,renameat,renameat2
+                -o "${WORK_DIR}/trace" "${REPRODUCE}" ${grid} --seeds 1 --out "${WORK_DIR}/traced"
+                RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
+check("the traced sweep exits 0" rc EQUAL 0)
 execute_process(COMMAND awk -f "${WORK_DIR}/fsync_order.awk" "${WORK_DIR}/trace"
                 RESULT_VARIABLE rc OUTPUT_VARIABLE order)
 check("every rename of the runner: the file fsync'ed before, its folder after (${order})"

@@ -162,12 +162,13 @@ TEST_CASE("cartpole batch: a column's result does not depend on the other column
 
 TEST_CASE("cartpole batch: a lane per pole and sample gives the lane per sample's numbers",
           "[sim][cartpole]") {
-  // Fewer samples than a block take a lane per pole and sample when that needs fewer blocks
-  // (4 samples of 4 poles: one); a full block of 16 keeps a lane per sample. Every count and
-  // place of a few samples must give, bit for bit, what the same samples give in the full
-  // block, for pole counts that fill a block with 1, 2, 3, 4 or 5 samples and for one (17)
-  // that cannot share a block.
-  for (const Index poles : {1, 2, 3, 4, 5, 8, 17}) {
+  // Fewer samples than a block take a lane per pole and sample when that needs fewer passes
+  // (4 samples of 4 poles: one); a full block of 16 keeps a lane per sample. Samples taken from
+  // both ends of a full block must give, bit for bit, what they give in it, whether they form
+  // a batch of their own or follow a full block in a longer batch (so that the short block
+  // starts at column 16). Pole counts that fit 16, 8, 5, 4, 3, 2 and 1 samples in a block, and
+  // one (17) that fits none; with 1 pole the lane per sample is always taken.
+  for (const Index poles : {1, 2, 3, 4, 5, 8, 12, 16, 17}) {
     const CartPole<float, Eigen::Dynamic> sim(poles);
     sbptt::Rng rng(45);
     const Batch b = random_batch(sim.state_dim(), 16, rng);
@@ -176,16 +177,21 @@ TEST_CASE("cartpole batch: a lane per pole and sample gives the lane per sample'
     sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
     for (const Index count : {1, 2, 3, 4, 5, 7, 8, 9, 12, 15}) {
       for (const Index first : {Index{0}, 16 - count}) {
-        const Matrix<float> x = b.x.middleCols(first, count);
-        const Matrix<float> u = b.u.middleCols(first, count);
-        const Matrix<float> lambda = b.lambda.middleCols(first, count);
-        Matrix<float> part_next, part_x, part_u;
-        sim.step_batch(x, u, part_next);
-        sim.vjp_batch(x, u, lambda, &part_x, &part_u);
-        INFO(poles << " poles, samples " << first << " … " << first + count - 1);
-        CHECK(part_next == next.middleCols(first, count));
-        CHECK(part_x == lambda_x.middleCols(first, count));
-        CHECK(part_u == lambda_u.middleCols(first, count));
+        for (const Index behind : {Index{0}, Index{16}}) {  // columns before the samples
+          Matrix<float> x(sim.state_dim(), behind + count), u(1, behind + count);
+          Matrix<float> lambda(sim.state_dim(), behind + count);
+          x << b.x.leftCols(behind), b.x.middleCols(first, count);
+          u << b.u.leftCols(behind), b.u.middleCols(first, count);
+          lambda << b.lambda.leftCols(behind), b.lambda.middleCols(first, count);
+          Matrix<float> part_next, part_x, part_u;
+          sim.step_batch(x, u, part_next);
+          sim.vjp_batch(x, u, lambda, &part_x, &part_u);
+          INFO(poles << " poles, samples " << first << " … " << first + count - 1 << " after "
+                     << behind << " columns");
+          CHECK(part_next.rightCols(count) == next.middleCols(first, count));
+          CHECK(part_x.rightCols(count) == lambda_x.middleCols(first, count));
+          CHECK(part_u.rightCols(count) == lambda_u.middleCols(first, count));
+        }
       }
     }
   }

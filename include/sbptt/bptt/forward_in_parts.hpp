@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "sbptt/bptt/batch_physics.hpp"
+#include "sbptt/bptt/diagnostics.hpp"
 #include "sbptt/bptt/engine_buffers.hpp"
 #include "sbptt/core/types.hpp"
 

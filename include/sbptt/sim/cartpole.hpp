@@ -49,6 +49,7 @@
 #include "sbptt/sim/cartpole_lanes.hpp"
 #include "sbptt/sim/cartpole_physical.hpp"
 #include "sbptt/sim/cartpole_reference.hpp"
+#include "sbptt/sim/lane_rows.hpp"
 
 namespace sbptt {
 

@@ -445,3 +445,7 @@ private:
 };
 
 }  // namespace sbptt
+
+// The paper's task helpers (GuidanceLoss, guidance_initial_states) were defined in this header
+// until they moved to their own: code that includes only this one keeps compiling.
+#include "sbptt/sim/guidance_task.hpp"  // IWYU pragma: export

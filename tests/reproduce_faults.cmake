@@ -176,26 +176,24 @@ END { print renames " renames checked"; exit bad }
 # The check itself, on traces written here (it needs neither strace nor an unsanitized build):
 # an fsync that strace split into "<unfinished ...>" and "<... fsync resumed>" (as it does when
 # another process's call comes between) counts; a split fsync of another file, or none, fails.
+# Every trace ends the same: the unnamed file linked as the temporary, renamed, folder synced.
+set(link_and_rename [=[
+7 linkat(AT_FDCWD</w>, "/proc/self/fd/7", AT_FDCWD</w>, "/w/out/summary.csv.tmp.7.3", AT_SYMLINK_FOLLOW) = 0
+7 rename("/w/out/summary.csv.tmp.7.3", "/w/out/summary.csv") = 0
+7 fsync(7</w/out>) = 0
+]=])
 set(split_fsync [=[
 7 fsync(7</w/out/#10978501>(deleted) <unfinished ...>
 8 --- SIGCHLD {si_signo=SIGCHLD, si_code=CLD_EXITED, si_pid=9, si_uid=0, si_status=0} ---
 7 <... fsync resumed>)              = 0
-7 linkat(AT_FDCWD</w>, "/proc/self/fd/7", AT_FDCWD</w>, "/w/out/summary.csv.tmp.7.3", AT_SYMLINK_FOLLOW) = 0
-7 rename("/w/out/summary.csv.tmp.7.3", "/w/out/summary.csv") = 0
-7 fsync(7</w/out>) = 0
 ]=])
 set(other_fd [=[
 7 fsync(5</w/out/#10978500>(deleted) <unfinished ...>
 7 <... fsync resumed>)              = 0
-7 linkat(AT_FDCWD</w>, "/proc/self/fd/7", AT_FDCWD</w>, "/w/out/summary.csv.tmp.7.3", AT_SYMLINK_FOLLOW) = 0
-7 rename("/w/out/summary.csv.tmp.7.3", "/w/out/summary.csv") = 0
-7 fsync(7</w/out>) = 0
 ]=])
-set(no_fsync [=[
-7 linkat(AT_FDCWD</w>, "/proc/self/fd/7", AT_FDCWD</w>, "/w/out/summary.csv.tmp.7.3", AT_SYMLINK_FOLLOW) = 0
-7 rename("/w/out/summary.csv.tmp.7.3", "/w/out/summary.csv") = 0
-7 fsync(7</w/out>) = 0
-]=])
+string(APPEND split_fsync "${link_and_rename}")
+string(APPEND other_fd "${link_and_rename}")
+set(no_fsync "${link_and_rename}")
 file(WRITE "${WORK_DIR}/trace_split_fsync" "${split_fsync}")
 file(WRITE "${WORK_DIR}/trace_no_fsync" "${no_fsync}")
 file(WRITE "${WORK_DIR}/trace_other_fd" "${other_fd}")

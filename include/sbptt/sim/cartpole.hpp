@@ -126,8 +126,7 @@ public:
                     "CartPole: pole_mass = ", options.pole_mass, " with the physical model, "
                     "expected m < total_mass = ", options.total_mass, " (a cart of positive mass)");
     options_ = options;
-    dt_ = static_cast<Scalar>(options.horizon / static_cast<double>(options.steps));
-    reference_.dt = dt_;
+    reference_.dt = static_cast<Scalar>(options.horizon / static_cast<double>(options.steps));
     reference_.gravity = static_cast<Scalar>(options.gravity);
     reference_.mass_ratio = static_cast<Scalar>(options.pole_mass / options.total_mass);
     reference_.inv_total_mass = static_cast<Scalar>(1.0 / options.total_mass);
@@ -135,7 +134,7 @@ public:
     reference_.ml_over_m =
         static_cast<Scalar>(options.pole_mass * options.half_length / options.total_mass);
     physical_.poles = poles;
-    physical_.dt = dt_;
+    physical_.dt = reference_.dt;
     physical_.gravity = reference_.gravity;
     physical_.half_length = reference_.half_length;
     physical_.pole_mass = static_cast<Scalar>(options.pole_mass);
@@ -146,7 +145,7 @@ public:
   [[nodiscard]] Index poles() const { return poles_; }
   [[nodiscard]] Index state_dim() const { return 2 + 2 * poles_; }
   [[nodiscard]] Index control_dim() const { return 1; }
-  [[nodiscard]] Scalar dt() const { return dt_; }
+  [[nodiscard]] Scalar dt() const { return reference_.dt; }
   [[nodiscard]] Index steps() const { return options_.steps; }
   [[nodiscard]] const Options& options() const { return options_; }
 
@@ -168,11 +167,11 @@ public:
   void jacobians(const State& x, const Control& u, StateJacobian& a, ControlJacobian& b) const {
     check_size(x, "x");
     const Index n = state_dim();
-    const Scalar dt2 = dt_ * dt_;
+    const Scalar dt = reference_.dt, dt2 = dt * dt;
     a.setZero(n, n);
     b.setZero(n, 1);
     a(0, 0) = Scalar(1);
-    a(0, 1) = dt_;
+    a(0, 1) = dt;
     a(1, 1) = Scalar(1);
     if (options_.model == CartPoleModel::Physical) return physical_.jacobians(x, u(0), a, b);
     const Scalar ml_over_m = reference_.ml_over_m;
@@ -182,22 +181,22 @@ public:
       const auto t = reference_.pole_terms(x(k), x(k + 1), u(0));
       // Pole rows: θ' = θ + dt θ̇ + dt² θ̈, θ̇' = θ̇ + dt θ̈.
       a(k, k) = Scalar(1) + dt2 * t.accel_theta;
-      a(k, k + 1) = dt_ + dt2 * t.accel_omega;
-      a(k + 1, k) = dt_ * t.accel_theta;
-      a(k + 1, k + 1) = Scalar(1) + dt_ * t.accel_omega;
+      a(k, k + 1) = dt + dt2 * t.accel_omega;
+      a(k + 1, k) = dt * t.accel_theta;
+      a(k + 1, k + 1) = Scalar(1) + dt * t.accel_omega;
       b(k) = dt2 * t.accel_force;
-      b(k + 1) = dt_ * t.accel_force;
+      b(k + 1) = dt * t.accel_force;
       // Cart rows: ẍ depends on pole i through q_i only.
       const Scalar cart_theta = ml_over_m * t.q_theta;
       const Scalar cart_omega = ml_over_m * t.q_omega;
       a(0, k) = dt2 * cart_theta;
       a(0, k + 1) = dt2 * cart_omega;
-      a(1, k) = dt_ * cart_theta;
-      a(1, k + 1) = dt_ * cart_omega;
+      a(1, k) = dt * cart_theta;
+      a(1, k + 1) = dt * cart_omega;
       cart_force += ml_over_m * t.q_force;
     }
     b(0) = dt2 * cart_force;
-    b(1) = dt_ * cart_force;
+    b(1) = dt * cart_force;
   }
 
   /// *lambda_x = Aᵀ λ (state_dim), *lambda_u = Bᵀ λ (1), in O(P) without forming A or B.
@@ -211,9 +210,9 @@ public:
     if (options_.model == CartPoleModel::Physical)
       return physical_.vjp(x, u(0), lambda, lambda_x,
                            lambda_u == nullptr ? nullptr : &(*lambda_u)(0));
-    const Scalar dt2 = dt_ * dt_;
+    const Scalar dt = reference_.dt, dt2 = dt * dt;
     // Gᵀλ: the adjoint of each acceleration (ẍ first, then θ̈_i per pole).
-    const Scalar cart_adj = dt2 * lambda(0) + dt_ * lambda(1);
+    const Scalar cart_adj = dt2 * lambda(0) + dt * lambda(1);
     Scalar force_adj = reference_.inv_total_mass * cart_adj;
     for (Index i = 0; i < poles_; ++i) {
       const Index k = 2 + 2 * i;
@@ -223,7 +222,7 @@ public:
     }
     if (lambda_x != nullptr) {
       (*lambda_x)(0) = lambda(0);
-      (*lambda_x)(1) = dt_ * lambda(0) + lambda(1);
+      (*lambda_x)(1) = dt * lambda(0) + lambda(1);
     }
     if (lambda_u != nullptr) (*lambda_u)(0) = force_adj;
   }
@@ -310,7 +309,6 @@ private:
 
   Index poles_;
   Options options_{};
-  Scalar dt_{};
   detail::CartPoleReference<Scalar> reference_;
   detail::CartPolePhysical<Scalar, Poles> physical_;
 };

@@ -36,8 +36,9 @@ struct CartPoleLanes {
   void step(const Matrix<Scalar>& x, const Matrix<Scalar>& u, Matrix<Scalar>& x_next,
             Index first, int count) const {
     if (pole_lanes_pay(count)) {
-      for (int done = 0; done < count; done += pole_lane_samples())
-        step_pole_lanes(x, u, x_next, first + done, std::min(pole_lane_samples(), count - done));
+      for_pole_blocks(first, count, [&](Index block_first, int block_count) {
+        step_pole_lanes(x, u, x_next, block_first, block_count);
+      });
       return;
     }
     auto load = [&](const Matrix<Scalar>& m, Index row) {
@@ -60,9 +61,9 @@ struct CartPoleLanes {
   void vjp(const Matrix<Scalar>& x, const Matrix<Scalar>& u, const Matrix<Scalar>& lambda,
            Matrix<Scalar>* lambda_x, Matrix<Scalar>* lambda_u, Index first, int count) const {
     if (pole_lanes_pay(count)) {
-      for (int done = 0; done < count; done += pole_lane_samples())
-        vjp_pole_lanes(x, u, lambda, lambda_x, lambda_u, first + done,
-                       std::min(pole_lane_samples(), count - done));
+      for_pole_blocks(first, count, [&](Index block_first, int block_count) {
+        vjp_pole_lanes(x, u, lambda, lambda_x, lambda_u, block_first, block_count);
+      });
       return;
     }
     auto load = [&](const Matrix<Scalar>& m, Index row) {
@@ -99,6 +100,14 @@ private:
   [[nodiscard]] bool pole_lanes_pay(int count) const {
     const int per_block = pole_lane_samples();
     return per_block > 0 && (count + per_block - 1) / per_block < poles;
+  }
+
+  /// f(first sample, samples) for each block of a lane per pole and sample that covers
+  /// samples first … first + count − 1.
+  template <class F>
+  void for_pole_blocks(Index first, int count, F&& f) const {
+    for (int done = 0; done < count; done += pole_lane_samples())
+      f(first + done, std::min(pole_lane_samples(), count - done));
   }
 
   /// Row `offset` (0: θ_i, 1: θ̇_i) of every pole of samples first … first + count − 1 of `m`

@@ -446,6 +446,5 @@ private:
 
 }  // namespace sbptt
 
-// The paper's task helpers (GuidanceLoss, guidance_initial_states) were defined in this header
-// until they moved to their own: code that includes only this one keeps compiling.
+// The task helpers lived here before guidance_task.hpp: code that includes only this compiles.
 #include "sbptt/sim/guidance_task.hpp"  // IWYU pragma: export

@@ -28,7 +28,7 @@
 /// fixed chunks of `kEvaluateChunk` samples independently. A lone sweep (`reverse`) whose
 /// per-sample loops are too cheap to split hands the parameter products of a
 /// `SplitBackwardController` to a second thread instead, step by step, and adds them in step
-/// order (engine_buffers.hpp, `ParamHandoff`); so does the pair
+/// order (param_handoff.hpp, `ParamHandoff`); so does the pair
 /// of `regular_and_modified` when its sweeps share one backward pass (one control), else its
 /// two sweeps run at once. Every sample is computed by the same operations whatever the
 /// thread count, and every batch sum is taken in a fixed order, so all results are bitwise
@@ -52,6 +52,7 @@
 #include "sbptt/core/error.hpp"
 #include "sbptt/bptt/engine_buffers.hpp"
 #include "sbptt/bptt/forward_in_parts.hpp"
+#include "sbptt/bptt/param_handoff.hpp"
 #include "sbptt/bptt/packed_controller.hpp"
 #include "sbptt/bptt/shared_seed_sweeps.hpp"
 #include "sbptt/core/parallel.hpp"

@@ -23,7 +23,7 @@
 #include <cstddef>
 #include <memory>
 
-#include "sbptt/bptt/engine_buffers.hpp"
+#include "sbptt/bptt/param_handoff.hpp"
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/types.hpp"
 

@@ -337,7 +337,7 @@ private:
     for (Index n = steps_ - 1; n >= 0; --n) {
       const auto i = static_cast<std::size_t>(n);
       const FlowMode mode = schedule.at(n);
-      const bool cut = truncation > 0 && n > 0 && n % truncation == 0;
+      const bool cut = truncated_at(n, truncation);
       const bool physics = physics_flows(mode) && !cut;
       const bool network = network_flows(mode) && !cut;
       adjoint_products({&s}, n, physics, parallel);
@@ -399,7 +399,7 @@ private:
     begin_sweep(full, result.regular, false);
     begin_sweep(physics_only, result.modified, false);
     for (Index n = steps_ - 1; n >= 0; --n) {
-      const bool flows = !(truncation > 0 && n > 0 && n % truncation == 0);
+      const bool flows = !truncated_at(n, truncation);
       adjoint_products({&full, &physics_only}, n, flows, true);
       network_backward(full, n, result.regular, flows ? &full.input_adjoint : nullptr);
       network_backward(physics_only, n, result.modified, nullptr);

@@ -36,6 +36,12 @@ enum class FlowMode {
   return mode == FlowMode::Full || mode == FlowMode::NetworkOnly;
 }
 
+/// True when a truncation window of `truncation` steps (0: none) cuts the gradient at x_n:
+/// n is a positive multiple of the window, so nothing propagates from λ_{n+1} into λ_n.
+[[nodiscard]] constexpr bool truncated_at(Index n, Index truncation) {
+  return truncation > 0 && n > 0 && n % truncation == 0;
+}
+
 /// The paper's one-letter label: R, M, N or S.
 [[nodiscard]] constexpr std::string_view label(FlowMode mode) {
   switch (mode) {

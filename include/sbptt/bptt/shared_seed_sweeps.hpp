@@ -23,6 +23,7 @@
 #include <cstddef>
 #include <memory>
 
+#include "sbptt/bptt/flow_mode.hpp"
 #include "sbptt/bptt/param_handoff.hpp"
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/types.hpp"
@@ -84,7 +85,7 @@ private:
     unit_seed_.setOnes(1, batch);
     for (Index n = e.steps_ - 1; n >= 0; --n) {
       const auto i = static_cast<std::size_t>(n);
-      const bool cut = truncation > 0 && n > 0 && n % truncation == 0;
+      const bool cut = truncated_at(n, truncation);
       e.adjoint_products({&full, &physics}, n, !cut, false);
       const Index k = e.steps_ - 1 - n;  // steps recorded so far
       const std::size_t slot = handoff != nullptr ? handoff->slot_for(k, add) : 0;

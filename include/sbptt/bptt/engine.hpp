@@ -52,8 +52,8 @@
 #include "sbptt/core/error.hpp"
 #include "sbptt/bptt/engine_buffers.hpp"
 #include "sbptt/bptt/forward_in_parts.hpp"
-#include "sbptt/bptt/param_handoff.hpp"
 #include "sbptt/bptt/packed_controller.hpp"
+#include "sbptt/bptt/param_handoff.hpp"
 #include "sbptt/bptt/shared_seed_sweeps.hpp"
 #include "sbptt/core/parallel.hpp"
 

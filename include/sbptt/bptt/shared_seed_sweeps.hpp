@@ -20,10 +20,12 @@
 /// for quantum control (2 × 8 VJPs of about 0.76 µs per step) splitting them instead of
 /// handing off the products made the two-thread C epoch 301.8 ms, against 248–263 ms
 /// (docs/benchmarks.md, fifth run).
+#include <atomic>
 #include <cstddef>
 #include <memory>
 
 #include "sbptt/bptt/flow_mode.hpp"
+#include "sbptt/bptt/packed_controller.hpp"
 #include "sbptt/bptt/param_handoff.hpp"
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/types.hpp"

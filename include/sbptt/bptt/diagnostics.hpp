@@ -1,5 +1,6 @@
 #pragma once
-/// \file What a forward pass and a reverse sweep report besides the loss and the gradient.
+/// \file What a forward pass and a reverse sweep report besides the loss and the gradient, and
+/// the pair of sweeps that the combined update needs (`GradientPair`).
 #include <cmath>
 #include <optional>
 #include <string_view>
@@ -60,5 +61,17 @@ template <class Scalar>
   result.agree_fraction = static_cast<double>(sign_agreement(modified, regular));
   return result;
 }
+
+/// Loss and both vectors the combined update needs, from one forward pass.
+template <class Scalar>
+struct GradientPair {
+  Scalar loss = 0;
+  Vector<Scalar> regular;   ///< g_R, the true gradient (Full)
+  Vector<Scalar> modified;  ///< g_M, gradient stopped at the network input (PhysicsOnly)
+  SweepDiagnostics regular_diagnostics;
+  SweepDiagnostics modified_diagnostics;
+  ComparisonDiagnostics comparison;
+  std::optional<NonFinite> forward_non_finite;
+};
 
 }  // namespace sbptt

@@ -59,18 +59,6 @@
 
 namespace sbptt {
 
-/// Loss and both vectors the combined update needs, from one forward pass.
-template <class Scalar>
-struct GradientPair {
-  Scalar loss = 0;
-  Vector<Scalar> regular;   ///< g_R, the true gradient (Full)
-  Vector<Scalar> modified;  ///< g_M, gradient stopped at the network input (PhysicsOnly)
-  SweepDiagnostics regular_diagnostics;
-  SweepDiagnostics modified_diagnostics;
-  ComparisonDiagnostics comparison;
-  std::optional<NonFinite> forward_non_finite;
-};
-
 /// Trains a `Controller` through a `Simulator`. Holds references: the simulator and the
 /// controller must outlive the engine; the forward pass uses the controller's parameters at
 /// the time of the call.

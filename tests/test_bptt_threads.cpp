@@ -157,7 +157,7 @@ TEMPLATE_TEST_CASE("threads: cart pole results are bitwise identical for 1, 2 an
 }
 
 // In float guidance is a BatchSimulator: on one thread the pair's sweeps then share one call
-// of 2B columns per step (Engine::sweep_pair), against two calls of B on two threads.
+// of 2B columns per step (ReverseSweeps::pair_in_step), against two calls of B on two threads.
 TEMPLATE_TEST_CASE("threads: guidance (continuous loss, regulariser) is bitwise identical",
                    "[bptt][threads]", float, double) {
   using S = TestType;

@@ -3,7 +3,8 @@
 ///
 /// Rollout of one sample (m steps):  c_n = N(x_n; θ),  x_{n+1} = P(x_n, c_n).
 /// Loss: see objective.hpp; the batch loss is the mean over samples, so every loss seed
-/// carries a factor 1/B. Reverse sweep (flow_mode.hpp), from λ_m = w·∂ℓ/∂x_m:
+/// carries a factor 1/B. Reverse sweep (flow_mode.hpp; its loops: reverse_sweeps.hpp), from
+/// λ_m = w·∂ℓ/∂x_m:
 ///
 ///     μ_n  = B_nᵀ λ_{n+1} + 2ρ/(m·k·B) · c_n
 ///     g   += (∂N/∂θ)_nᵀ μ_n
@@ -54,6 +55,7 @@
 #include "sbptt/bptt/forward_in_parts.hpp"
 #include "sbptt/bptt/packed_controller.hpp"
 #include "sbptt/bptt/param_handoff.hpp"
+#include "sbptt/bptt/reverse_sweeps.hpp"
 #include "sbptt/bptt/shared_seed_sweeps.hpp"
 #include "sbptt/core/parallel.hpp"
 
@@ -231,13 +233,18 @@ public:
                                    : fork_[1].probing() || fork_[1].fork();
       if (handoff_ && !split_loops) {
         Handoff& h = *handoff_;
-        auto add = [&](std::size_t slot, int) { add_params(h, slot, gradient); };
-        h.run(*pool_, steps_, add,
-              [&] { sweep(sweeps_[0], schedule, gradient, truncation, false, &h); });
+        auto add = [&](std::size_t slot, int) {
+          detail::ReverseSweeps::add_params(*this, h, slot, gradient);
+        };
+        h.run(*pool_, steps_, add, [&] {
+          detail::ReverseSweeps::lone(*this, sweeps_[0], schedule, gradient, truncation, false,
+                                      &h);
+        });
         return sweeps_[0].diagnostics;
       }
     }
-    sweep(sweeps_[0], schedule, gradient, truncation, true);
+    detail::ReverseSweeps::lone(*this, sweeps_[0], schedule, gradient, truncation, true,
+                                nullptr);
     return sweeps_[0].diagnostics;
   }
 
@@ -267,15 +274,15 @@ public:
     }
     if (pool_) {
       auto task = [&](Index item, Index) {
-        if (item == 0) {
-          sweep(sweeps_[0], FlowMode::Full, result.regular, truncation, false);
-        } else {
-          sweep(sweeps_[1], FlowMode::PhysicsOnly, result.modified, truncation, false);
-        }
+        const bool full = item == 0;
+        const FlowMode mode = full ? FlowMode::Full : FlowMode::PhysicsOnly;
+        detail::ReverseSweeps::lone(*this, sweeps_[full ? 0 : 1], mode,
+                                    full ? result.regular : result.modified, truncation, false,
+                                    nullptr);
       };
       pool_->run(2, task);
     } else {
-      sweep_pair(result, truncation);
+      detail::ReverseSweeps::pair_in_step(*this, result, truncation);
     }
     finish_pair(result);
   }
@@ -285,19 +292,13 @@ private:
   using Sweep = detail::SweepBuffers<Scalar, Scratch>;
   using EvalChunk = detail::EvaluationChunk<Scalar, typename Ctrl::Workspace, Scratch>;
 
+  using Controller = Ctrl;
   using Handoff = typename detail::ParamHandoffOf<Ctrl>::Type;
+  friend struct detail::ReverseSweeps;
   template <class Adjoints, class S>
   friend class detail::SharedSeedSweeps;
   template <class S>
   friend class detail::ForwardInParts;
-
-  /// Adds the parameter products recorded in `slot` of the hand-off to `gradient`.
-  void add_params(Handoff& h, std::size_t slot, Vector<Scalar>& gradient) const {
-    if constexpr (SplitBackwardController<Ctrl>) {
-      const auto step = static_cast<std::size_t>(h.steps[slot]);
-      controller_.add_param_gradient(trajectory_.workspaces[step], h.ring[slot], gradient);
-    }
-  }
 
   void check_initial_states(const Matrix<Scalar>& initial_states, const char* caller) const {
     detail::require(initial_states.rows() == sim_.state_dim(), "Engine::", caller, ": ",
@@ -313,123 +314,6 @@ private:
     detail::require(truncation >= 0, "Engine::reverse: truncation = ", truncation,
                     "; expected 0 (none) or a window of at least 1 step");
     schedule.validate(steps_);
-  }
-
-  /// The reverse sweep of the file comment into `s` and `gradient`. The loss seed of x_{n+1}
-  /// is added just before the VJPs of step n (`adjoint_products`).
-  /// With `handoff` the parameter products go through it (`reverse`), else they are done here.
-  void sweep(Sweep& s, const FlowSchedule& schedule, Vector<Scalar>& gradient, Index truncation,
-             bool parallel, Handoff* handoff = nullptr) {
-    begin_sweep(s, gradient, handoff != nullptr);
-    auto add = [&](std::size_t slot, int) { add_params(*handoff, slot, gradient); };
-    for (Index n = steps_ - 1; n >= 0; --n) {
-      const auto i = static_cast<std::size_t>(n);
-      const FlowMode mode = schedule.at(n);
-      const bool cut = truncated_at(n, truncation);
-      const bool physics = physics_flows(mode) && !cut;
-      const bool network = network_flows(mode) && !cut;
-      adjoint_products({&s}, n, physics, parallel);
-      Matrix<Scalar>* input_adjoint = network ? &s.input_adjoint : nullptr;
-      if constexpr (SplitBackwardController<Ctrl>) {
-        if (handoff != nullptr) {
-          const Index k = steps_ - 1 - n;  // recordings so far
-          const std::size_t slot = handoff->slot_for(k, add);
-          packed_controller_.backward_inputs(trajectory_.workspaces[i], s.mu, input_adjoint,
-                                 handoff->ring[slot]);
-          handoff->steps[slot] = n;
-          handoff->recorded.store(k + 1, std::memory_order_release);
-        }
-      }
-      if (handoff == nullptr) network_backward(s, n, gradient, input_adjoint);
-      advance(s, physics, network);
-    }
-    if constexpr (SplitBackwardController<Ctrl>) {
-      if (handoff != nullptr) handoff->wait_added(steps_, add);
-    }
-    s.end(gradient);
-  }
-
-  /// grad += (∂N/∂θ)_nᵀ μ_n of sweep `s` and, when `dx` is set, dx = K_nᵀ μ_n. For a
-  /// `SplitBackwardController` through its two halves and the sweep's own `LayerAdjoints` (the
-  /// same numbers as `backward`), so that nothing of the controller's grows per thread: the
-  /// pair's sweeps run on whichever thread claims them, and a thread-local buffer would
-  /// allocate the first time a sweep lands on a new thread.
-  void network_backward(Sweep& s, Index n, Vector<Scalar>& gradient, Matrix<Scalar>* dx) {
-    const auto& workspace = trajectory_.workspaces[static_cast<std::size_t>(n)];
-    if constexpr (SplitBackwardController<Ctrl>) {
-      auto& adjoints = sweep_adjoints_[&s == &sweeps_[0] ? 0 : 1];
-      packed_controller_.backward_inputs(workspace, s.mu, dx, adjoints);
-      controller_.add_param_gradient(workspace, adjoints, gradient);
-    } else {
-      packed_controller_.backward(workspace, s.mu, gradient, dx);
-    }
-  }
-
-  /// λ_n of the file comment from the products of step n: A_nᵀλ_{n+1} when `physics`,
-  /// K_nᵀμ_n when `network`.
-  static void advance(Sweep& s, bool physics, bool network) {
-    if (physics) {
-      s.lambda.swap(s.propagated);
-      if (network) s.lambda += s.input_adjoint;
-    } else if (network) {
-      s.lambda = s.input_adjoint;
-    } else {
-      s.lambda.setZero();
-    }
-  }
-
-  /// The pair's Full (g_R) and PhysicsOnly (g_M) sweeps step by step together on one thread,
-  /// so that the simulator differentiates both in one call per step (`adjoint_products` of
-  /// two sweeps); each sweep computes what `sweep` computes alone, bit for bit.
-  void sweep_pair(GradientPair<Scalar>& result, Index truncation) {
-    Sweep& full = sweeps_[0];
-    Sweep& physics_only = sweeps_[1];
-    begin_sweep(full, result.regular, false);
-    begin_sweep(physics_only, result.modified, false);
-    for (Index n = steps_ - 1; n >= 0; --n) {
-      const bool flows = !truncated_at(n, truncation);
-      adjoint_products({&full, &physics_only}, n, flows, true);
-      network_backward(full, n, result.regular, flows ? &full.input_adjoint : nullptr);
-      network_backward(physics_only, n, result.modified, nullptr);
-      advance(full, flows, flows);
-      advance(physics_only, flows, false);
-    }
-    full.end(result.regular);
-    physics_only.end(result.modified);
-  }
-
-  /// The per-sample half of step n of each of `sweeps` (one, or the pair's two): λ_{n+1} += its
-  /// loss seed (computed once for all), μ_n = B_nᵀλ_{n+1} (plus the control seed) and, when
-  /// `physics`, A_nᵀλ_{n+1} into `s.propagated`. The loops use the first sweep's scratch. A
-  /// `BatchSimulator` gets the whole batch's VJPs in one call per sweep.
-  void adjoint_products(std::initializer_list<Sweep*> sweeps, Index n, bool physics,
-                        bool parallel) {
-    const auto i = static_cast<std::size_t>(n);
-    const auto batch = static_cast<double>(trajectory_.batch());
-    const auto seed_scale = static_cast<Scalar>(objective_.step_weight / batch);  // w/B
-    const auto control_seed = static_cast<Scalar>(  // 2ρ/(m·k·B)
-        2.0 * objective_.control_weight /
-        (static_cast<double>(steps_ * sim_.control_dim()) * batch));
-    const bool scored = objective_.timing == LossTiming::Continuous || n + 1 == steps_;
-    auto seed = [&](Index b, Scratch& t) {  // λ_{n+1} += w/B · ∂ℓ/∂x_{n+1}
-      t.x = trajectory_.states[i + 1].col(b);
-      objective_.state_loss(t.x, &t.seed);
-      for (Sweep* s : sweeps) s->lambda.col(b) += seed_scale * t.seed;
-    };
-    detail::vjp_columns(sim_, trajectory_.states[i], trajectory_.controls[i], sweeps, physics,
-                        scored, seed, [&](auto&& body) {
-      fork_[1].for_samples(pool_.get(), trajectory_.batch(), (*sweeps.begin())->scratch,
-                           parallel, body);
-    }, paired_columns_);
-    for (Sweep* s : sweeps) {
-      s->record_adjoint(n + 1);
-      if (objective_.control_weight > 0) s->mu.noalias() += control_seed * trajectory_.controls[i];
-    }
-  }
-
-  void begin_sweep(Sweep& s, Vector<Scalar>& gradient, bool overlapped) {
-    gradient.setZero(controller_.num_params());
-    s.begin(sim_.state_dim(), sim_.control_dim(), trajectory_.batch(), steps_, overlapped);
   }
 
   void finish_pair(GradientPair<Scalar>& result) const {
@@ -480,7 +364,8 @@ private:
   detail::ForwardInParts<Scalar> forward_in_parts_;  ///< `forward` on several threads
   detail::ForkDecision fork_[3];  ///< per-sample loops: simulator step, VJPs, batch loss
   Sweep sweeps_[2];
-  typename detail::LayerAdjointsOf<Ctrl>::Type sweep_adjoints_[2];  ///< `network_backward`
+  /// Each sweep's layer adjoints when it adds its own parameter products (no hand-off).
+  typename detail::LayerAdjointsOf<Ctrl>::Type sweep_adjoints_[2];
   detail::PairedColumns<Scalar> paired_columns_;  ///< both sweeps' VJPs in one batch call
   std::vector<EvalChunk> chunks_;
   Vector<Scalar> eval_losses_;

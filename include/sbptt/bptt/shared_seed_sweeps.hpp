@@ -27,6 +27,7 @@
 #include "sbptt/bptt/flow_mode.hpp"
 #include "sbptt/bptt/packed_controller.hpp"
 #include "sbptt/bptt/param_handoff.hpp"
+#include "sbptt/bptt/reverse_sweeps.hpp"
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/types.hpp"
 
@@ -82,13 +83,13 @@ private:
     const Index batch = e.trajectory_.batch();
     auto& full = e.sweeps_[0];
     auto& physics = e.sweeps_[1];
-    e.begin_sweep(full, result.regular, handoff != nullptr);
-    e.begin_sweep(physics, result.modified, handoff != nullptr);
+    ReverseSweeps::begin(e, full, result.regular, handoff != nullptr);
+    ReverseSweeps::begin(e, physics, result.modified, handoff != nullptr);
     unit_seed_.setOnes(1, batch);
     for (Index n = e.steps_ - 1; n >= 0; --n) {
       const auto i = static_cast<std::size_t>(n);
       const bool cut = truncated_at(n, truncation);
-      e.adjoint_products({&full, &physics}, n, !cut, false);
+      ReverseSweeps::adjoint_products(e, {&full, &physics}, n, !cut, false);
       const Index k = e.steps_ - 1 - n;  // steps recorded so far
       const std::size_t slot = handoff != nullptr ? handoff->slot_for(k, add) : 0;
       Step& step = handoff != nullptr ? handoff->ring[slot] : single_;

@@ -274,11 +274,13 @@ public:
     }
     if (pool_) {
       auto task = [&](Index item, Index) {
-        const bool full = item == 0;
-        const FlowMode mode = full ? FlowMode::Full : FlowMode::PhysicsOnly;
-        detail::ReverseSweeps::lone(*this, sweeps_[full ? 0 : 1], mode,
-                                    full ? result.regular : result.modified, truncation, false,
-                                    nullptr);
+        if (item == 0) {
+          detail::ReverseSweeps::lone(*this, sweeps_[0], FlowMode::Full, result.regular,
+                                      truncation, false, nullptr);
+        } else {
+          detail::ReverseSweeps::lone(*this, sweeps_[1], FlowMode::PhysicsOnly, result.modified,
+                                      truncation, false, nullptr);
+        }
       };
       pool_->run(2, task);
     } else {

@@ -1,18 +1,20 @@
 #pragma once
 /// \file The reverse sweeps of `Engine` over its stored trajectory: a lone sweep in any flow
-/// schedule (`Engine::reverse`), the pair of the combined update step by step together on one
-/// thread, and the per-sample half of a step that every sweep shares (the shared-seed sweeps
-/// of shared_seed_sweeps.hpp too). Implementation detail of `Engine` (its friend).
+/// schedule (`Engine::reverse`, and each sweep of the combined update's pair on two threads),
+/// the pair step by step together on one thread, and the per-sample half of a step that every
+/// sweep shares (the shared-seed sweeps of shared_seed_sweeps.hpp too). Implementation detail
+/// of `Engine` (its friend).
 ///
 /// Each sweep runs the recursion of engine.hpp's file comment from λ_m back to λ_0: the control
 /// adjoint μ_n, the parameter products (∂N/∂θ)_nᵀ μ_n, then λ_n, with the propagated terms
 /// dropped where the truncation window cuts (flow_mode.hpp).
+#include <atomic>
 #include <cstddef>
 #include <initializer_list>
 
 #include "sbptt/bptt/batch_physics.hpp"
-#include "sbptt/bptt/diagnostics.hpp"
 #include "sbptt/bptt/flow_mode.hpp"
+#include "sbptt/bptt/objective.hpp"
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/types.hpp"
 
@@ -21,8 +23,8 @@ namespace sbptt::detail {
 /// The sweeps of an `Engine`, as functions of it: they work in its sweep buffers, its
 /// trajectory and its threads.
 struct ReverseSweeps {
-  /// The reverse sweep of the file comment into `s` and `gradient`. The loss seed of x_{n+1}
-  /// is added just before the VJPs of step n (`adjoint_products`).
+  /// The reverse sweep of engine.hpp's file comment into `s` and `gradient`. The loss seed of
+  /// x_{n+1} is added just before the VJPs of step n (`adjoint_products`).
   /// With `handoff` the parameter products go through it (`Engine::reverse`), else they are
   /// done here.
   template <class Engine, class Sweep>
@@ -100,8 +102,9 @@ struct ReverseSweeps {
       objective.state_loss(t.x, &t.seed);
       for (Sweep* s : sweeps) s->lambda.col(b) += seed_scale * t.seed;
     };
-    vjp_columns(e.sim_, e.trajectory_.states[i], e.trajectory_.controls[i], sweeps, physics,
-                scored, seed, [&](auto&& body) {
+    const auto& x = e.trajectory_.states[i];
+    const auto& u = e.trajectory_.controls[i];
+    detail::vjp_columns(e.sim_, x, u, sweeps, physics, scored, seed, [&](auto&& body) {
       e.fork_[1].for_samples(e.pool_.get(), e.trajectory_.batch(), (*sweeps.begin())->scratch,
                              parallel, body);
     }, e.paired_columns_);
@@ -151,7 +154,7 @@ private:
     }
   }
 
-  /// λ_n of the file comment from the products of step n: A_nᵀλ_{n+1} when `physics`,
+  /// λ_n of engine.hpp's file comment from the products of step n: A_nᵀλ_{n+1} when `physics`,
   /// K_nᵀμ_n when `network`.
   template <class Sweep>
   static void advance(Sweep& s, bool physics, bool network) {

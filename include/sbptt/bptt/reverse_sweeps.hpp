@@ -110,7 +110,7 @@ struct ReverseSweeps {
     }, e.paired_columns_);
     for (Sweep* s : sweeps) {
       s->record_adjoint(n + 1);
-      if (objective.control_weight > 0) s->mu.noalias() += control_seed * e.trajectory_.controls[i];
+      if (objective.control_weight > 0) s->mu.noalias() += control_seed * u;
     }
   }
 

@@ -78,7 +78,7 @@ double measure_peak() {
 
 /// Median over batches of the time of one round trip of a cache line between two threads,
 /// each waiting for the other's store: the price of every hand-off between the engine's
-/// threads. On the machine of docs/benchmarks.md (eleventh run) it swings between about 80
+/// threads. On the machine of docs/benchmark-runs.md (eleventh run) it swings between about 80
 /// and 400 ns from one minute to the next, and the two-thread speed-ups swing with it, so
 /// every row prints the round trip measured right after its threaded epochs. The first batch
 /// is left out: it waits for the new thread to start, which took up to 16 ms there.

@@ -72,7 +72,7 @@ public:
     // copies are (m + 1)·state_dim·B + m·control_dim·B numbers (35 KiB for the paper's cart
     // pole, beside its 694 KiB trajectory). The controller's workspace is still written in
     // place, so its matrices whose columns are not whole cache lines (the cart pole's input,
-    // 10 floats, and output) share a line at the cut: docs/benchmarks.md, eleventh run.
+    // 10 floats, and output) share a line at the cut: docs/benchmark-runs.md, eleventh run.
     for (Index k = 0; k < parts; ++k) {
       const ForwardPart<Scalar>& part = parts_[static_cast<std::size_t>(k)];
       const Index first = first_of(k), count = first_of(k + 1) - first;

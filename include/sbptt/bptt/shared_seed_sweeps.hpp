@@ -19,7 +19,7 @@
 /// loops are never split over the threads here, even where a lone sweep would split them:
 /// for quantum control (2 × 8 VJPs of about 0.76 µs per step) splitting them instead of
 /// handing off the products made the two-thread C epoch 301.8 ms, against 248–263 ms
-/// (docs/benchmarks.md, fifth run).
+/// (docs/benchmark-runs.md, fifth run).
 #include <atomic>
 #include <cstddef>
 #include <memory>

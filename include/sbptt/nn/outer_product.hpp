@@ -6,9 +6,9 @@
 /// gradient: dW += Σ_k d_k x_kᵀ. At the paper's batch of 8 the inner dimension is 8, and a
 /// general matrix product packs both operands and then loads and stores all of dW around
 /// those 8 multiply-adds: Eigen runs the 100 × 100 × 8 product at about 120 GFLOP/s on an
-/// AVX-512 core that peaks near 200 (docs/benchmarks.md). The kernel below keeps a block of X
-/// (3 column panels × 8 samples) in registers and streams the rows of dW past it, which runs
-/// at about 230.
+/// AVX-512 core that peaks near 200 (docs/benchmark-runs.md, fourth run). The kernel below
+/// keeps a block of X (3 column panels × 8 samples) in registers and streams the rows of dW
+/// past it, which runs at about 230.
 ///
 /// It needs 32 vector registers and masked loads and stores for the rows' last panel, so it is
 /// compiled for AVX-512 only, and used when a row of dW fills at least half a register (100 ×

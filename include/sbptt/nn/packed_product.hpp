@@ -4,8 +4,9 @@
 /// A rollout multiplies the same weight by a small batch (8 samples in the paper) at every one
 /// of its steps. A general matrix product packs its left operand on every call, and at 8
 /// columns that packing and the zeroing of the destination cost as much as the multiply-adds
-/// (docs/benchmarks.md). Packing the weight once per parameter update and keeping it turns
-/// each step's product into the loop below, which runs at the core's multiply-add peak.
+/// (docs/benchmark-runs.md, second run). Packing the weight once per parameter update and
+/// keeping it turns each step's product into the loop below, which runs at the core's
+/// multiply-add peak.
 ///
 /// Layout: A (rows × cols) is cut into panels of `kLanes` rows (one SIMD register); a panel
 /// stores its columns one after another, each as kLanes contiguous scalars, and the last

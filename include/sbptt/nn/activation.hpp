@@ -68,11 +68,16 @@ struct CephesTanh {
 /// tanh in registers").
 template <class Packet>
 [[nodiscard]] Packet tanh_packet_double(const Packet& x) {
+  using Eigen::internal::pabs;
   using Eigen::internal::padd;
+  using Eigen::internal::pcmp_lt;
   using Eigen::internal::pdiv;
+  using Eigen::internal::pexp;
   using Eigen::internal::pmadd;
   using Eigen::internal::pmul;
+  using Eigen::internal::pselect;
   using Eigen::internal::pset1;
+  using Eigen::internal::psub;
   using C = CephesTanh;
   const Packet one = pset1<Packet>(1.0);
   const Packet s = pmul(x, x);
@@ -81,11 +86,9 @@ template <class Packet>
   const Packet q = pmadd(pmadd(padd(s, pset1<Packet>(C::q0)), s, pset1<Packet>(C::q1)), s,
                          pset1<Packet>(C::q2));
   const Packet up_to_branch = pmul(x, pmadd(s, pdiv(p, q), one));
-  const Packet past_branch = Eigen::internal::psub(
-      one, pdiv(pset1<Packet>(2.0), padd(Eigen::internal::pexp(padd(x, x)), one)));
-  const Packet is_past_branch =
-      Eigen::internal::pcmp_lt(pset1<Packet>(C::branch_point), Eigen::internal::pabs(x));
-  return Eigen::internal::pselect(is_past_branch, past_branch, up_to_branch);
+  const Packet past_branch = psub(one, pdiv(pset1<Packet>(2.0), padd(pexp(padd(x, x)), one)));
+  const Packet is_past_branch = pcmp_lt(pset1<Packet>(C::branch_point), pabs(x));
+  return pselect(is_past_branch, past_branch, up_to_branch);
 }
 
 /// The same with Eigen arrays, for builds whose registers hold fewer than 4 doubles: the pick

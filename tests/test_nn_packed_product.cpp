@@ -66,19 +66,62 @@ TEMPLATE_TEST_CASE("a column's result does not depend on the batch around it", "
                    float, double) {
   using S = TestType;
   // 100 rows use the panels, kLanes/4 rows (if a register has 4 lanes or more) and 1 row the
-  // short-matrix dot products (file comment).
-  const Index short_rows = std::max<Index>(1, PackedMatrix<S>::kLanes / 4);
-  for (const Index rows : {Index{100}, short_rows, Index{1}}) {
+  // short-matrix dot products (file comment). In panels, every batch of 1 to 19 columns cuts
+  // into blocks of 8, 4, 2 and 1 columns, and 1 to 9 panels (3, 5, 7 and 9 of them with an odd
+  // last panel, partial or whole) into blocks of 1, 2, 3 and up to 8 panels: a column must
+  // come out the same in each.
+  const Index lanes = PackedMatrix<S>::kLanes;
+  const Index short_rows = std::max<Index>(1, lanes / 4);
+  for (const Index rows : {Index{100}, short_rows, Index{1}, 2 * lanes + 1, 3 * lanes, 5 * lanes,
+                           9 * lanes - 3}) {
     const Matrix<S> w = random_matrix<S>(rows * 37, 1, 5, 1.0);
     const Matrix<S> b = random_matrix<S>(rows, 1, 6, 1.0);
     PackedMatrix<S> a;
     a.pack(w.data(), rows, 37, false, b.data());
     const Matrix<S> x = random_matrix<S>(37, 19, 7, 1.0);
-    Matrix<S> batch(rows, 19), single(rows, 1);
-    a.multiply(x.data(), 37, 19, batch.data(), rows);
-    for (Index j = 0; j < 19; ++j) {
-      a.multiply(x.col(j).data(), 37, 1, single.data(), rows);
-      REQUIRE((single.col(0).array() == batch.col(j).array()).all());
+    Matrix<S> single(rows, 1);
+    for (Index n = 1; n <= 19; ++n) {
+      Matrix<S> batch(rows, n);
+      a.multiply(x.data(), 37, n, batch.data(), rows);
+      for (Index j = 0; j < n; ++j) {
+        a.multiply(x.col(j).data(), 37, 1, single.data(), rows);
+        INFO("rows " << rows << ", column " << j << " of " << n);
+        REQUIRE((single.col(0).array() == batch.col(j).array()).all());
+      }
+    }
+  }
+}
+
+TEMPLATE_TEST_CASE("every entry of the product is its bias plus the terms in column order",
+                   "[nn][packed]", float, double) {
+  // The order of the file comment, with fused multiply-adds where the build has them: one
+  // independent truth for every block shape at once (the batch test above only ties them).
+  using S = TestType;
+  const Index lanes = PackedMatrix<S>::kLanes;
+  for (const Index rows : {Index{100}, 3 * lanes, 7 * lanes - 5}) {
+    const Index cols = 29;
+    const Matrix<S> w = random_matrix<S>(rows * cols, 1, 15, 1.0);
+    const Matrix<S> b = random_matrix<S>(rows, 1, 16, 1.0);
+    PackedMatrix<S> a;
+    a.pack(w.data(), rows, cols, false, b.data());
+    for (const Index n : {Index{1}, Index{2}, Index{3}, Index{4}, Index{7}, Index{8}, Index{13}}) {
+      const Matrix<S> x = random_matrix<S>(cols, n, 17 + n, 1.0);
+      Matrix<S> y(rows, n);
+      a.multiply(x.data(), cols, n, y.data(), rows);
+      for (Index j = 0; j < n; ++j) {
+        for (Index i = 0; i < rows; ++i) {
+          S sum = b(i);
+          for (Index k = 0; k < cols; ++k) {
+#if defined(EIGEN_VECTORIZE_FMA)
+            sum = std::fma(w(i * cols + k), x(k, j), sum);
+#else
+            sum = w(i * cols + k) * x(k, j) + sum;
+#endif
+          }
+          INFO("rows " << rows << " n " << n << " entry (" << i << ", " << j << ")");
+          REQUIRE(y(i, j) == sum);
+        }
+      }
     }
   }
 }

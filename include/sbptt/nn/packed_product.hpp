@@ -26,6 +26,7 @@
 #include <algorithm>
 #include <cmath>
 #include <type_traits>
+#include <utility>
 
 #include <Eigen/Core>
 
@@ -94,8 +95,16 @@ public:
       constexpr int width = decltype(columns)::value;
       for (; j + width <= n; j += width) {
         Index p = 0;
-        for (; p + 2 <= full_panels; p += 2)
+        // An odd last panel goes with the two before it where the registers hold three
+        // panels' accumulators: a lone panel keeps only `width` multiply-adds in flight.
+        constexpr bool last_three = 3 * width + 4 < EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS;
+        const Index paired = last_three && panels >= 3 && panels % 2 == 1 ? panels - 3 : panels;
+        for (; p + 2 <= full_panels && p + 2 <= paired; p += 2)
           block<2, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+        if (last_three && p + 3 == panels) {
+          block<3, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+          p += 3;
+        }
         for (; p < panels; ++p) block<1, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
       }
     };
@@ -103,14 +112,39 @@ public:
     // Half a block: a batch split over two threads (the paper's 8 samples, 4 each) still keeps
     // 8 multiply-adds in flight instead of one chain per column.
     if constexpr (kColumnBlock > 4) blocks_of(std::integral_constant<int, 4>{});
-    for (; j < n; ++j)
-      for (Index p = 0; p < panels; ++p) block<1, 1>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+    // The last 1 to 3 columns (a batch cut over 3 or more threads has such parts) in blocks of
+    // more panels, for the same reason: one panel a block would leave one chain per column.
+    if (j + 2 <= n) {
+      narrow_columns<2>(panels, x + j * ldx, ldx, y + j * ldy, ldy);
+      j += 2;
+    }
+    if (j < n) narrow_columns<1>(panels, x + j * ldx, ldx, y + j * ldy, ldy);
   }
 
 private:
   // Accumulators of a 2-panel block, plus the two weight registers and a broadcast, must fit
   // in the register file (32 registers with AVX-512, 16 with SSE/AVX on x86-64).
   static constexpr int kColumnBlock = EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS >= 32 ? 8 : 4;
+
+  /// Columns 0 … Columns − 1 of every row, in blocks of as many panels as the registers
+  /// hold beside their accumulators (8 with 32 registers, 4 with 16), the last block smaller.
+  template <int Columns>
+  void narrow_columns(Index panels, const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
+    constexpr int kPanels = EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS >= 32 ? 8 : 4;
+    Index p = 0;
+    for (; p + kPanels <= panels; p += kPanels) block<kPanels, Columns>(p, x, ldx, y, ldy);
+    last_block<Columns>(panels - p, p, x, ldx, y, ldy, std::make_index_sequence<kPanels - 1>{});
+  }
+
+  /// Panels p … p + count − 1 (count below `narrow_columns`' block) in one block.
+  template <int Columns, std::size_t... Counts>
+  void last_block(Index count, Index p, const Scalar* x, Index ldx, Scalar* y, Index ldy,
+                  std::index_sequence<Counts...> /*sizes*/) const {
+    ((count == static_cast<Index>(Counts) + 1
+          ? block<static_cast<int>(Counts) + 1, Columns>(p, x, ldx, y, ldy)
+          : void()),
+     ...);
+  }
 
   /// Rows p·kLanes … (p + Panels)·kLanes − 1 of Y, columns 0 … Columns − 1.
   template <int Panels, int Columns>

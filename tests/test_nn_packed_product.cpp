@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 #include <tuple>
+#include <vector>
 
 #include "support/test_data.hpp"
 #include "sbptt/nn/network.hpp"
@@ -62,18 +63,29 @@ TEMPLATE_TEST_CASE("packed product equals a long-double product within the round
   }
 }
 
+// Row counts that reach every way the panels are cut into blocks: 1, 2, 3, 4, 5, 7, 8, 9 and
+// 11 panels, the last one partial or whole (100 rows: 7 panels of 16 floats, 13 of 8 doubles).
+template <class S>
+std::vector<Index> panel_row_counts() {
+  const Index lanes = PackedMatrix<S>::kLanes;
+  // lanes / 2 + 1: one partial panel, more rows than the dot products take.
+  return {Index{100},    lanes / 2 + 1, lanes,         2 * lanes - 1, 2 * lanes + 1,
+          3 * lanes,     4 * lanes,     5 * lanes,     7 * lanes - 5, 8 * lanes - 1,
+          9 * lanes - 3, 10 * lanes + 1};
+}
+
 TEMPLATE_TEST_CASE("a column's result does not depend on the batch around it", "[nn][packed]",
                    float, double) {
   using S = TestType;
   // 100 rows use the panels, kLanes/4 rows (if a register has 4 lanes or more) and 1 row the
   // short-matrix dot products (file comment). In panels, every batch of 1 to 19 columns cuts
-  // into blocks of 8, 4, 2 and 1 columns, and 1 to 9 panels (3, 5, 7 and 9 of them with an odd
-  // last panel, partial or whole) into blocks of 1, 2, 3 and up to 8 panels: a column must
-  // come out the same in each.
-  const Index lanes = PackedMatrix<S>::kLanes;
-  const Index short_rows = std::max<Index>(1, lanes / 4);
-  for (const Index rows : {Index{100}, short_rows, Index{1}, 2 * lanes + 1, 3 * lanes, 5 * lanes,
-                           9 * lanes - 3}) {
+  // into blocks of 8, 4, 2 and 1 columns, and the panels (1, 2, 3, 4, 5, 7, 8, 9 and 11 of
+  // them, the last partial or whole) into blocks of 1, 2, 3 and up to 8: a column must come
+  // out the same in each.
+  std::vector<Index> row_counts = panel_row_counts<S>();
+  row_counts.push_back(std::max<Index>(1, PackedMatrix<S>::kLanes / 4));
+  row_counts.push_back(1);
+  for (const Index rows : row_counts) {
     const Matrix<S> w = random_matrix<S>(rows * 37, 1, 5, 1.0);
     const Matrix<S> b = random_matrix<S>(rows, 1, 6, 1.0);
     PackedMatrix<S> a;
@@ -97,8 +109,7 @@ TEMPLATE_TEST_CASE("every entry of the product is its bias plus the terms in col
   // The order of the file comment, with fused multiply-adds where the build has them: one
   // independent truth for every block shape at once (the batch test above only ties them).
   using S = TestType;
-  const Index lanes = PackedMatrix<S>::kLanes;
-  for (const Index rows : {Index{100}, 3 * lanes, 7 * lanes - 5}) {
+  for (const Index rows : panel_row_counts<S>()) {
     const Index cols = 29;
     const Matrix<S> w = random_matrix<S>(rows * cols, 1, 15, 1.0);
     const Matrix<S> b = random_matrix<S>(rows, 1, 16, 1.0);
@@ -106,18 +117,14 @@ TEMPLATE_TEST_CASE("every entry of the product is its bias plus the terms in col
     a.pack(w.data(), rows, cols, false, b.data());
     for (const Index n : {Index{1}, Index{2}, Index{3}, Index{4}, Index{7}, Index{8}, Index{13}}) {
       const Matrix<S> x = random_matrix<S>(cols, n, 17 + n, 1.0);
-      Matrix<S> y(rows, n);
+      // NaN until written: an entry that no block computes cannot pass.
+      Matrix<S> y = Matrix<S>::Constant(rows, n, std::numeric_limits<S>::quiet_NaN());
       a.multiply(x.data(), cols, n, y.data(), rows);
       for (Index j = 0; j < n; ++j) {
         for (Index i = 0; i < rows; ++i) {
           S sum = b(i);
-          for (Index k = 0; k < cols; ++k) {
-#if defined(EIGEN_VECTORIZE_FMA)
-            sum = std::fma(w(i * cols + k), x(k, j), sum);
-#else
-            sum = w(i * cols + k) * x(k, j) + sum;
-#endif
-          }
+          for (Index k = 0; k < cols; ++k)
+            sum = sbptt::detail::fused_multiply_add(w(i * cols + k), x(k, j), sum);
           INFO("rows " << rows << " n " << n << " entry (" << i << ", " << j << ")");
           REQUIRE(y(i, j) == sum);
         }

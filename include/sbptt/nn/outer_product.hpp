@@ -25,6 +25,7 @@
 
 #include <Eigen/Core>
 
+#include "sbptt/core/count_dispatch.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
 
@@ -50,8 +51,10 @@ public:
     Index k = 0;
     for (; k + kSamples <= n; k += kSamples)
       samples<kSamples>(dw, rows, cols, d + k * rows, x + k * cols, at(scale, k));
-    last_samples(n - k, dw, rows, cols, d + k * rows, x + k * cols, at(scale, k),
-                 std::make_index_sequence<kSamples - 1>{});
+    // The 1 … kSamples − 1 samples after the last full group, by a kernel of that width.
+    with_count<kSamples - 1>(n - k, [&](auto count) {
+      samples<decltype(count)::value>(dw, rows, cols, d + k * rows, x + k * cols, at(scale, k));
+    });
   }
 
 private:
@@ -66,17 +69,6 @@ private:
 
   static const Scalar* at(const Scalar* scale, Index k) {
     return scale == nullptr ? nullptr : scale + k;
-  }
-
-  /// The 1 … kSamples − 1 samples after the last full group, by a kernel of that width.
-  template <std::size_t... Counts>
-  static void last_samples(Index count, Scalar* dw, Index rows, Index cols, const Scalar* d,
-                           const Scalar* x, const Scalar* scale,
-                           std::index_sequence<Counts...> /*widths*/) {
-    ((count == static_cast<Index>(Counts) + 1
-          ? samples<static_cast<int>(Counts) + 1>(dw, rows, cols, d, x, scale)
-          : void()),
-     ...);
   }
 
   /// One pass over dW adding `Samples` samples' outer products: blocks of kPanels column

@@ -26,13 +26,29 @@
 #include <algorithm>
 #include <cmath>
 #include <type_traits>
-#include <utility>
 
 #include <Eigen/Core>
 
+#include "sbptt/core/count_dispatch.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt {
+namespace detail {
+
+/// a·b + c rounded once where the target has a hardware FMA (x86 with FMA, ARM, POWER), as
+/// the packed product's register code computes it; rounded twice elsewhere, where the
+/// compiler cannot contract either and std::fma would be a slow library call.
+template <class Scalar>
+Scalar fused_multiply_add(Scalar a, Scalar b, Scalar c) {
+#if defined(EIGEN_VECTORIZE_FMA) || defined(__FP_FAST_FMA) || defined(__FP_FAST_FMAF) || \
+    defined(__ARM_FEATURE_FMA)
+  return std::fma(a, b, c);
+#else
+  return a * b + c;
+#endif
+}
+
+}  // namespace detail
 
 /// A matrix in the panel layout of the file comment, with an optional bias.
 template <class Scalar>
@@ -89,17 +105,17 @@ public:
       return;
     }
     const Index panels = (rows_ + kLanes - 1) / kLanes;
-    const Index full_panels = rows_ / kLanes;
     Index j = 0;
     auto blocks_of = [&](auto columns) {
       constexpr int width = decltype(columns)::value;
       for (; j + width <= n; j += width) {
         Index p = 0;
-        // An odd last panel goes with the two before it where the registers hold three
-        // panels' accumulators: a lone panel keeps only `width` multiply-adds in flight.
+        // An odd last panel goes with the two before it where three panels' accumulators,
+        // weights and a broadcast leave a register spare: a lone panel keeps only `width`
+        // multiply-adds in flight. (A partial panel is padded with zero rows, so it pairs too.)
         constexpr bool last_three = 3 * width + 4 < EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS;
         const Index paired = last_three && panels >= 3 && panels % 2 == 1 ? panels - 3 : panels;
-        for (; p + 2 <= full_panels && p + 2 <= paired; p += 2)
+        for (; p + 2 <= paired; p += 2)
           block<2, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
         if (last_three && p + 3 == panels) {
           block<3, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
@@ -126,24 +142,19 @@ private:
   // in the register file (32 registers with AVX-512, 16 with SSE/AVX on x86-64).
   static constexpr int kColumnBlock = EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS >= 32 ? 8 : 4;
 
-  /// Columns 0 … Columns − 1 of every row, in blocks of as many panels as the registers
-  /// hold beside their accumulators (8 with 32 registers, 4 with 16), the last block smaller.
+  /// Columns 0 … Columns − 1 (1 or 2) of every row, in blocks of enough panels for about 8
+  /// independent chains of multiply-adds, which hide their latency at two a cycle, where the
+  /// accumulators, the panels' weights and a broadcast fit in the registers (with 16: 7 panels
+  /// of one column, 4 of two); the last block smaller.
   template <int Columns>
   void narrow_columns(Index panels, const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
-    constexpr int kPanels = EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS >= 32 ? 8 : 4;
+    constexpr int kPanels =
+        EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS >= 32 ? 8 : (Columns == 1 ? 7 : 4);
     Index p = 0;
     for (; p + kPanels <= panels; p += kPanels) block<kPanels, Columns>(p, x, ldx, y, ldy);
-    last_block<Columns>(panels - p, p, x, ldx, y, ldy, std::make_index_sequence<kPanels - 1>{});
-  }
-
-  /// Panels p … p + count − 1 (count below `narrow_columns`' block) in one block.
-  template <int Columns, std::size_t... Counts>
-  void last_block(Index count, Index p, const Scalar* x, Index ldx, Scalar* y, Index ldy,
-                  std::index_sequence<Counts...> /*sizes*/) const {
-    ((count == static_cast<Index>(Counts) + 1
-          ? block<static_cast<int>(Counts) + 1, Columns>(p, x, ldx, y, ldy)
-          : void()),
-     ...);
+    detail::with_count<kPanels - 1>(panels - p, [&](auto count) {
+      block<decltype(count)::value, Columns>(p, x, ldx, y, ldy);
+    });
   }
 
   /// Rows p·kLanes … (p + Panels)·kLanes − 1 of Y, columns 0 … Columns − 1.
@@ -192,19 +203,8 @@ private:
     }
     // std::fma where FMA exists: a plain a·x + sum may be contracted in one inlined copy of
     // this loop and not in another, and a column would depend on its batch.
-    for (Index k = whole; k < cols_; ++k) sum = fused_multiply_add(a[k], x[k], sum);
+    for (Index k = whole; k < cols_; ++k) sum = detail::fused_multiply_add(a[k], x[k], sum);
     return sum;
-  }
-
-  // Any target with a hardware FMA (x86 with FMA, ARM, POWER): where there is none, the
-  // compiler cannot contract either, and std::fma would be a slow library call.
-  static Scalar fused_multiply_add(Scalar a, Scalar b, Scalar c) {
-#if defined(EIGEN_VECTORIZE_FMA) || defined(__FP_FAST_FMA) || defined(__FP_FAST_FMAF) || \
-    defined(__ARM_FEATURE_FMA)
-    return std::fma(a, b, c);
-#else
-    return a * b + c;
-#endif
   }
 
   static void grow_and_zero(Vector<Scalar>& storage, Index size) {

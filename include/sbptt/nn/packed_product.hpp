@@ -148,11 +148,12 @@ private:
   /// of one column, 4 of two); the last block smaller.
   template <int Columns>
   void narrow_columns(Index panels, const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
-    constexpr int kPanels =
+    constexpr int block_panels =
         EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS >= 32 ? 8 : (Columns == 1 ? 7 : 4);
     Index p = 0;
-    for (; p + kPanels <= panels; p += kPanels) block<kPanels, Columns>(p, x, ldx, y, ldy);
-    detail::with_count<kPanels - 1>(panels - p, [&](auto count) {
+    for (; p + block_panels <= panels; p += block_panels)
+      block<block_panels, Columns>(p, x, ldx, y, ldy);
+    detail::with_count<block_panels - 1>(panels - p, [&](auto count) {
       block<decltype(count)::value, Columns>(p, x, ldx, y, ldy);
     });
   }

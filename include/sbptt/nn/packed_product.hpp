@@ -105,6 +105,7 @@ public:
       return;
     }
     const Index panels = (rows_ + kLanes - 1) / kLanes;
+    const Index full_panels = rows_ / kLanes;
     Index j = 0;
     auto blocks_of = [&](auto columns) {
       constexpr int width = decltype(columns)::value;
@@ -112,10 +113,12 @@ public:
         Index p = 0;
         // An odd last panel goes with the two before it where three panels' accumulators,
         // weights and a broadcast leave a register spare: a lone panel keeps only `width`
-        // multiply-adds in flight. (A partial panel is padded with zero rows, so it pairs too.)
+        // multiply-adds in flight. (Pairs stop at the last whole panel: pairing a partial one
+        // too made GCC 12's code for 4 columns 10% slower, 443–449 against 396–410 ns for
+        // 100 × 100; docs/benchmark-runs.md, fifteenth run.)
         constexpr bool last_three = 3 * width + 4 < EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS;
         const Index paired = last_three && panels >= 3 && panels % 2 == 1 ? panels - 3 : panels;
-        for (; p + 2 <= paired; p += 2)
+        for (; p + 2 <= full_panels && p + 2 <= paired; p += 2)
           block<2, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
         if (last_three && p + 3 == panels) {
           block<3, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);

@@ -21,7 +21,6 @@
 /// fused multiply-adds, whatever the shapes; Eigen's product has an order of its own. Either
 /// way the order depends only on the shapes, so results do not depend on the thread count.
 #include <type_traits>
-#include <utility>
 
 #include <Eigen/Core>
 

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <limits>
 #include <tuple>
+#include <utility>
+#include <vector>
 
 #include "support/test_data.hpp"
 #include "sbptt/nn/outer_product.hpp"
@@ -99,6 +101,51 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel's scale within the rounding 
               static_cast<long double>(n + 2) * static_cast<long double>(eps) * magnitude * 1.01L;
           INFO("entry (" << i << ", " << j << ")");
           REQUIRE(std::abs(static_cast<long double>(dw(i * cols + j)) - exact) <= bound);
+        }
+      }
+    }
+  }
+  // Where the kernel exists at all (AVX-512 builds), these shapes must have reached it.
+  if (sbptt::outer_product_kernel_applies<S>(1 << 20)) CHECK(kernel_cases > 0);
+}
+
+TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel sums each entry in sample order, bit for bit",
+                   "[nn][outer]", float, double) {
+  // The kernel's promise (outer_product.hpp): every entry is ((dW_ij + d_i0 x'_j0) + d_i1
+  // x'_j1) + … with fused multiply-adds, x' = s·x rounded, whatever the shapes and whatever
+  // order the kernel visits the rows in. Rows narrower than a register: blocks of 8 rows with
+  // every remainder 0 … 7 and one lone short block (rows 1 … 17), the paper's 100 × 10 and an
+  // odd 97; wider rows for the masked tail beside them.
+  using S = TestType;
+  constexpr Index kLanes = sizeof(S) == 4 ? 16 : 8;
+  std::uint64_t seed = 900;
+  int kernel_cases = 0;
+  std::vector<std::pair<Index, Index>> shapes = {{100, kLanes / 2 + 2}, {97, kLanes - 1},
+                                                 {100, 100}, {33, kLanes + 3}};
+  for (Index rows = 1; rows <= 17; ++rows) shapes.emplace_back(rows, kLanes / 2);
+  for (const auto& [rows, cols] : shapes) {
+    if (!sbptt::outer_product_kernel_applies<S>(cols)) continue;
+    for (const Index n : {1, 8, 9, 21}) {
+      for (const bool scaled : {false, true}) {
+        ++kernel_cases;
+        const Matrix<S> d = random_matrix<S>(rows, n, ++seed, 1.0);
+        const Matrix<S> x = random_matrix<S>(cols, n, ++seed, 1.0);
+        const Matrix<S> scale = random_matrix<S>(n, 1, ++seed, 3.0);
+        sbptt::Vector<S> dw = random_matrix<S>(rows * cols, 1, ++seed, 1.0);
+        const sbptt::Vector<S> start = dw;
+        sbptt::add_outer_products(dw.data(), rows, cols, d.data(), x.data(), n,
+                                  scaled ? scale.data() : nullptr);
+        INFO("rows " << rows << " cols " << cols << " n " << n << " scaled " << scaled);
+        for (Index i = 0; i < rows; ++i) {
+          for (Index j = 0; j < cols; ++j) {
+            S expected = start(i * cols + j);
+            for (Index k = 0; k < n; ++k) {
+              const S xs = scaled ? S(x(j, k) * scale(k)) : x(j, k);
+              expected = std::fma(xs, d(i, k), expected);
+            }
+            INFO("entry (" << i << ", " << j << ")");
+            REQUIRE(dw(i * cols + j) == expected);
+          }
         }
       }
     }

@@ -27,11 +27,12 @@ TEMPLATE_TEST_CASE("dW += D X^T within the rounding bound, nothing written outsi
   // cols (float panels of 16): below one register, one register of either type, 3 panels and
   // a masked one (53), 5 panels (a block of 3 and one of 2), 100 (6 + 4 masked), the
   // convolution's 180 (3 blocks, 2, 4 masked); rows: 1, 2, odd, the paper's 100. Rows narrower
-  // than a register go in blocks of 8 rows: 17 × 10 (float) and 19 × 5 (double) have two
-  // blocks and a remainder, 21 × 4 is exactly half a register of doubles.
+  // than a register go one at a time in passes of every 2nd (17 × 10 float, 19 × 5 double), 3rd
+  // (21 × 6 float) or 8th row (23 × 2 float); rows of one entry go to Eigen (30 × 1).
   for (const auto& [rows, cols] :
        {std::pair<Index, Index>{1, 100}, {2, 100}, {3, 10}, {5, 8}, {7, 16}, {100, 100},
-        {100, 24}, {60, 180}, {17, 53}, {33, 64}, {9, 80}, {17, 10}, {19, 5}, {21, 4}}) {
+        {100, 24}, {60, 180}, {17, 53}, {33, 64}, {9, 80}, {17, 10}, {19, 5}, {21, 4}, {21, 6},
+        {23, 2}, {30, 1}}) {
     for (const Index n : {1, 3, 7, 8, 9, 16, 21, 56}) {
       const Matrix<S> d = random_matrix<S>(rows, n, ++seed, 1.0);
       const Matrix<S> x = random_matrix<S>(cols, n, ++seed, 1.0);
@@ -70,7 +71,7 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel's scale within the rounding 
   std::uint64_t seed = 500;
   int kernel_cases = 0;
   for (const auto& [rows, cols] : {std::pair<Index, Index>{100, 10}, {100, 100}, {1, 100},
-                                   {60, 180}, {17, 53}, {19, 5}}) {
+                                   {60, 180}, {17, 53}, {19, 5}, {19, 3}, {40, 1}}) {
     for (const Index n : {1, 7, 8, 16, 21}) {
       const Matrix<S> d = random_matrix<S>(rows, n, ++seed, 1.0);
       const Matrix<S> x = random_matrix<S>(cols, n, ++seed, 1.0);
@@ -113,15 +114,19 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel sums each entry in sample or
                    "[nn][outer]", float, double) {
   // The kernel's promise (outer_product.hpp): every entry is ((dW_ij + d_i0 x'_j0) + d_i1
   // x'_j1) + … with fused multiply-adds, x' = s·x rounded, whatever the shapes and whatever
-  // order the kernel visits the rows in. Rows narrower than a register: blocks of 8 rows with
-  // every remainder 0 … 7 and one lone short block (rows 1 … 17), the paper's 100 × 10 and an
-  // odd 97; wider rows for the masked tail beside them.
+  // order the kernel visits the rows in (passes of every 2nd … 8th row where a masked panel's
+  // block starts the row). Rows narrower than a register (1 … 17 rows, the paper's 100 × 10,
+  // an odd 97, 2 and 3 entries); a partial panel in one block with 1 or 2 whole panels,
+  // starting the row or after blocks of 3; alone after them (100 × 100); the convolution's
+  // 60 × 180.
   using S = TestType;
   constexpr Index kLanes = sizeof(S) == 4 ? 16 : 8;
   std::uint64_t seed = 900;
   int kernel_cases = 0;
-  std::vector<std::pair<Index, Index>> shapes = {{100, kLanes / 2 + 2}, {97, kLanes - 1},
-                                                 {100, 100}, {33, kLanes + 3}};
+  std::vector<std::pair<Index, Index>> shapes = {
+      {100, kLanes / 2 + 2}, {97, kLanes - 1},     {33, kLanes + 3}, {18, 2 * kLanes + 5},
+      {9, 5 * kLanes + 1},   {11, 4 * kLanes + 7}, {100, 100},       {60, 180},
+      {100, 24},             {100, 2},             {41, 3},          {23, kLanes / 2 - 1}};
   for (Index rows = 1; rows <= 17; ++rows) shapes.emplace_back(rows, kLanes / 2);
   for (const auto& [rows, cols] : shapes) {
     if (!sbptt::outer_product_kernel_applies<S>(cols)) continue;

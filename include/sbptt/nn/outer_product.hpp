@@ -11,11 +11,11 @@
 /// past it, which runs at about 230.
 ///
 /// It needs 32 vector registers and masked loads and stores for the rows' last panel, so it is
-/// compiled for AVX-512 only, and used when a row of dW fills at least half a register (100 ×
-/// 10 × 8 in float: 230 ns against Eigen's 404; 100 × 4 × 8 in double: 217 against 256).
-/// Narrower rows measured no faster (60 × 6 × 120 in float) or seven times slower (100 × 1 ×
-/// 8), so they, and other builds, use Eigen's product (with AVX2's 16 registers the same
-/// scheme, holding 8 × 1 panels, measured slower than Eigen).
+/// compiled for AVX-512 only, and used for rows of 2 or more entries (float, 8 samples: 100 ×
+/// 10 in 141–145 ns against Eigen's 404, 100 × 6 in 149 against 422, 100 × 2 in 148 against
+/// 276). Rows of one entry (100 × 1: 303 against 46 ns) and other builds use Eigen's product
+/// (with AVX2's 16 registers the same scheme, holding 8 × 1 panels, measured slower than
+/// Eigen).
 ///
 /// In the kernel every entry is ((dW_ij + d_i0 x_j0) + d_i1 x_j1) + … in sample order with
 /// fused multiply-adds, whatever the shapes; Eigen's product has an order of its own. Either
@@ -58,90 +58,83 @@ public:
 
 private:
   // X's block (kPanels × kSamples registers), kRows × kPanels accumulators and a broadcast:
-  // 24 + 6 + 1 of the 32 registers. A row narrower than a register has one masked panel, so
-  // its blocks take kNarrowRows rows, that many chains of FMAs in flight (2 rows: 621 ns for
-  // 100 × 10 × 8, 8 rows: 230 ns, and 162 ns in `interleaved_blocks`' order). In a wider
-  // row's partial panel 8 rows measured slower.
+  // 24 + 6 + 1 of the 32 registers. A block with a row's partial last panel and whole panels
+  // before it, or a row narrower than a register, goes one row at a time (kMaskedRows):
+  // 100 × 24 × 8 in 215–220 ns against 254–267 for the whole panel and the partial one in
+  // blocks of 2 rows each. A partial panel alone after the blocks keeps kRows.
   static constexpr int kSamples = 8;
   static constexpr int kPanels = 3;
   static constexpr int kRows = 2;
-  static constexpr int kNarrowRows = 8;
+  static constexpr int kMaskedRows = 1;
 
   static const Scalar* at(const Scalar* scale, Index k) {
     return scale == nullptr ? nullptr : scale + k;
   }
 
   /// One pass over dW adding `Samples` samples' outer products: blocks of kPanels column
-  /// panels, the remaining whole panels in one more block, and a row's partial last panel on
-  /// its own: inside the block of a whole panel it measured 2.4 times slower (100 × 24 × 8).
+  /// panels, then one more block with the whole panels left and a row's partial last panel
+  /// (on its own when no whole panel is left).
   template <int Samples>
   static void samples(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
                       const Scalar* scale) {
     const Index full_panels = cols / kLanes;
+    const bool partial = full_panels * kLanes < cols;
     Index p = 0;
     for (; p + kPanels <= full_panels; p += kPanels)
       columns<Samples, kPanels, false>(dw, rows, cols, d, x, scale, p * kLanes);
-    if (full_panels - p == 2)
-      columns<Samples, 2, false>(dw, rows, cols, d, x, scale, p * kLanes);
-    if (full_panels - p == 1)
-      columns<Samples, 1, false>(dw, rows, cols, d, x, scale, p * kLanes);
-    if (full_panels == 0) {
-      columns<Samples, 1, true, kNarrowRows>(dw, rows, cols, d, x, scale, 0);
-    } else if (full_panels * kLanes < cols) {
-      columns<Samples, 1, true>(dw, rows, cols, d, x, scale, full_panels * kLanes);
+    const Index left = full_panels - p;  // whole panels after the blocks of kPanels: 0, 1, 2
+    const Index first = p * kLanes;
+    if (!partial) {
+      if (left == 2) columns<Samples, 2, false>(dw, rows, cols, d, x, scale, first);
+      if (left == 1) columns<Samples, 1, false>(dw, rows, cols, d, x, scale, first);
+    } else if (left == 2) {
+      columns<Samples, 3, true, kMaskedRows>(dw, rows, cols, d, x, scale, first);
+    } else if (left == 1) {
+      columns<Samples, 2, true, kMaskedRows>(dw, rows, cols, d, x, scale, first);
+    } else if (full_panels == 0) {
+      columns<Samples, 1, true, kMaskedRows>(dw, rows, cols, d, x, scale, first);
+    } else {
+      columns<Samples, 1, true>(dw, rows, cols, d, x, scale, first);
     }
   }
 
-  /// Columns first … first + Panels·kLanes − 1 of every row (up to cols when `Masked`), in
-  /// blocks of `Rows` rows. A scale multiplies X's block in the registers, once for all rows.
+  /// Columns first … first + Panels·kLanes − 1 of every row, the last panel only up to cols
+  /// when `Masked`, in blocks of `Rows` rows. A scale multiplies X's block in the registers,
+  /// once for all rows.
   template <int Samples, int Panels, bool Masked, int Rows = kRows>
   static void columns(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
                       const Scalar* scale, Index first) {
-    const Index lanes = Masked ? cols - first : kLanes;
+    const Index lanes = Masked ? cols - first - (Panels - 1) * kLanes : kLanes;
     Packet xs[Panels][Samples];
     for (int p = 0; p < Panels; ++p)
       for (int k = 0; k < Samples; ++k)
-        xs[p][k] = load<Masked>(x + k * cols + first + p * kLanes, lanes);
+        xs[p][k] = load_panel<Panels, Masked>(x + k * cols + first + p * kLanes, p, lanes);
     if (scale != nullptr)
       for (int k = 0; k < Samples; ++k)
         for (int p = 0; p < Panels; ++p)
           xs[p][k] = Eigen::internal::pmul(xs[p][k], Eigen::internal::pset1<Packet>(scale[k]));
-    if constexpr (Masked && Rows == kNarrowRows) {
-      if (cols < kLanes) {
-        interleaved_blocks<Samples, Panels, Rows>(dw, rows, cols, d, xs, lanes);
-        return;
-      }
-    }
-    Index i = 0;
-    for (; i + Rows <= rows; i += Rows)
-      update_rows<Samples, Panels, Rows, Masked>(dw + i * cols + first, cols, d + i, rows, xs,
-                                                 lanes);
-    for (; i < rows; ++i)
-      update_rows<Samples, Panels, 1, Masked>(dw + i * cols + first, cols, d + i, rows, xs,
-                                              lanes);
-  }
-
-  /// The rows of a dW narrower than a register, in blocks of `Rows` (the last one shorter):
-  /// the even-numbered blocks, then the odd-numbered. A masked store reaches into the next
-  /// row, and a load that overlaps a store still in flight waits until it is written, even
-  /// where only masked-off lanes overlap; in this order no block loads what the block before
-  /// it stored (100 × 10 × 8: 245–253 ns in row order, 200–216 ns so).
-  template <int Samples, int Panels, int Rows>
-  static void interleaved_blocks(Scalar* dw, Index rows, Index cols, const Scalar* d,
-                                 const Packet (&xs)[Panels][Samples], Index lanes) {
-    const Index blocks = (rows + Rows - 1) / Rows;
-    for (Index parity = 0; parity < 2; ++parity) {
-      for (Index b = parity; b < blocks; b += 2) {
-        const Index i = b * Rows;
-        if (i + Rows <= rows) {
-          update_rows<Samples, Panels, Rows, true>(dw + i * cols, cols, d + i, rows, xs, lanes);
-        } else {
-          with_count<Rows - 1>(rows - i, [&](auto count) {
-            update_rows<Samples, Panels, decltype(count)::value, true>(dw + i * cols, cols,
-                                                                       d + i, rows, xs, lanes);
-          });
-        }
-      }
+    if constexpr (Rows == 1) {
+      // A masked store reaches up to a register past the end of its row, and a load that
+      // overlaps a store still in flight waits until it is written, even where only
+      // masked-off lanes overlap. Where the block starts its rows (first = 0) the next rows'
+      // loads would overlap, so the rows go in `stride` passes, each taking every stride-th
+      // row, far enough apart that no row loads what the row before it stored: 100 × 10 × 8
+      // took 1220 ns in row order and 141 ns in two passes. (`samples` gives such blocks one
+      // row at a time.)
+      const Index rows_reached = (kLanes - lanes + cols - 1) / cols;  // past the store's own
+      const Index stride = Masked && first == 0 ? 1 + rows_reached : 1;
+      for (Index start = 0; start < stride; ++start)
+        for (Index i = start; i < rows; i += stride)
+          update_rows<Samples, Panels, 1, Masked>(dw + i * cols + first, cols, d + i, rows, xs,
+                                                  lanes);
+    } else {
+      Index i = 0;
+      for (; i + Rows <= rows; i += Rows)
+        update_rows<Samples, Panels, Rows, Masked>(dw + i * cols + first, cols, d + i, rows,
+                                                   xs, lanes);
+      for (; i < rows; ++i)
+        update_rows<Samples, Panels, 1, Masked>(dw + i * cols + first, cols, d + i, rows, xs,
+                                                lanes);
     }
   }
 
@@ -151,7 +144,8 @@ private:
                                               Index lanes) {
     Packet acc[Rows][Panels];
     for (int r = 0; r < Rows; ++r)
-      for (int p = 0; p < Panels; ++p) acc[r][p] = load<Masked>(dw + r * ldw + p * kLanes, lanes);
+      for (int p = 0; p < Panels; ++p)
+        acc[r][p] = load_panel<Panels, Masked>(dw + r * ldw + p * kLanes, p, lanes);
     for (int k = 0; k < Samples; ++k)
       for (int r = 0; r < Rows; ++r) {
         const Packet dk = Eigen::internal::pset1<Packet>(d[r + k * ldd]);
@@ -159,7 +153,23 @@ private:
           acc[r][p] = Eigen::internal::pmadd(xs[p][k], dk, acc[r][p]);
       }
     for (int r = 0; r < Rows; ++r)
-      for (int p = 0; p < Panels; ++p) store<Masked>(dw + r * ldw + p * kLanes, acc[r][p], lanes);
+      for (int p = 0; p < Panels; ++p)
+        store_panel<Panels, Masked>(dw + r * ldw + p * kLanes, acc[r][p], p, lanes);
+  }
+
+  /// Panel p of a block whose last panel is masked when `Masked`.
+  template <int Panels, bool Masked>
+  EIGEN_ALWAYS_INLINE static Packet load_panel(const Scalar* from, int p, Index lanes) {
+    return Masked && p == Panels - 1 ? load<true>(from, lanes) : load<false>(from, lanes);
+  }
+  template <int Panels, bool Masked>
+  EIGEN_ALWAYS_INLINE static void store_panel(Scalar* to, const Packet& value, int p,
+                                              Index lanes) {
+    if (Masked && p == Panels - 1) {
+      store<true>(to, value, lanes);
+    } else {
+      store<false>(to, value, lanes);
+    }
   }
 
   template <bool Masked>
@@ -194,12 +204,12 @@ private:
 }  // namespace detail
 
 /// Whether `add_outer_products` runs the register kernel for rows of `cols` entries (AVX-512,
-/// float or double, a row at least half a register wide); only then does it take a scale.
+/// float or double, 2 or more entries); only then does it take a scale.
 template <class Scalar>
 [[nodiscard]] constexpr bool outer_product_kernel_applies([[maybe_unused]] Index cols) {
 #if defined(EIGEN_VECTORIZE_AVX512)
   if constexpr (std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>)
-    return 2 * cols >= detail::OuterProductKernel<Scalar>::kLanes;
+    return cols >= 2;
 #endif
   return false;
 }

@@ -26,13 +26,15 @@ TEMPLATE_TEST_CASE("dW += D X^T within the rounding bound, nothing written outsi
   std::uint64_t seed = 100;
   // cols (float panels of 16): below one register, one register of either type, 3 panels and
   // a masked one (53), 5 panels (a block of 3 and one of 2), 100 (6 + 4 masked), the
-  // convolution's 180 (3 blocks, 2, 4 masked); rows: 1, 2, odd, the paper's 100. Rows narrower
+  // convolution's 180 (3 blocks, then 2 and 4 masked as one block); 21 and 37 (one or two whole
+  // panels and a masked one, starting the row); 41 (the same in double after a block of 3);
+  // rows: 1, 2, odd, the paper's 100. Rows narrower
   // than a register go one at a time in passes of every 2nd (17 × 10 float, 19 × 5 double), 3rd
   // (21 × 6 float) or 8th row (23 × 2 float); rows of one entry go to Eigen (30 × 1).
   for (const auto& [rows, cols] :
        {std::pair<Index, Index>{1, 100}, {2, 100}, {3, 10}, {5, 8}, {7, 16}, {100, 100},
         {100, 24}, {60, 180}, {17, 53}, {33, 64}, {9, 80}, {17, 10}, {19, 5}, {21, 4}, {21, 6},
-        {23, 2}, {30, 1}}) {
+        {23, 2}, {30, 1}, {18, 37}, {18, 21}, {9, 41}}) {
     for (const Index n : {1, 3, 7, 8, 9, 16, 21, 56}) {
       const Matrix<S> d = random_matrix<S>(rows, n, ++seed, 1.0);
       const Matrix<S> x = random_matrix<S>(cols, n, ++seed, 1.0);
@@ -126,7 +128,9 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel sums each entry in sample or
   std::vector<std::pair<Index, Index>> shapes = {
       {100, kLanes / 2 + 2}, {97, kLanes - 1},     {33, kLanes + 3}, {18, 2 * kLanes + 5},
       {9, 5 * kLanes + 1},   {11, 4 * kLanes + 7}, {100, 100},       {60, 180},
-      {100, 24},             {100, 2},             {41, 3},          {23, kLanes / 2 - 1}};
+      {100, 24},             {100, 2},             {41, 3},          {23, kLanes / 2 - 1},
+      {17, 3 * kLanes + 5},  {29, kLanes / 4},     {5, 2},           {7, kLanes},
+      {5, 2 * kLanes}};
   for (Index rows = 1; rows <= 17; ++rows) shapes.emplace_back(rows, kLanes / 2);
   for (const auto& [rows, cols] : shapes) {
     if (!sbptt::outer_product_kernel_applies<S>(cols)) continue;

@@ -17,8 +17,9 @@
 /// (with AVX2's 16 registers the same scheme, holding 8 × 1 panels, measured slower than
 /// Eigen).
 ///
-/// In the kernel every entry is ((dW_ij + d_i0 x_j0) + d_i1 x_j1) + … in sample order with
-/// fused multiply-adds, whatever the shapes; Eigen's product has an order of its own. Either
+/// In the kernel every entry is ((dW_ij + d_i0 x'_j0) + d_i1 x'_j1) + … in sample order with
+/// fused multiply-adds, x' = s·x rounded (x itself without a scale), whatever the shapes;
+/// Eigen's product has an order of its own. Either
 /// way the order depends only on the shapes, so results do not depend on the thread count.
 #include <type_traits>
 
@@ -60,11 +61,12 @@ private:
   // X's block (kPanels × kSamples registers), kRows × kPanels accumulators and a broadcast:
   // 24 + 6 + 1 of the 32 registers. A block with a row's partial last panel and whole panels
   // before it, or a row narrower than a register, goes one row at a time (kMaskedRows):
-  // 100 × 24 × 8 in 215–220 ns against 254–267 for the whole panel and the partial one in
+  // 100 × 24 × 8 in 215–224 ns against 254–267 for the whole panel and the partial one in
   // blocks of 2 rows each. A partial panel alone after the blocks keeps kRows.
   static constexpr int kSamples = 8;
   static constexpr int kPanels = 3;
   static constexpr int kRows = 2;
+  // One row a block is also what lets `columns` order the rows in passes.
   static constexpr int kMaskedRows = 1;
 
   static const Scalar* at(const Scalar* scale, Index k) {
@@ -77,6 +79,7 @@ private:
   template <int Samples>
   static void samples(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
                       const Scalar* scale) {
+    static_assert(kMaskedRows == 1, "a masked block at column 0 needs its rows in passes");
     const Index full_panels = cols / kLanes;
     const bool partial = full_panels * kLanes < cols;
     Index p = 0;
@@ -118,11 +121,12 @@ private:
       // overlaps a store still in flight waits until it is written, even where only
       // masked-off lanes overlap. Where the block starts its rows (first = 0) the next rows'
       // loads would overlap, so the rows go in `stride` passes, each taking every stride-th
-      // row, far enough apart that no row loads what the row before it stored: 100 × 10 × 8
-      // took 1220 ns in row order and 141 ns in two passes. (`samples` gives such blocks one
-      // row at a time.)
-      const Index rows_reached = (kLanes - lanes + cols - 1) / cols;  // past the store's own
-      const Index stride = Masked && first == 0 ? 1 + rows_reached : 1;
+      // row: a row's block spans Panels·kLanes entries, and the next row visited starts at or
+      // after their end (100 × 10 × 8 took 1220 ns in row order, 141 ns in two passes). A
+      // block after the first 3 panels starts 3 registers into its row, further than any
+      // store reaches past the row before, so it needs no passes.
+      const Index span = Panels * kLanes;
+      const Index stride = Masked && first == 0 ? (span + cols - 1) / cols : 1;
       for (Index start = 0; start < stride; ++start)
         for (Index i = start; i < rows; i += stride)
           update_rows<Samples, Panels, 1, Masked>(dw + i * cols + first, cols, d + i, rows, xs,

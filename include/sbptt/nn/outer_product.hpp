@@ -19,8 +19,8 @@
 ///
 /// In the kernel every entry is ((dW_ij + d_i0 x'_j0) + d_i1 x'_j1) + … in sample order with
 /// fused multiply-adds, x' = s·x rounded (x itself without a scale), whatever the shapes;
-/// Eigen's product has an order of its own. Either
-/// way the order depends only on the shapes, so results do not depend on the thread count.
+/// Eigen's product has an order of its own. Either way the order depends only on the shapes,
+/// so results do not depend on the thread count.
 #include <type_traits>
 
 #include <Eigen/Core>

@@ -28,6 +28,7 @@
 #include "sbptt/core/count_dispatch.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
+#include "sbptt/core/unroll.hpp"
 
 #if defined(EIGEN_VECTORIZE_AVX512)
 #include <immintrin.h>
@@ -109,13 +110,20 @@ private:
                       const Scalar* scale, Index first) {
     const Index lanes = Masked ? cols - first - (Panels - 1) * kLanes : kLanes;
     Packet xs[Panels][Samples];
-    for (int p = 0; p < Panels; ++p)
+    SBPTT_UNROLL
+    for (int p = 0; p < Panels; ++p) {
+      SBPTT_UNROLL
       for (int k = 0; k < Samples; ++k)
         xs[p][k] = load_panel<Panels, Masked>(x + k * cols + first + p * kLanes, p, lanes);
-    if (scale != nullptr)
-      for (int k = 0; k < Samples; ++k)
+    }
+    if (scale != nullptr) {
+      SBPTT_UNROLL
+      for (int k = 0; k < Samples; ++k) {
+        SBPTT_UNROLL
         for (int p = 0; p < Panels; ++p)
           xs[p][k] = Eigen::internal::pmul(xs[p][k], Eigen::internal::pset1<Packet>(scale[k]));
+      }
+    }
     if constexpr (Rows == 1) {
       // A masked store reaches up to a register past the end of its row, and a load that
       // overlaps a store still in flight waits until it is written, even where only
@@ -147,18 +155,28 @@ private:
                                               const Packet (&xs)[Panels][Samples],
                                               Index lanes) {
     Packet acc[Rows][Panels];
-    for (int r = 0; r < Rows; ++r)
+    SBPTT_UNROLL
+    for (int r = 0; r < Rows; ++r) {
+      SBPTT_UNROLL
       for (int p = 0; p < Panels; ++p)
         acc[r][p] = load_panel<Panels, Masked>(dw + r * ldw + p * kLanes, p, lanes);
-    for (int k = 0; k < Samples; ++k)
+    }
+    SBPTT_UNROLL
+    for (int k = 0; k < Samples; ++k) {
+      SBPTT_UNROLL
       for (int r = 0; r < Rows; ++r) {
         const Packet dk = Eigen::internal::pset1<Packet>(d[r + k * ldd]);
+        SBPTT_UNROLL
         for (int p = 0; p < Panels; ++p)
           acc[r][p] = Eigen::internal::pmadd(xs[p][k], dk, acc[r][p]);
       }
-    for (int r = 0; r < Rows; ++r)
+    }
+    SBPTT_UNROLL
+    for (int r = 0; r < Rows; ++r) {
+      SBPTT_UNROLL
       for (int p = 0; p < Panels; ++p)
         store_panel<Panels, Masked>(dw + r * ldw + p * kLanes, acc[r][p], p, lanes);
+    }
   }
 
   /// Panel p of a block whose last panel is masked when `Masked`.

@@ -28,9 +28,9 @@ TEMPLATE_TEST_CASE("dW += D X^T within the rounding bound, nothing written outsi
   // a masked one (53), 5 panels (a block of 3 and one of 2), 100 (6 + 4 masked), the
   // convolution's 180 (3 blocks, then 2 and 4 masked as one block); 21 and 37 (one or two whole
   // panels and a masked one, starting the row); 41 (the same in double after a block of 3);
-  // rows: 1, 2, odd, the paper's 100. Rows narrower
-  // than a register go one at a time in passes of every 2nd (17 × 10 float, 19 × 5 double), 3rd
-  // (21 × 6 float) or 8th row (23 × 2 float); rows of one entry go to Eigen (30 × 1).
+  // rows: 1, 2, odd, the paper's 100. Rows narrower than a register go one at a time in passes
+  // of every 2nd (17 × 10 float, 19 × 5 double), 3rd (21 × 6 float) or 8th row (23 × 2
+  // float); rows of one entry go to Eigen (30 × 1).
   for (const auto& [rows, cols] :
        {std::pair<Index, Index>{1, 100}, {2, 100}, {3, 10}, {5, 8}, {7, 16}, {100, 100},
         {100, 24}, {60, 180}, {17, 53}, {33, 64}, {9, 80}, {17, 10}, {19, 5}, {21, 4}, {21, 6},

@@ -124,30 +124,27 @@ private:
           xs[p][k] = Eigen::internal::pmul(xs[p][k], Eigen::internal::pset1<Packet>(scale[k]));
       }
     }
-    if constexpr (Rows == 1) {
-      // A masked store reaches up to a register past the end of its row, and a load that
-      // overlaps a store still in flight waits until it is written, even where only
-      // masked-off lanes overlap. Where the block starts its rows (first = 0) the next rows'
-      // loads would overlap, so the rows go in `stride` passes, each taking every stride-th
-      // row: a row's block spans Panels·kLanes entries, and the next row visited starts at or
-      // after their end (100 × 10 × 8 took 1220 ns in row order, 141 ns in two passes). A
-      // block after the first 3 panels starts 3 registers into its row, further than any
-      // store reaches past the row before, so it needs no passes.
-      const Index span = Panels * kLanes;
-      const Index stride = Masked && first == 0 ? (span + cols - 1) / cols : 1;
-      for (Index start = 0; start < stride; ++start)
-        for (Index i = start; i < rows; i += stride)
-          update_rows<Samples, Panels, 1, Masked>(dw + i * cols + first, cols, d + i, rows, xs,
-                                                  lanes);
-    } else {
-      Index i = 0;
+    Index i = 0;
+    if constexpr (Rows > 1) {
       for (; i + Rows <= rows; i += Rows)
         update_rows<Samples, Panels, Rows, Masked>(dw + i * cols + first, cols, d + i, rows,
                                                    xs, lanes);
-      for (; i < rows; ++i)
-        update_rows<Samples, Panels, 1, Masked>(dw + i * cols + first, cols, d + i, rows, xs,
-                                                lanes);
     }
+    // The rows left, one at a time (all of them in a block of one row). A masked store
+    // reaches up to a register past the end of its row, and a load that overlaps a store
+    // still in flight waits until it is written, even where only masked-off lanes overlap.
+    // Where the block starts its rows (first = 0) the next rows' loads would overlap, so the
+    // rows go in `stride` passes, each taking every stride-th row: a row's block spans
+    // Panels·kLanes entries, and the next row visited starts at or after their end (100 × 10
+    // × 8 took 1220 ns in row order, 141 ns in two passes). A block after the first 3 panels
+    // starts 3 registers into its row, further than any store reaches past the row before, so
+    // it needs no passes; `samples` gives the blocks at column 0 one row at a time.
+    const Index span = Panels * kLanes;
+    const Index stride = Rows == 1 && Masked && first == 0 ? (span + cols - 1) / cols : 1;
+    for (Index start = i; start < i + stride; ++start)
+      for (Index r = start; r < rows; r += stride)
+        update_rows<Samples, Panels, 1, Masked>(dw + r * cols + first, cols, d + r, rows, xs,
+                                                lanes);
   }
 
   template <int Samples, int Panels, int Rows, bool Masked>

@@ -133,26 +133,71 @@ TEMPLATE_TEST_CASE("every entry of the product is its bias plus the terms in col
   }
 }
 
-TEST_CASE("the product writes the real rows only, at the given leading dimensions",
-          "[nn][packed]") {
-  // 19 rows: the last panel is padded; ldy = 23 leaves 4 rows of every column untouched.
-  const Matrix<double> w = random_matrix<double>(Index{19} * 5, 1, 8, 1.0);
-  PackedMatrix<double> a;
+TEMPLATE_TEST_CASE("a short matrix's entries are the file comment's dot products, bit for bit",
+                   "[nn][packed]", float, double) {
+  // Lane-wise partial sums over whole registers, reduced by Eigen's predux, added to the bias,
+  // then the remaining terms in order: written here one entry at a time, against the
+  // products' dot products side by side, for every short row count and batches of 1 to 19
+  // (whole groups of columns and every remainder).
+  using S = TestType;
+  using Packet = typename Eigen::internal::packet_traits<S>::type;
+  const Index lanes = PackedMatrix<S>::kLanes;
+  for (Index rows = 1; 4 * rows <= lanes; ++rows) {
+    for (const Index cols : {Index{5}, Index{37}, Index{100}}) {
+      const Matrix<S> w = random_matrix<S>(rows * cols, 1, 21 + cols, 1.0);
+      const Matrix<S> b = random_matrix<S>(rows, 1, 22, 1.0);
+      PackedMatrix<S> a;
+      a.pack(w.data(), rows, cols, false, b.data());
+      const Matrix<S> x = random_matrix<S>(cols, 19, 23, 1.0);
+      const Index whole = cols / lanes * lanes;
+      for (Index n = 1; n <= 19; ++n) {
+        Matrix<S> y = Matrix<S>::Constant(rows, n, std::numeric_limits<S>::quiet_NaN());
+        a.multiply(x.data(), cols, n, y.data(), rows);
+        for (Index j = 0; j < n; ++j) {
+          for (Index i = 0; i < rows; ++i) {
+            S sum = b(i);
+            if (whole > 0) {
+              Packet acc = Eigen::internal::pset1<Packet>(S(0));
+              for (Index k = 0; k < whole; k += lanes)
+                acc = Eigen::internal::pmadd(Eigen::internal::ploadu<Packet>(&w(i * cols + k)),
+                                             Eigen::internal::ploadu<Packet>(&x(k, j)), acc);
+              sum += Eigen::internal::predux(acc);
+            }
+            for (Index k = whole; k < cols; ++k)
+              sum = sbptt::detail::fused_multiply_add(w(i * cols + k), x(k, j), sum);
+            INFO("rows " << rows << " cols " << cols << " n " << n << " entry (" << i << ", "
+                         << j << ")");
+            REQUIRE(y(i, j) == sum);
+          }
+        }
+      }
+    }
+  }
+}
+
+TEMPLATE_TEST_CASE("the product writes the real rows only, at the given leading dimensions",
+                   "[nn][packed]", float, double) {
+  // 19 rows: the last panel is padded (a masked store with AVX-512, a buffer elsewhere); ldy =
+  // 23 leaves 4 rows of every column untouched.
+  using S = TestType;
+  const S tolerance = 64 * std::numeric_limits<S>::epsilon();
+  const Matrix<S> w = random_matrix<S>(Index{19} * 5, 1, 8, 1.0);
+  PackedMatrix<S> a;
   a.pack(w.data(), 19, 5, false);
-  const Matrix<double> x = random_matrix<double>(9, 11, 9, 1.0);  // ldx 9 > cols 5
-  Matrix<double> y = Matrix<double>::Constant(23, 11, 7.25);
+  const Matrix<S> x = random_matrix<S>(9, 11, 9, 1.0);  // ldx 9 > cols 5
+  Matrix<S> y = Matrix<S>::Constant(23, 11, S(7.25));
   a.multiply(x.data(), 9, 11, y.data(), 23);
-  const Eigen::Map<const sbptt::RowMajorMatrix<double>> wm(w.data(), 19, 5);
-  const Matrix<double> expected = wm * x.topRows(5);
-  REQUIRE((y.topRows(19) - expected).cwiseAbs().maxCoeff() <= 1e-14);
-  REQUIRE((y.bottomRows(4).array() == 7.25).all());
+  const Eigen::Map<const sbptt::RowMajorMatrix<S>> wm(w.data(), 19, 5);
+  const Matrix<S> expected = wm * x.topRows(5);
+  REQUIRE((y.topRows(19) - expected).cwiseAbs().maxCoeff() <= tolerance);
+  REQUIRE((y.bottomRows(4).array() == S(7.25)).all());
   // A short matrix (1 row, dot products) at ldy 3: rows 1 and 2 of every column untouched.
-  PackedMatrix<double> row;
+  PackedMatrix<S> row;
   row.pack(w.data(), 1, 5, false);
-  Matrix<double> y1 = Matrix<double>::Constant(3, 11, 7.25);
+  Matrix<S> y1 = Matrix<S>::Constant(3, 11, S(7.25));
   row.multiply(x.data(), 9, 11, y1.data(), 3);
-  REQUIRE((y1.row(0) - wm.row(0) * x.topRows(5)).cwiseAbs().maxCoeff() <= 1e-14);
-  REQUIRE((y1.bottomRows(2).array() == 7.25).all());
+  REQUIRE((y1.row(0) - wm.row(0) * x.topRows(5)).cwiseAbs().maxCoeff() <= tolerance);
+  REQUIRE((y1.bottomRows(2).array() == S(7.25)).all());
 }
 
 // The engine calls the packed overloads, the finite-difference tests the plain ones: this ties

@@ -29,10 +29,7 @@
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/core/unroll.hpp"
-
-#if defined(EIGEN_VECTORIZE_AVX512)
-#include <immintrin.h>
-#endif
+#include "sbptt/nn/first_lanes.hpp"
 
 namespace sbptt {
 namespace detail {
@@ -193,29 +190,20 @@ private:
 
   template <bool Masked>
   EIGEN_ALWAYS_INLINE static Packet load(const Scalar* from, Index lanes) {
-    if constexpr (!Masked) {
-      return Eigen::internal::ploadu<Packet>(from);
-    } else if constexpr (std::is_same_v<Scalar, float>) {
-      return _mm512_maskz_loadu_ps(first_lanes<__mmask16>(lanes), from);
+    if constexpr (Masked) {
+      return load_first_lanes(from, lanes);
     } else {
-      return _mm512_maskz_loadu_pd(first_lanes<__mmask8>(lanes), from);
+      return Eigen::internal::ploadu<Packet>(from);
     }
   }
 
   template <bool Masked>
   EIGEN_ALWAYS_INLINE static void store(Scalar* to, const Packet& value, Index lanes) {
-    if constexpr (!Masked) {
-      Eigen::internal::pstoreu(to, value);
-    } else if constexpr (std::is_same_v<Scalar, float>) {
-      _mm512_mask_storeu_ps(to, first_lanes<__mmask16>(lanes), value);
+    if constexpr (Masked) {
+      store_first_lanes(to, value, lanes);
     } else {
-      _mm512_mask_storeu_pd(to, first_lanes<__mmask8>(lanes), value);
+      Eigen::internal::pstoreu(to, value);
     }
-  }
-
-  template <class Mask>
-  static Mask first_lanes(Index lanes) {
-    return static_cast<Mask>((1U << static_cast<unsigned>(lanes)) - 1U);
   }
 };
 #endif

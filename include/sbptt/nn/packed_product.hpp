@@ -31,6 +31,8 @@
 
 #include "sbptt/core/count_dispatch.hpp"
 #include "sbptt/core/types.hpp"
+#include "sbptt/core/unroll.hpp"
+#include "sbptt/nn/first_lanes.hpp"
 
 namespace sbptt {
 namespace detail {
@@ -100,8 +102,16 @@ public:
   /// column-major with leading dimension `ldy` (overwritten; it must not overlap `x`).
   void multiply(const Scalar* x, Index ldx, Index n, Scalar* y, Index ldy) const {
     if (by_rows()) {
-      for (Index j = 0; j < n; ++j)
-        for (Index i = 0; i < rows_; ++i) y[i + j * ldy] = row_dot(i, x + j * ldx);
+      detail::with_count<kMaxShortRows>(rows_, [&](auto rows) {
+        constexpr int r = decltype(rows)::value;
+        constexpr int columns = r >= kDotsInFlight ? 1 : kDotsInFlight / r;
+        Index j = 0;
+        for (; j + columns <= n; j += columns)
+          row_dots<r, columns>(x + j * ldx, ldx, y + j * ldy, ldy);
+        detail::with_count<columns - 1>(n - j, [&](auto left) {
+          row_dots<r, decltype(left)::value>(x + j * ldx, ldx, y + j * ldy, ldy);
+        });
+      });
       return;
     }
     const Index panels = (rows_ + kLanes - 1) / kLanes;
@@ -191,24 +201,52 @@ private:
 
   /// Whether A is short and kept in the row-major layout of the file comment.
   [[nodiscard]] bool by_rows() const { return 4 * rows_ <= kLanes; }
+  static constexpr int kMaxShortRows = static_cast<int>(kLanes / 4);
+  // The dot products `row_dots` takes side by side: measured, 8 beat 4 and 16.
+  static constexpr int kDotsInFlight = 8;
 
-  /// b_i + a_i· x in the order of the file comment (short matrices).
-  [[nodiscard]] Scalar row_dot(Index i, const Scalar* x) const {
+  /// Y's entries (i, j), i < Rows = rows(), j < Columns, each b_i + a_i· x_j in the order of
+  /// the file comment (short matrices). The Rows × Columns dot products go side by side: one
+  /// at a time, each waited on its own chain of multiply-adds and its reduction (float,
+  /// 4 × 100 × 8, guidance's output layer: 120–124 ns one at a time, 101–103 side by side;
+  /// 1 × 100 × 8, the cart pole's: 32–38 against 25–26; docs/benchmark-runs.md, seventeenth
+  /// run). 16 side by side were slower than 8.
+  template <int Rows, int Columns>
+  void row_dots(const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
     using Eigen::internal::pmadd;
     using Eigen::internal::ploadu;
-    const Scalar* a = data_.data() + i * cols_;
     const Index whole = cols_ / kLanes * kLanes;
-    Scalar sum = bias_(i);
-    if (whole > 0) {
-      Packet acc = Eigen::internal::pset1<Packet>(Scalar(0));
-      for (Index k = 0; k < whole; k += kLanes)
-        acc = pmadd(ploadu<Packet>(a + k), ploadu<Packet>(x + k), acc);
-      sum += Eigen::internal::predux(acc);
+    Packet acc[Rows][Columns];
+    SBPTT_UNROLL
+    for (int r = 0; r < Rows; ++r) {
+      SBPTT_UNROLL
+      for (int c = 0; c < Columns; ++c) acc[r][c] = Eigen::internal::pset1<Packet>(Scalar(0));
     }
-    // std::fma where FMA exists: a plain a·x + sum may be contracted in one inlined copy of
-    // this loop and not in another, and a column would depend on its batch.
-    for (Index k = whole; k < cols_; ++k) sum = detail::fused_multiply_add(a[k], x[k], sum);
-    return sum;
+    for (Index k = 0; k < whole; k += kLanes) {
+      Packet xk[Columns];
+      SBPTT_UNROLL
+      for (int c = 0; c < Columns; ++c) xk[c] = ploadu<Packet>(x + c * ldx + k);
+      SBPTT_UNROLL
+      for (int r = 0; r < Rows; ++r) {
+        const Packet a = ploadu<Packet>(data_.data() + r * cols_ + k);
+        SBPTT_UNROLL
+        for (int c = 0; c < Columns; ++c) acc[r][c] = pmadd(a, xk[c], acc[r][c]);
+      }
+    }
+    SBPTT_UNROLL
+    for (int r = 0; r < Rows; ++r) {
+      const Scalar* a = data_.data() + r * cols_;
+      SBPTT_UNROLL
+      for (int c = 0; c < Columns; ++c) {
+        Scalar sum = bias_(r);
+        if (whole > 0) sum += Eigen::internal::predux(acc[r][c]);
+        // std::fma where FMA exists: a plain a·x + sum may be contracted in one inlined copy
+        // of this loop and not in another, and a column would depend on its batch.
+        for (Index k = whole; k < cols_; ++k)
+          sum = detail::fused_multiply_add(a[k], x[c * ldx + k], sum);
+        y[r + c * ldy] = sum;
+      }
+    }
   }
 
   static void grow_and_zero(Vector<Scalar>& storage, Index size) {
@@ -216,12 +254,21 @@ private:
     storage.head(size).setZero();
   }
 
-  /// The first `count` lanes of `value` to `to`: only a panel's real rows go out.
+  /// The first `count` lanes of `value` to `to`: only a panel's real rows go out. With
+  /// AVX-512 by a masked store: through a buffer and a copy, the 12 rows of the last panel
+  /// made the quantum CNN's first product (60 × 6 × 128, float) take 1187–1306 ns against
+  /// 694–702 (docs/benchmark-runs.md, seventeenth run).
   static void store_rows(Scalar* to, Index count, const Packet& value) {
     if (count == kLanes) {
       Eigen::internal::pstoreu(to, value);
       return;
     }
+#if defined(EIGEN_VECTORIZE_AVX512)
+    if constexpr (std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>) {
+      detail::store_first_lanes(to, value, count);
+      return;
+    }
+#endif
     alignas(64) Scalar lanes[kLanes];
     Eigen::internal::pstoreu(lanes, value);
     std::copy(lanes, lanes + count, to);

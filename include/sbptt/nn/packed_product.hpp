@@ -171,32 +171,39 @@ private:
     });
   }
 
-  /// Rows p·kLanes … (p + Panels)·kLanes − 1 of Y, columns 0 … Columns − 1.
+  /// Rows p·kLanes … (p + Panels)·kLanes − 1 of Y, columns 0 … Columns − 1; its loops over
+  /// registers are `static_for`s (core/unroll.hpp). Never inlined: inlined into `multiply`'s
+  /// loops, the same block made guidance's R epoch 2% slower at -O3; kept apart, 5% faster
+  /// than the plain loops (docs/benchmark-runs.md, seventeenth run).
   template <int Panels, int Columns>
-  void block(Index p, const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
+  [[gnu::noinline]] void block(Index p, const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
     using Eigen::internal::pmadd;
     using Eigen::internal::pset1;
     using Eigen::internal::ploadu;
     Packet acc[Panels][Columns];
     const Scalar* a[Panels];
-    for (int q = 0; q < Panels; ++q) {
+    detail::static_for<Panels>([&](auto q) SBPTT_ALWAYS_INLINE {
       const Packet b = ploadu<Packet>(bias_.data() + (p + q) * kLanes);
-      for (int c = 0; c < Columns; ++c) acc[q][c] = b;
+      detail::static_for<Columns>([&](auto c) SBPTT_ALWAYS_INLINE { acc[q][c] = b; });
       a[q] = data_.data() + (p + q) * kLanes * cols_;
-    }
+    });
     for (Index k = 0; k < cols_; ++k) {
       Packet w[Panels];
-      for (int q = 0; q < Panels; ++q) w[q] = ploadu<Packet>(a[q] + k * kLanes);
-      for (int c = 0; c < Columns; ++c) {
+      detail::static_for<Panels>(
+          [&](auto q) SBPTT_ALWAYS_INLINE { w[q] = ploadu<Packet>(a[q] + k * kLanes); });
+      detail::static_for<Columns>([&](auto c) SBPTT_ALWAYS_INLINE {
         const Packet xk = pset1<Packet>(x[k + c * ldx]);
-        for (int q = 0; q < Panels; ++q) acc[q][c] = pmadd(w[q], xk, acc[q][c]);
-      }
+        detail::static_for<Panels>(
+            [&](auto q) SBPTT_ALWAYS_INLINE { acc[q][c] = pmadd(w[q], xk, acc[q][c]); });
+      });
     }
-    for (int q = 0; q < Panels; ++q) {
+    detail::static_for<Panels>([&](auto q) SBPTT_ALWAYS_INLINE {
       const Index first = (p + q) * kLanes;
       const Index count = std::min(kLanes, rows_ - first);
-      for (int c = 0; c < Columns; ++c) store_rows(y + c * ldy + first, count, acc[q][c]);
-    }
+      detail::static_for<Columns>([&](auto c) SBPTT_ALWAYS_INLINE {
+        store_rows(y + c * ldy + first, count, acc[q][c]);
+      });
+    });
   }
 
   /// Whether A is short and kept in the row-major layout of the file comment.

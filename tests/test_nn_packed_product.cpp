@@ -138,7 +138,7 @@ TEMPLATE_TEST_CASE("a short matrix's entries are the file comment's dot products
   // Lane-wise partial sums over whole registers, reduced by Eigen's predux, added to the bias,
   // then the remaining terms in order: written here one entry at a time, against the
   // products' dot products side by side, for every short row count and batches of 1 to 19
-  // (whole groups of columns and every remainder).
+  // (whole groups of columns and every remainder), at leading dimensions past the matrices.
   using S = TestType;
   using Packet = typename Eigen::internal::packet_traits<S>::type;
   const Index lanes = PackedMatrix<S>::kLanes;
@@ -148,11 +148,13 @@ TEMPLATE_TEST_CASE("a short matrix's entries are the file comment's dot products
       const Matrix<S> b = random_matrix<S>(rows, 1, 22, 1.0);
       PackedMatrix<S> a;
       a.pack(w.data(), rows, cols, false, b.data());
-      const Matrix<S> x = random_matrix<S>(cols, 19, 23, 1.0);
+      // Leading dimensions past the matrices: ldx = cols + 3, ldy = rows + 2.
+      const Matrix<S> x = random_matrix<S>(cols + 3, 19, 23, 1.0);
       const Index whole = cols / lanes * lanes;
       for (Index n = 1; n <= 19; ++n) {
-        Matrix<S> y = Matrix<S>::Constant(rows, n, std::numeric_limits<S>::quiet_NaN());
-        a.multiply(x.data(), cols, n, y.data(), rows);
+        Matrix<S> y = Matrix<S>::Constant(rows + 2, n, std::numeric_limits<S>::quiet_NaN());
+        a.multiply(x.data(), cols + 3, n, y.data(), rows + 2);
+        REQUIRE(y.bottomRows(2).array().isNaN().all());
         for (Index j = 0; j < n; ++j) {
           for (Index i = 0; i < rows; ++i) {
             S sum = b(i);

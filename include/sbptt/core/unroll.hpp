@@ -3,16 +3,16 @@
 /// indexed by loop counters whose bounds are template arguments; only where every index is a
 /// constant can the compiler keep it in registers. GCC 12 unrolls those loops by itself at -O3
 /// but not at -O2 (CMake's RelWithDebInfo, Debian's own builds), where the arrays lived on the
-/// stack. Two tools, each where it measured faster (AVX-512 code, docs/benchmark-runs.md,
-/// sixteenth and seventeenth runs):
-/// - `SBPTT_UNROLL` unrolls the loop after it completely (the parameter products' kernel,
-///   nn/outer_product.hpp: 100 × 100 × 8 at -O2 3209–3274 ns without it, 740–744 with it;
-///   the short products' dot products). On the packed product's blocks it slowed the -O3
-///   code of 4-column blocks by half.
-/// - `static_for` calls f(0), …, f(N − 1) with constant indices (the packed product's blocks,
-///   nn/packed_product.hpp: guidance's R epoch at -O2 27.2 ms with loops, 17.1 with it).
-///   In the parameter products' kernel, its lambdas nested three deep were not all inlined:
-///   100 × 100 × 8 took 2358–2385 ns at -O2 and 1396–1410 at -O3, against 723–733.
+/// stack. Two tools (AVX-512 code, docs/benchmark-runs.md, sixteenth and seventeenth runs):
+/// - `SBPTT_UNROLL` unrolls the loop after it completely. The parameter products' kernel
+///   (nn/outer_product.hpp) uses it: 100 × 100 × 8 at -O2 took 3209–3274 ns without it,
+///   740–744 with it; `static_for` there, its lambdas nested three deep not all inlined,
+///   2358–2385 at -O2 and 1396–1410 at -O3. So do the short products' dot products
+///   (`PackedMatrix::row_dots`; `static_for` was not measured there).
+/// - `static_for` calls f(0), …, f(N − 1) with constant indices. The packed product's blocks
+///   use it: guidance's R epoch at -O2 took 27.4–27.8 ms with plain loops, 16.4–16.7 with it.
+///   `SBPTT_UNROLL` on those loops made the -O3 code of 4-column blocks take 1.5 times as
+///   long (385–392 → 578–608 ns).
 #include <type_traits>
 #include <utility>
 
@@ -24,9 +24,9 @@
 #define SBPTT_UNROLL
 #endif
 
-// After a lambda's parameters: inline its calls even where the compiler would not (clang 14
-// at -O1 under the sanitizers ran the packed product 4.5 times slower through `static_for`
-// without it).
+// Inline the calls of a function (in front of it) or of a lambda (after its parameters) even
+// where the compiler would not: clang 14 at -O1 under the sanitizers ran the packed product
+// 4.5 times slower through `static_for` without it.
 #if defined(__GNUC__) || defined(__clang__)
 #define SBPTT_ALWAYS_INLINE __attribute__((always_inline))
 #else

@@ -173,8 +173,9 @@ private:
 
   /// Rows p·kLanes … (p + Panels)·kLanes − 1 of Y, columns 0 … Columns − 1; its loops over
   /// registers are `static_for`s (core/unroll.hpp). Never inlined: inlined into `multiply`'s
-  /// loops, the same block made guidance's R epoch 2% slower at -O3; kept apart, 5% faster
-  /// than the plain loops (docs/benchmark-runs.md, seventeenth run).
+  /// loops, the same block made guidance's R epoch 2% slower at -O3 than the plain loops;
+  /// kept apart, 7–8% faster (13.59–13.78 against 14.79–15.02 ms; docs/benchmark-runs.md,
+  /// seventeenth run).
   template <int Panels, int Columns>
   [[gnu::noinline]] void block(Index p, const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
     using Eigen::internal::pmadd;
@@ -217,7 +218,7 @@ private:
   /// at a time, each waited on its own chain of multiply-adds and its reduction (float,
   /// 4 × 100 × 8, guidance's output layer: 120–124 ns one at a time, 101–103 side by side;
   /// 1 × 100 × 8, the cart pole's: 32–38 against 25–26; docs/benchmark-runs.md, seventeenth
-  /// run). 16 side by side were slower than 8.
+  /// run).
   template <int Rows, int Columns>
   void row_dots(const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
     using Eigen::internal::pmadd;

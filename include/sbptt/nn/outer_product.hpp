@@ -173,33 +173,16 @@ private:
     }
   }
 
-  /// Panel p of a block whose last panel is masked when `Masked`.
+  /// Panel p of a block whose last panel is masked when `Masked` (its first `lanes` lanes).
   template <int Panels, bool Masked>
   EIGEN_ALWAYS_INLINE static Packet load_panel(const Scalar* from, int p, Index lanes) {
-    return Masked && p == Panels - 1 ? load<true>(from, lanes) : load<false>(from, lanes);
+    return Masked && p == Panels - 1 ? load_first_lanes(from, lanes)
+                                     : Eigen::internal::ploadu<Packet>(from);
   }
   template <int Panels, bool Masked>
   EIGEN_ALWAYS_INLINE static void store_panel(Scalar* to, const Packet& value, int p,
                                               Index lanes) {
     if (Masked && p == Panels - 1) {
-      store<true>(to, value, lanes);
-    } else {
-      store<false>(to, value, lanes);
-    }
-  }
-
-  template <bool Masked>
-  EIGEN_ALWAYS_INLINE static Packet load(const Scalar* from, Index lanes) {
-    if constexpr (Masked) {
-      return load_first_lanes(from, lanes);
-    } else {
-      return Eigen::internal::ploadu<Packet>(from);
-    }
-  }
-
-  template <bool Masked>
-  EIGEN_ALWAYS_INLINE static void store(Scalar* to, const Packet& value, Index lanes) {
-    if constexpr (Masked) {
       store_first_lanes(to, value, lanes);
     } else {
       Eigen::internal::pstoreu(to, value);

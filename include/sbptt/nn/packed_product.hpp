@@ -104,7 +104,7 @@ public:
     if (by_rows()) {
       detail::with_count<kMaxShortRows>(rows_, [&](auto rows) {
         constexpr int r = decltype(rows)::value;
-        constexpr int columns = r >= kDotsInFlight ? 1 : kDotsInFlight / r;
+        constexpr int columns = kDotsInFlight / r;
         Index j = 0;
         for (; j + columns <= n; j += columns)
           row_dots<r, columns>(x + j * ldx, ldx, y + j * ldy, ldy);
@@ -208,10 +208,12 @@ private:
   }
 
   /// Whether A is short and kept in the row-major layout of the file comment.
-  [[nodiscard]] bool by_rows() const { return 4 * rows_ <= kLanes; }
+  [[nodiscard]] bool by_rows() const { return rows_ <= kMaxShortRows; }
+  // A quarter of a register's rows (file comment).
   static constexpr int kMaxShortRows = static_cast<int>(kLanes / 4);
   // The dot products `row_dots` takes side by side: measured, 8 beat 4 and 16.
   static constexpr int kDotsInFlight = 8;
+  static_assert(kMaxShortRows <= kDotsInFlight, "all short rows side by side");
 
   /// Y's entries (i, j), i < Rows = rows(), j < Columns, each b_i + a_i· x_j in the order of
   /// the file comment (short matrices). The Rows × Columns dot products go side by side: one

@@ -29,7 +29,7 @@
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/core/unroll.hpp"
-#include "sbptt/nn/first_lanes.hpp"
+#include "sbptt/core/first_lanes.hpp"
 
 namespace sbptt {
 namespace detail {

@@ -32,7 +32,7 @@
 #include "sbptt/core/count_dispatch.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/core/unroll.hpp"
-#include "sbptt/nn/first_lanes.hpp"
+#include "sbptt/core/first_lanes.hpp"
 
 namespace sbptt {
 namespace detail {

@@ -399,13 +399,11 @@ private:
   /// Columns first … first + count − 1 of `m` into one lane array per row, and back.
   template <class Rows>
   static void load(const Matrix<Scalar>& m, Index first, int count, Rows& rows) {
-    for (std::size_t r = 0; r < rows.size(); ++r)
-      rows[r] = detail::LaneRows<Scalar>::load(m, static_cast<Index>(r), first, count);
+    detail::LaneRows<Scalar>::load_rows(m, first, count, rows.data());
   }
   template <class Rows>
   static void store(const Rows& rows, Index first, int count, Matrix<Scalar>& m) {
-    for (std::size_t r = 0; r < rows.size(); ++r)
-      detail::LaneRows<Scalar>::store(rows[r], m, static_cast<Index>(r), first, count);
+    detail::LaneRows<Scalar>::store_rows(rows.data(), first, count, m);
   }
 
   /// 0 as one number or as a lane array.

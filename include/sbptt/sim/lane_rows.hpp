@@ -8,10 +8,18 @@
 /// instruction sets split it). A batch's last, partial block is padded with 0, so that every
 /// block runs the same instructions: a sample's result does not depend on its place in the
 /// batch or on the batch's size, as long as the arithmetic on a lane reads only that lane.
+///
+/// A batch matrix holds a sample's rows together (column-major), a block of lanes a row's
+/// samples together: moving a whole block in or out (`load_rows`, `store_rows`) transposes it.
+/// On AVX-512 that goes by tiles of kLanes × kLanes, a column of the tile a register,
+/// transposed in registers (guidance's 56 rows in and 28 out of a 16-sample block: 0.15 ns an
+/// entry one at a time, docs/benchmark-runs.md).
 #include <algorithm>
+#include <type_traits>
 
 #include <Eigen/Core>
 
+#include "sbptt/core/first_lanes.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt::detail {
@@ -37,6 +45,105 @@ struct LaneRows {
   static void store(const Values& v, Matrix<Scalar>& m, Index row, Index first, int count) {
     for (int l = 0; l < count; ++l) m(row, first + l) = v(l);
   }
+
+  /// Every row of columns first … first + count − 1 of `m` into `rows` (m.rows() arrays), as
+  /// `load` row by row.
+  static void load_rows(const Matrix<Scalar>& m, Index first, int count, Values* rows) {
+#if defined(EIGEN_VECTORIZE_AVX512)
+    if constexpr (kTiles) {
+      for (Index top = 0; top < m.rows(); top += kLanes) {
+        const Index height = std::min<Index>(kLanes, m.rows() - top);
+        Packet tile[kLanes];
+        for (int l = 0; l < kLanes; ++l)
+          tile[l] = l < count ? load_first_lanes(&m(top, first + l), height) : Packet(zero());
+        transpose(tile);
+        for (Index i = 0; i < height; ++i)
+          Eigen::internal::pstoreu(rows[top + i].data(), tile[i]);
+      }
+      return;
+    }
+#endif
+    for (Index r = 0; r < m.rows(); ++r) rows[r] = load(m, r, first, count);
+  }
+
+  /// The first `count` lanes of `rows` (m.rows() arrays) into columns first … first + count − 1
+  /// of `m`, as `store` row by row.
+  static void store_rows(const Values* rows, Index first, int count, Matrix<Scalar>& m) {
+#if defined(EIGEN_VECTORIZE_AVX512)
+    if constexpr (kTiles) {
+      for (Index top = 0; top < m.rows(); top += kLanes) {
+        const Index height = std::min<Index>(kLanes, m.rows() - top);
+        Packet tile[kLanes];
+        for (Index i = 0; i < kLanes; ++i)
+          tile[i] =
+              i < height ? Eigen::internal::ploadu<Packet>(rows[top + i].data()) : Packet(zero());
+        transpose(tile);
+        for (int l = 0; l < count; ++l) store_first_lanes(&m(top, first + l), tile[l], height);
+      }
+      return;
+    }
+#endif
+    for (Index r = 0; r < m.rows(); ++r) store(rows[r], m, r, first, count);
+  }
+
+private:
+#if defined(EIGEN_VECTORIZE_AVX512)
+  static constexpr bool kTiles = std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>;
+  using Packet = typename Eigen::internal::packet_traits<Scalar>::type;
+  static Packet zero() { return Eigen::internal::pset1<Packet>(Scalar(0)); }
+
+  /// Register l's lane i to register i's lane l: 32-bit, 64-bit, then twice 128-bit
+  /// interleaves for 16 floats; 64-bit, then twice 128-bit for 8 doubles.
+  static void transpose(Packet* r) {
+    if constexpr (std::is_same_v<Scalar, float>) {
+      __m512 t[16];
+      for (int i = 0; i < 16; i += 2) {
+        t[i] = _mm512_unpacklo_ps(r[i], r[i + 1]);
+        t[i + 1] = _mm512_unpackhi_ps(r[i], r[i + 1]);
+      }
+      for (int i = 0; i < 16; i += 4) {
+        const __m512d a = _mm512_castps_pd(t[i]), b = _mm512_castps_pd(t[i + 1]);
+        const __m512d c = _mm512_castps_pd(t[i + 2]), d = _mm512_castps_pd(t[i + 3]);
+        r[i] = _mm512_castpd_ps(_mm512_unpacklo_pd(a, c));
+        r[i + 1] = _mm512_castpd_ps(_mm512_unpackhi_pd(a, c));
+        r[i + 2] = _mm512_castpd_ps(_mm512_unpacklo_pd(b, d));
+        r[i + 3] = _mm512_castpd_ps(_mm512_unpackhi_pd(b, d));
+      }
+      // r[4q + j] holds entry j, 4 + j, 8 + j, 12 + j (a 128-bit lane each) of registers
+      // 4q … 4q + 3.
+      for (int j = 0; j < 4; ++j) {
+        t[j] = _mm512_shuffle_f32x4(r[j], r[4 + j], 0x88);       // entries j, 8 + j
+        t[4 + j] = _mm512_shuffle_f32x4(r[j], r[4 + j], 0xdd);   // entries 4 + j, 12 + j
+        t[8 + j] = _mm512_shuffle_f32x4(r[8 + j], r[12 + j], 0x88);
+        t[12 + j] = _mm512_shuffle_f32x4(r[8 + j], r[12 + j], 0xdd);
+      }
+      for (int j = 0; j < 4; ++j) {
+        r[j] = _mm512_shuffle_f32x4(t[j], t[8 + j], 0x88);
+        r[8 + j] = _mm512_shuffle_f32x4(t[j], t[8 + j], 0xdd);
+        r[4 + j] = _mm512_shuffle_f32x4(t[4 + j], t[12 + j], 0x88);
+        r[12 + j] = _mm512_shuffle_f32x4(t[4 + j], t[12 + j], 0xdd);
+      }
+    } else {
+      __m512d t[8];
+      for (int i = 0; i < 8; i += 2) {
+        t[i] = _mm512_unpacklo_pd(r[i], r[i + 1]);
+        t[i + 1] = _mm512_unpackhi_pd(r[i], r[i + 1]);
+      }
+      // t[2q] holds entries 0, 2, 4, 6 of registers 2q, 2q + 1; t[2q + 1] entries 1, 3, 5, 7.
+      for (int q = 0; q < 8; q += 4) {
+        r[q] = _mm512_shuffle_f64x2(t[q], t[q + 2], 0x88);      // entries 0, 4
+        r[q + 1] = _mm512_shuffle_f64x2(t[q + 1], t[q + 3], 0x88);  // 1, 5
+        r[q + 2] = _mm512_shuffle_f64x2(t[q], t[q + 2], 0xdd);      // 2, 6
+        r[q + 3] = _mm512_shuffle_f64x2(t[q + 1], t[q + 3], 0xdd);  // 3, 7
+      }
+      for (int j = 0; j < 4; ++j) {
+        t[j] = _mm512_shuffle_f64x2(r[j], r[4 + j], 0x88);
+        t[4 + j] = _mm512_shuffle_f64x2(r[j], r[4 + j], 0xdd);
+      }
+      std::copy(t, t + 8, r);
+    }
+  }
+#endif
 };
 
 }  // namespace sbptt::detail

@@ -48,19 +48,11 @@ struct LaneRows {
 
   /// Every row of columns first … first + count − 1 of `m` into `rows` (m.rows() arrays), as
   /// `load` row by row.
-  static void load_rows(const Matrix<Scalar>& m, Index first, int count, Values* rows) {
+  EIGEN_ALWAYS_INLINE static void load_rows(const Matrix<Scalar>& m, Index first, int count,
+                                            Values* rows) {
 #if defined(EIGEN_VECTORIZE_AVX512)
     if constexpr (kTiles) {
-      for (Index top = 0; top < m.rows(); top += kLanes) {
-        const Index height = std::min<Index>(kLanes, m.rows() - top);
-        Packet tile[kLanes];
-        for (int l = 0; l < kLanes; ++l)
-          tile[l] = l < count ? load_first_lanes(&m(top, first + l), height) : Packet(zero());
-        transpose(tile);
-        for (Index i = 0; i < height; ++i)
-          Eigen::internal::pstoreu(rows[top + i].data(), tile[i]);
-      }
-      return;
+      return load_tiles(m, first, count, rows);
     }
 #endif
     for (Index r = 0; r < m.rows(); ++r) rows[r] = load(m, r, first, count);
@@ -68,19 +60,11 @@ struct LaneRows {
 
   /// The first `count` lanes of `rows` (m.rows() arrays) into columns first … first + count − 1
   /// of `m`, as `store` row by row.
-  static void store_rows(const Values* rows, Index first, int count, Matrix<Scalar>& m) {
+  EIGEN_ALWAYS_INLINE static void store_rows(const Values* rows, Index first, int count,
+                                             Matrix<Scalar>& m) {
 #if defined(EIGEN_VECTORIZE_AVX512)
     if constexpr (kTiles) {
-      for (Index top = 0; top < m.rows(); top += kLanes) {
-        const Index height = std::min<Index>(kLanes, m.rows() - top);
-        Packet tile[kLanes];
-        for (Index i = 0; i < kLanes; ++i)
-          tile[i] =
-              i < height ? Eigen::internal::ploadu<Packet>(rows[top + i].data()) : Packet(zero());
-        transpose(tile);
-        for (int l = 0; l < count; ++l) store_first_lanes(&m(top, first + l), tile[l], height);
-      }
-      return;
+      return store_tiles(rows, first, count, m);
     }
 #endif
     for (Index r = 0; r < m.rows(); ++r) store(rows[r], m, r, first, count);
@@ -92,9 +76,41 @@ private:
   using Packet = typename Eigen::internal::packet_traits<Scalar>::type;
   static Packet zero() { return Eigen::internal::pset1<Packet>(Scalar(0)); }
 
+  EIGEN_ALWAYS_INLINE static void load_tiles(const Matrix<Scalar>& m, Index first, int count,
+                                             Values* rows) {
+    for (Index top = 0; top < m.rows(); top += kLanes) {
+      const Index height = std::min<Index>(kLanes, m.rows() - top);
+      Packet tile[kLanes];
+      for (int l = 0; l < kLanes; ++l)
+        tile[l] = l < count ? load_first_lanes(&m(top, first + l), height) : zero();
+      transpose(tile);
+      for (Index i = 0; i < height; ++i) Eigen::internal::pstoreu(rows[top + i].data(), tile[i]);
+    }
+  }
+
+  EIGEN_ALWAYS_INLINE static void store_tiles(const Values* rows, Index first, int count,
+                                              Matrix<Scalar>& m) {
+    for (Index top = 0; top < m.rows(); top += kLanes) {
+      const Index height = std::min<Index>(kLanes, m.rows() - top);
+      Packet tile[kLanes];
+      for (Index i = 0; i < kLanes; ++i)
+        tile[i] = i < height ? Eigen::internal::ploadu<Packet>(rows[top + i].data()) : zero();
+      transpose(tile);
+      for (int l = 0; l < count; ++l) store_first_lanes(&m(top, first + l), tile[l], height);
+    }
+  }
+
   /// Register l's lane i to register i's lane l: 32-bit, 64-bit, then twice 128-bit
   /// interleaves for 16 floats; 64-bit, then twice 128-bit for 8 doubles.
-  static void transpose(Packet* r) {
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+// GCC 12's interleave intrinsics merge into an undefined register, which its -Wall reports as
+// uninitialized wherever they are inlined (GCC bug 105593). Their masked forms with every
+// lane selected would not warn, but GCC keeps the mask: step_batch took 144 ns, not 111.
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+  EIGEN_ALWAYS_INLINE static void transpose(Packet* r) {
     if constexpr (std::is_same_v<Scalar, float>) {
       __m512 t[16];
       for (int i = 0; i < 16; i += 2) {
@@ -143,6 +159,9 @@ private:
       std::copy(t, t + 8, r);
     }
   }
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
 #endif
 };
 

@@ -43,6 +43,10 @@ public:
   static constexpr int kLanes = LaneRows<Scalar>::kLanes;
   static constexpr int kRows = Nx + 2;  // the grid and a wall on either side
   using LaneValues = std::array<Scalar, kLanes>;  // one number per sample of the block
+  /// The 2Nx rows of a block of a batch (Re ψ_0, Im ψ_0, …) as lane arrays: `load`
+  /// and `store` move a block through them (lane_rows.hpp's transposition), then
+  /// de-interleave.
+  using Rows = std::array<typename LaneRows<Scalar>::Values, static_cast<std::size_t>(2 * Nx)>;
   struct alignas(64) Field {  // one complex value per row and lane; the walls are 0
     Scalar re[kRows][kLanes];
     Scalar im[kRows][kLanes];
@@ -62,21 +66,20 @@ public:
   /// lanes past `count` set to 0.
   static void load(const Matrix<Scalar>& x, Index first, int count, Field& f) {
     f.clear_walls();
+    Rows rows;
+    LaneRows<Scalar>::load_rows(x, first, count, rows.data());
     for (int j = 0; j < Nx; ++j) {
-      for (int l = 0; l < kLanes; ++l) {
-        const bool used = l < count;
-        f.re[j + 1][l] = used ? x(2 * j, first + l) : Scalar(0);
-        f.im[j + 1][l] = used ? x(2 * j + 1, first + l) : Scalar(0);
-      }
+      std::copy_n(rows[2 * j].data(), kLanes, f.re[j + 1]);
+      std::copy_n(rows[2 * j + 1].data(), kLanes, f.im[j + 1]);
     }
   }
   static void store(const Field& f, Index first, int count, Matrix<Scalar>& x) {
-    for (int l = 0; l < count; ++l) {
-      for (int j = 0; j < Nx; ++j) {
-        x(2 * j, first + l) = f.re[j + 1][l];
-        x(2 * j + 1, first + l) = f.im[j + 1][l];
-      }
+    Rows rows;
+    for (int j = 0; j < Nx; ++j) {
+      std::copy_n(f.re[j + 1], kLanes, rows[2 * j].data());
+      std::copy_n(f.im[j + 1], kLanes, rows[2 * j + 1].data());
     }
+    LaneRows<Scalar>::store_rows(rows.data(), first, count, x);
   }
   static LaneValues load_controls(const Matrix<Scalar>& u, Index first, int count) {
     LaneValues out{};

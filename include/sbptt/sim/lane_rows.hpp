@@ -12,8 +12,8 @@
 /// A batch matrix holds a sample's rows together (column-major), a block of lanes a row's
 /// samples together: moving a whole block in or out (`load_rows`, `store_rows`) transposes it.
 /// On AVX-512 that goes by tiles of kLanes × kLanes, a column of the tile a register,
-/// transposed in registers (guidance's 56 rows in and 28 out of a 16-sample block: 0.15 ns an
-/// entry one at a time, docs/benchmark-runs.md).
+/// transposed in registers (guidance's `vjp_batch` moves 52 rows in and 28 out per block:
+/// entry by entry, about 0.15 ns an entry; docs/benchmark-runs.md, eighteenth run).
 #include <algorithm>
 #include <type_traits>
 
@@ -100,68 +100,79 @@ private:
     }
   }
 
+  // The interleaves are the masked forms with every lane selected, which run as fast: GCC 12
+  // gives the unmasked ones an undefined register to merge into, and its -Wall reports that as
+  // uninitialized in every function they are inlined into (GCC bug 105593).
+  template <bool High>
+  static __m512 interleave32(__m512 a, __m512 b) {
+    return High ? _mm512_mask_unpackhi_ps(a, 0xFFFF, a, b)
+                : _mm512_mask_unpacklo_ps(a, 0xFFFF, a, b);
+  }
+  template <bool High>
+  static __m512d interleave64(__m512d a, __m512d b) {
+    return High ? _mm512_mask_unpackhi_pd(a, 0xFF, a, b) : _mm512_mask_unpacklo_pd(a, 0xFF, a, b);
+  }
+  /// 128-bit quarters 0 and 2 (Odd: 1 and 3) of a, then of b.
+  template <bool Odd>
+  static __m512 quarters(__m512 a, __m512 b) {
+    return _mm512_mask_shuffle_f32x4(a, 0xFFFF, a, b, Odd ? 0xdd : 0x88);
+  }
+  template <bool Odd>
+  static __m512d quarters(__m512d a, __m512d b) {
+    return _mm512_mask_shuffle_f64x2(a, 0xFF, a, b, Odd ? 0xdd : 0x88);
+  }
+
   /// Register l's lane i to register i's lane l: 32-bit, 64-bit, then twice 128-bit
   /// interleaves for 16 floats; 64-bit, then twice 128-bit for 8 doubles.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic push
-// GCC 12's interleave intrinsics merge into an undefined register, which its -Wall reports as
-// uninitialized wherever they are inlined (GCC bug 105593). Their masked forms with every
-// lane selected would not warn, but GCC keeps the mask: step_batch took 144 ns, not 111.
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
   EIGEN_ALWAYS_INLINE static void transpose(Packet* r) {
     if constexpr (std::is_same_v<Scalar, float>) {
       __m512 t[16];
       for (int i = 0; i < 16; i += 2) {
-        t[i] = _mm512_unpacklo_ps(r[i], r[i + 1]);
-        t[i + 1] = _mm512_unpackhi_ps(r[i], r[i + 1]);
+        t[i] = interleave32<false>(r[i], r[i + 1]);
+        t[i + 1] = interleave32<true>(r[i], r[i + 1]);
       }
       for (int i = 0; i < 16; i += 4) {
         const __m512d a = _mm512_castps_pd(t[i]), b = _mm512_castps_pd(t[i + 1]);
         const __m512d c = _mm512_castps_pd(t[i + 2]), d = _mm512_castps_pd(t[i + 3]);
-        r[i] = _mm512_castpd_ps(_mm512_unpacklo_pd(a, c));
-        r[i + 1] = _mm512_castpd_ps(_mm512_unpackhi_pd(a, c));
-        r[i + 2] = _mm512_castpd_ps(_mm512_unpacklo_pd(b, d));
-        r[i + 3] = _mm512_castpd_ps(_mm512_unpackhi_pd(b, d));
+        r[i] = _mm512_castpd_ps(interleave64<false>(a, c));
+        r[i + 1] = _mm512_castpd_ps(interleave64<true>(a, c));
+        r[i + 2] = _mm512_castpd_ps(interleave64<false>(b, d));
+        r[i + 3] = _mm512_castpd_ps(interleave64<true>(b, d));
       }
-      // r[4q + j] holds entry j, 4 + j, 8 + j, 12 + j (a 128-bit lane each) of registers
+      // r[4q + j] holds entry j, 4 + j, 8 + j, 12 + j (a 128-bit quarter each) of registers
       // 4q … 4q + 3.
       for (int j = 0; j < 4; ++j) {
-        t[j] = _mm512_shuffle_f32x4(r[j], r[4 + j], 0x88);       // entries j, 8 + j
-        t[4 + j] = _mm512_shuffle_f32x4(r[j], r[4 + j], 0xdd);   // entries 4 + j, 12 + j
-        t[8 + j] = _mm512_shuffle_f32x4(r[8 + j], r[12 + j], 0x88);
-        t[12 + j] = _mm512_shuffle_f32x4(r[8 + j], r[12 + j], 0xdd);
+        t[j] = quarters<false>(r[j], r[4 + j]);     // entries j, 8 + j
+        t[4 + j] = quarters<true>(r[j], r[4 + j]);  // entries 4 + j, 12 + j
+        t[8 + j] = quarters<false>(r[8 + j], r[12 + j]);
+        t[12 + j] = quarters<true>(r[8 + j], r[12 + j]);
       }
       for (int j = 0; j < 4; ++j) {
-        r[j] = _mm512_shuffle_f32x4(t[j], t[8 + j], 0x88);
-        r[8 + j] = _mm512_shuffle_f32x4(t[j], t[8 + j], 0xdd);
-        r[4 + j] = _mm512_shuffle_f32x4(t[4 + j], t[12 + j], 0x88);
-        r[12 + j] = _mm512_shuffle_f32x4(t[4 + j], t[12 + j], 0xdd);
+        r[j] = quarters<false>(t[j], t[8 + j]);
+        r[8 + j] = quarters<true>(t[j], t[8 + j]);
+        r[4 + j] = quarters<false>(t[4 + j], t[12 + j]);
+        r[12 + j] = quarters<true>(t[4 + j], t[12 + j]);
       }
     } else {
       __m512d t[8];
       for (int i = 0; i < 8; i += 2) {
-        t[i] = _mm512_unpacklo_pd(r[i], r[i + 1]);
-        t[i + 1] = _mm512_unpackhi_pd(r[i], r[i + 1]);
+        t[i] = interleave64<false>(r[i], r[i + 1]);
+        t[i + 1] = interleave64<true>(r[i], r[i + 1]);
       }
       // t[2q] holds entries 0, 2, 4, 6 of registers 2q, 2q + 1; t[2q + 1] entries 1, 3, 5, 7.
       for (int q = 0; q < 8; q += 4) {
-        r[q] = _mm512_shuffle_f64x2(t[q], t[q + 2], 0x88);      // entries 0, 4
-        r[q + 1] = _mm512_shuffle_f64x2(t[q + 1], t[q + 3], 0x88);  // 1, 5
-        r[q + 2] = _mm512_shuffle_f64x2(t[q], t[q + 2], 0xdd);      // 2, 6
-        r[q + 3] = _mm512_shuffle_f64x2(t[q + 1], t[q + 3], 0xdd);  // 3, 7
+        r[q] = quarters<false>(t[q], t[q + 2]);          // entries 0, 4
+        r[q + 1] = quarters<false>(t[q + 1], t[q + 3]);  // 1, 5
+        r[q + 2] = quarters<true>(t[q], t[q + 2]);       // 2, 6
+        r[q + 3] = quarters<true>(t[q + 1], t[q + 3]);   // 3, 7
       }
       for (int j = 0; j < 4; ++j) {
-        t[j] = _mm512_shuffle_f64x2(r[j], r[4 + j], 0x88);
-        t[4 + j] = _mm512_shuffle_f64x2(r[j], r[4 + j], 0xdd);
+        t[j] = quarters<false>(r[j], r[4 + j]);
+        t[4 + j] = quarters<true>(r[j], r[4 + j]);
       }
       std::copy(t, t + 8, r);
     }
   }
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic pop
-#endif
 #endif
 };
 

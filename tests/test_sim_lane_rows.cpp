@@ -1,10 +1,12 @@
 // A batch matrix's block of samples into lane arrays and back (sim/lane_rows.hpp): every
 // entry against the matrix indexed one entry at a time, for heights that fill no tile, one,
-// and several with a partial last one, every count of samples in a block, and blocks that
-// start past column 0; the lanes past the count are 0, and nothing outside the block is
-// written.
+// and several with a partial last one, every count of samples in a block, blocks that start
+// past column 0 and blocks that end at the matrix's last column (a read past the block there
+// leaves the allocation, for a sanitizer to see); the lanes past the count are 0, and nothing
+// outside the block or past the last lane array is written.
 #include <catch2/catch.hpp>
 
+#include <utility>
 #include <vector>
 
 #include "support/test_data.hpp"
@@ -22,13 +24,15 @@ TEMPLATE_TEST_CASE("lane rows: a block of samples in and out, entry for entry",
   std::uint64_t seed = 300;
   for (const Index rows : {1, 2, 5, 7, 8, 9, 15, 16, 17, 24, 28, 33, 40}) {
     for (int count = 1; count <= kLanes; ++count) {
-      for (const Index first : {0, 3}) {
-        INFO("rows " << rows << " count " << count << " first " << first);
-        const Index cols = first + count + 2;
+      for (const auto& [first, after] : {std::pair<Index, Index>{0, 2}, {3, 2}, {0, 0}, {3, 0}}) {
+        INFO("rows " << rows << " count " << count << " first " << first << " after " << after);
+        const Index cols = first + count + after;
         const Matrix<S> m = random_matrix<S>(rows, cols, ++seed, 1.0);
-        std::vector<typename Lanes::Values> values(static_cast<std::size_t>(rows));
+        // One more lane array than rows, as a sentinel.
+        std::vector<typename Lanes::Values> values(static_cast<std::size_t>(rows + 1));
         for (auto& v : values) v.setConstant(S(-9));
         Lanes::load_rows(m, first, count, values.data());
+        REQUIRE((values.back() == S(-9)).all());
         for (Index r = 0; r < rows; ++r) {
           const auto& v = values[static_cast<std::size_t>(r)];
           for (int l = 0; l < kLanes; ++l)

@@ -399,10 +399,12 @@ private:
   /// Columns first … first + count − 1 of `m` into one lane array per row, and back.
   template <class Rows>
   static void load(const Matrix<Scalar>& m, Index first, int count, Rows& rows) {
+    eigen_assert(static_cast<Index>(rows.size()) == m.rows());
     detail::LaneRows<Scalar>::load_rows(m, first, count, rows.data());
   }
   template <class Rows>
   static void store(const Rows& rows, Index first, int count, Matrix<Scalar>& m) {
+    eigen_assert(static_cast<Index>(rows.size()) == m.rows());
     detail::LaneRows<Scalar>::store_rows(rows.data(), first, count, m);
   }
 

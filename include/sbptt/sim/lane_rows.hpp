@@ -21,6 +21,7 @@
 
 #include "sbptt/core/first_lanes.hpp"
 #include "sbptt/core/types.hpp"
+#include "sbptt/core/unroll.hpp"
 
 namespace sbptt::detail {
 
@@ -51,7 +52,7 @@ struct LaneRows {
   EIGEN_ALWAYS_INLINE static void load_rows(const Matrix<Scalar>& m, Index first, int count,
                                             Values* rows) {
 #if defined(EIGEN_VECTORIZE_AVX512)
-    if constexpr (kTiles) {
+    if constexpr (kTransposeInRegisters) {
       return load_tiles(m, first, count, rows);
     }
 #endif
@@ -63,7 +64,7 @@ struct LaneRows {
   EIGEN_ALWAYS_INLINE static void store_rows(const Values* rows, Index first, int count,
                                              Matrix<Scalar>& m) {
 #if defined(EIGEN_VECTORIZE_AVX512)
-    if constexpr (kTiles) {
+    if constexpr (kTransposeInRegisters) {
       return store_tiles(rows, first, count, m);
     }
 #endif
@@ -72,7 +73,8 @@ struct LaneRows {
 
 private:
 #if defined(EIGEN_VECTORIZE_AVX512)
-  static constexpr bool kTiles = std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>;
+  static constexpr bool kTransposeInRegisters =
+      std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>;
   using Packet = typename Eigen::internal::packet_traits<Scalar>::type;
   static Packet zero() { return Eigen::internal::pset1<Packet>(Scalar(0)); }
 
@@ -81,9 +83,11 @@ private:
     for (Index top = 0; top < m.rows(); top += kLanes) {
       const Index height = std::min<Index>(kLanes, m.rows() - top);
       Packet tile[kLanes];
+      SBPTT_UNROLL
       for (int l = 0; l < kLanes; ++l)
         tile[l] = l < count ? load_first_lanes(&m(top, first + l), height) : zero();
       transpose(tile);
+      SBPTT_UNROLL
       for (Index i = 0; i < height; ++i) Eigen::internal::pstoreu(rows[top + i].data(), tile[i]);
     }
   }
@@ -93,9 +97,11 @@ private:
     for (Index top = 0; top < m.rows(); top += kLanes) {
       const Index height = std::min<Index>(kLanes, m.rows() - top);
       Packet tile[kLanes];
+      SBPTT_UNROLL
       for (Index i = 0; i < kLanes; ++i)
         tile[i] = i < height ? Eigen::internal::ploadu<Packet>(rows[top + i].data()) : zero();
       transpose(tile);
+      SBPTT_UNROLL
       for (int l = 0; l < count; ++l) store_first_lanes(&m(top, first + l), tile[l], height);
     }
   }
@@ -123,14 +129,18 @@ private:
   }
 
   /// Register l's lane i to register i's lane l: 32-bit, 64-bit, then twice 128-bit
-  /// interleaves for 16 floats; 64-bit, then twice 128-bit for 8 doubles.
+  /// interleaves for 16 floats; 64-bit, then twice 128-bit for 8 doubles. (Eigen's
+  /// `ptranspose` of these blocks goes through 256-bit halves: extracts, 256-bit permutes and
+  /// inserts on top of the same interleaves.)
   EIGEN_ALWAYS_INLINE static void transpose(Packet* r) {
     if constexpr (std::is_same_v<Scalar, float>) {
       __m512 t[16];
+      SBPTT_UNROLL
       for (int i = 0; i < 16; i += 2) {
         t[i] = interleave32<false>(r[i], r[i + 1]);
         t[i + 1] = interleave32<true>(r[i], r[i + 1]);
       }
+      SBPTT_UNROLL
       for (int i = 0; i < 16; i += 4) {
         const __m512d a = _mm512_castps_pd(t[i]), b = _mm512_castps_pd(t[i + 1]);
         const __m512d c = _mm512_castps_pd(t[i + 2]), d = _mm512_castps_pd(t[i + 3]);
@@ -141,12 +151,14 @@ private:
       }
       // r[4q + j] holds entry j, 4 + j, 8 + j, 12 + j (a 128-bit quarter each) of registers
       // 4q … 4q + 3.
+      SBPTT_UNROLL
       for (int j = 0; j < 4; ++j) {
         t[j] = quarters<false>(r[j], r[4 + j]);     // entries j, 8 + j
         t[4 + j] = quarters<true>(r[j], r[4 + j]);  // entries 4 + j, 12 + j
         t[8 + j] = quarters<false>(r[8 + j], r[12 + j]);
         t[12 + j] = quarters<true>(r[8 + j], r[12 + j]);
       }
+      SBPTT_UNROLL
       for (int j = 0; j < 4; ++j) {
         r[j] = quarters<false>(t[j], t[8 + j]);
         r[8 + j] = quarters<true>(t[j], t[8 + j]);
@@ -154,18 +166,22 @@ private:
         r[12 + j] = quarters<true>(t[4 + j], t[12 + j]);
       }
     } else {
+      static_assert(std::is_same_v<Scalar, double>);
       __m512d t[8];
+      SBPTT_UNROLL
       for (int i = 0; i < 8; i += 2) {
         t[i] = interleave64<false>(r[i], r[i + 1]);
         t[i + 1] = interleave64<true>(r[i], r[i + 1]);
       }
       // t[2q] holds entries 0, 2, 4, 6 of registers 2q, 2q + 1; t[2q + 1] entries 1, 3, 5, 7.
+      SBPTT_UNROLL
       for (int q = 0; q < 8; q += 4) {
         r[q] = quarters<false>(t[q], t[q + 2]);          // entries 0, 4
         r[q + 1] = quarters<false>(t[q + 1], t[q + 3]);  // 1, 5
         r[q + 2] = quarters<true>(t[q], t[q + 2]);       // 2, 6
         r[q + 3] = quarters<true>(t[q + 1], t[q + 3]);   // 3, 7
       }
+      SBPTT_UNROLL
       for (int j = 0; j < 4; ++j) {
         t[j] = quarters<false>(r[j], r[4 + j]);
         t[4 + j] = quarters<true>(r[j], r[4 + j]);

@@ -88,8 +88,9 @@ class Schrodinger1D {
   static_assert(std::is_floating_point_v<ScalarT>, "Schrodinger1D: Scalar must be a real type");
   static_assert(Nx == Eigen::Dynamic || Nx >= 1, "Schrodinger1D: Nx must be >= 1 or Dynamic");
   static constexpr int kStateSize = Nx == Eigen::Dynamic ? Eigen::Dynamic : 2 * Nx;
-  // The batched step keeps a few blocks of 64 bytes per grid point on the stack (under 200 KiB
-  // at Nx = 256), so it needs a fixed Nx, and a bounded one.
+  // The batched step keeps a few blocks of 64 bytes per grid point on the stack (about 225 KiB
+  // at Nx = 256: `vjp_batch`'s fields, `vjp`'s and a block's rows on their way in or out), so
+  // it needs a fixed Nx, and a bounded one.
   static constexpr bool kLanesInStack = Nx != Eigen::Dynamic && Nx <= 256;
 
 public:

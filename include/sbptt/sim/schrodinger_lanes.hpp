@@ -43,9 +43,9 @@ public:
   static constexpr int kLanes = LaneRows<Scalar>::kLanes;
   static constexpr int kRows = Nx + 2;  // the grid and a wall on either side
   using LaneValues = std::array<Scalar, kLanes>;  // one number per sample of the block
-  /// The 2Nx rows of a block of a batch (Re ψ_0, Im ψ_0, …) as lane arrays: `load`
-  /// and `store` move a block through them (lane_rows.hpp's transposition), then
-  /// de-interleave.
+  /// The 2Nx rows of a block of a batch as lane arrays, in the batch's order (Re ψ_0, Im ψ_0,
+  /// …): the tiles of lane_rows.hpp transpose a block whole, and `Field` keeps Re and Im
+  /// apart, so `load` and `store` pass through these.
   using Rows = std::array<typename LaneRows<Scalar>::Values, static_cast<std::size_t>(2 * Nx)>;
   struct alignas(64) Field {  // one complex value per row and lane; the walls are 0
     Scalar re[kRows][kLanes];

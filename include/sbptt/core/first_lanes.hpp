@@ -2,9 +2,8 @@
 /// \file The first `count` lanes of an AVX-512 register from or to memory, by masked loads
 /// and stores: a matrix's last panel narrower than a register (the packed and the outer
 /// products), or a tile's columns shorter than one (the simulators' lane rows), without
-/// reading or writing past its end. Lanes not loaded are 0; memory past
-/// the lanes stored is left as it was. Defined only where Eigen vectorizes with AVX-512, for
-/// float and double.
+/// reading or writing past its end. Lanes not loaded are 0; memory past the lanes stored is
+/// left as it was. Defined only where Eigen vectorizes with AVX-512, for float and double.
 #include <type_traits>
 
 #include <Eigen/Core>

@@ -13,7 +13,7 @@
 /// samples together: moving a whole block in or out (`load_rows`, `store_rows`) transposes it.
 /// On AVX-512 that goes by tiles of kLanes × kLanes, a column of the tile a register,
 /// transposed in registers (guidance's `vjp_batch` moves 52 rows in and 28 out per block:
-/// entry by entry, about 0.15 ns an entry; docs/benchmark-runs.md, eighteenth run).
+/// entry by entry, about 0.15–0.2 ns an entry; docs/benchmark-runs.md, eighteenth run).
 #include <algorithm>
 #include <type_traits>
 

@@ -109,14 +109,25 @@ private:
   // The interleaves are the masked forms with every lane selected, which run as fast: GCC 12
   // gives the unmasked ones an undefined register to merge into, and its -Wall reports that as
   // uninitialized in every function they are inlined into (GCC bug 105593).
+  // Entries (32-bit for __m512, 64-bit for __m512d) of a and b alternating, from the low
+  // (High: high) half of each 128-bit quarter.
   template <bool High>
-  static __m512 interleave32(__m512 a, __m512 b) {
+  static __m512 interleave(__m512 a, __m512 b) {
     return High ? _mm512_mask_unpackhi_ps(a, 0xFFFF, a, b)
                 : _mm512_mask_unpacklo_ps(a, 0xFFFF, a, b);
   }
   template <bool High>
-  static __m512d interleave64(__m512d a, __m512d b) {
+  static __m512d interleave(__m512d a, __m512d b) {
     return High ? _mm512_mask_unpackhi_pd(a, 0xFF, a, b) : _mm512_mask_unpacklo_pd(a, 0xFF, a, b);
+  }
+  /// The first stage of either transpose: registers 2k and 2k + 1 interleaved into t.
+  template <int Count, class Register>
+  EIGEN_ALWAYS_INLINE static void interleave_neighbours(const Register* r, Register* t) {
+    SBPTT_UNROLL
+    for (int i = 0; i < Count; i += 2) {
+      t[i] = interleave<false>(r[i], r[i + 1]);
+      t[i + 1] = interleave<true>(r[i], r[i + 1]);
+    }
   }
   /// 128-bit quarters 0 and 2 (Odd: 1 and 3) of a, then of b.
   template <bool Odd>
@@ -135,19 +146,15 @@ private:
   EIGEN_ALWAYS_INLINE static void transpose(Packet* r) {
     if constexpr (std::is_same_v<Scalar, float>) {
       __m512 t[16];
-      SBPTT_UNROLL
-      for (int i = 0; i < 16; i += 2) {
-        t[i] = interleave32<false>(r[i], r[i + 1]);
-        t[i + 1] = interleave32<true>(r[i], r[i + 1]);
-      }
+      interleave_neighbours<16>(r, t);
       SBPTT_UNROLL
       for (int i = 0; i < 16; i += 4) {
         const __m512d a = _mm512_castps_pd(t[i]), b = _mm512_castps_pd(t[i + 1]);
         const __m512d c = _mm512_castps_pd(t[i + 2]), d = _mm512_castps_pd(t[i + 3]);
-        r[i] = _mm512_castpd_ps(interleave64<false>(a, c));
-        r[i + 1] = _mm512_castpd_ps(interleave64<true>(a, c));
-        r[i + 2] = _mm512_castpd_ps(interleave64<false>(b, d));
-        r[i + 3] = _mm512_castpd_ps(interleave64<true>(b, d));
+        r[i] = _mm512_castpd_ps(interleave<false>(a, c));
+        r[i + 1] = _mm512_castpd_ps(interleave<true>(a, c));
+        r[i + 2] = _mm512_castpd_ps(interleave<false>(b, d));
+        r[i + 3] = _mm512_castpd_ps(interleave<true>(b, d));
       }
       // r[4q + j] holds entry j, 4 + j, 8 + j, 12 + j (a 128-bit quarter each) of registers
       // 4q … 4q + 3.
@@ -168,11 +175,7 @@ private:
     } else {
       static_assert(std::is_same_v<Scalar, double>);
       __m512d t[8];
-      SBPTT_UNROLL
-      for (int i = 0; i < 8; i += 2) {
-        t[i] = interleave64<false>(r[i], r[i + 1]);
-        t[i + 1] = interleave64<true>(r[i], r[i + 1]);
-      }
+      interleave_neighbours<8>(r, t);
       // t[2q] holds entries 0, 2, 4, 6 of registers 2q, 2q + 1; t[2q + 1] entries 1, 3, 5, 7.
       SBPTT_UNROLL
       for (int q = 0; q < 8; q += 4) {

@@ -8,6 +8,7 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <limits>
 #include <type_traits>
 #include <vector>
 
@@ -213,6 +214,37 @@ TEST_CASE("engine diagnostics: adjoint norms follow |κ|^(m-n), and non-finite v
     CHECK(d.grad_norm2 == Approx(g.squaredNorm()));
     CHECK_FALSE(d.first_non_finite);
   }
+
+  // A sweep's report: an adjoint whose square overflows is finite and not reported; the first
+  // NaN is, at its step and sample, whichever came before it; the gradient's NaN likewise.
+  detail::SweepBuffers<double, int> sweep;
+  sweep.begin(1, 1, 3, 4, false);
+  sweep.lambda << 1.0, std::numeric_limits<double>::max(), 2.0;
+  sweep.record_adjoint(4);
+  CHECK(std::isinf(sweep.diagnostics.adjoint_norms[4]));
+  CHECK_FALSE(sweep.diagnostics.first_non_finite);
+  sweep.lambda << 1.0, 2.0, -std::numeric_limits<double>::infinity();
+  sweep.record_adjoint(3);
+  REQUIRE(sweep.diagnostics.first_non_finite);
+  CHECK(sweep.diagnostics.first_non_finite->quantity == Quantity::Adjoint);
+  CHECK(sweep.diagnostics.first_non_finite->step == 3);
+  CHECK(sweep.diagnostics.first_non_finite->sample == 2);
+  sweep.lambda << std::nan(""), 0.0, 0.0;
+  sweep.record_adjoint(2);
+  CHECK(sweep.diagnostics.first_non_finite->step == 3);
+  sweep.begin(1, 1, 3, 4, false);
+  sweep.lambda.setOnes();
+  Vector<double> gradient(4);
+  gradient << 0.0, 1.0, std::nan(""), 1e300;
+  sweep.end(gradient);
+  REQUIRE(sweep.diagnostics.first_non_finite);
+  CHECK(sweep.diagnostics.first_non_finite->quantity == Quantity::Gradient);
+  CHECK(sweep.diagnostics.first_non_finite->sample == 2);
+  gradient(2) = 1e300;
+  sweep.begin(1, 1, 3, 4, false);
+  sweep.end(gradient);
+  CHECK(std::isinf(sweep.diagnostics.grad_norm2));
+  CHECK_FALSE(sweep.diagnostics.first_non_finite);
 
   Matrix<double> bad(1, 3);
   bad << 1.0, std::nan(""), 2.0;

@@ -53,3 +53,25 @@ TEMPLATE_TEST_CASE("first_non_finite finds what a loop over isfinite finds", "[c
     }
   }
 }
+
+TEMPLATE_TEST_CASE("a finite sum of squares shows every entry finite; otherwise the scan decides",
+                   "[core]", float, double) {
+  // The sweeps skip the scan when ‖λ‖² or ‖g‖² is finite (engine_buffers.hpp). A NaN or an
+  // infinity anywhere must make the sum say no; finite entries whose squares overflow make it
+  // say no too, and the scan then finds nothing.
+  using S = TestType;
+  using limits = std::numeric_limits<S>;
+  Matrix<S> m = Matrix<S>::Constant(24, 8, S(0.5));
+  CHECK(sbptt::squares_show_all_finite(m.squaredNorm()));
+  for (const S bad : {limits::quiet_NaN(), limits::infinity(), -limits::infinity()}) {
+    for (Index i = 0; i < m.size(); i += 13) {
+      Matrix<S> with = m;
+      with(i) = bad;
+      CHECK_FALSE(sbptt::squares_show_all_finite(with.squaredNorm()));
+    }
+  }
+  Matrix<S> huge = m;
+  huge(5) = limits::max();
+  CHECK_FALSE(sbptt::squares_show_all_finite(huge.squaredNorm()));
+  CHECK_FALSE(sbptt::first_non_finite(huge).has_value());
+}

@@ -6,6 +6,7 @@
 #include <string_view>
 #include <vector>
 
+#include "sbptt/core/error.hpp"
 #include "sbptt/core/sign.hpp"
 #include "sbptt/core/types.hpp"
 
@@ -54,11 +55,24 @@ struct ComparisonDiagnostics {
 template <class Scalar>
 [[nodiscard]] ComparisonDiagnostics compare(const Vector<Scalar>& modified,
                                             const Vector<Scalar>& regular) {
+  detail::require(modified.size() == regular.size(), "compare: g_R size = ", regular.size(),
+                  ", expected the g_M size ", modified.size());
+  detail::PairSums<Scalar> sums;
+  constexpr bool one_pass = detail::kPairSumsInRegisters<Scalar>;
+  const Index agreeing = detail::agreement_pass<Scalar>(modified.data(), regular.data(),
+                                                        modified.size(), nullptr,
+                                                        one_pass ? &sums : nullptr);
+  if constexpr (!one_pass) {
+    sums.dot = modified.dot(regular);
+    sums.modified_norm2 = modified.squaredNorm();
+    sums.regular_norm2 = regular.squaredNorm();
+  }
   ComparisonDiagnostics result;
-  const double dot = static_cast<double>(modified.dot(regular));
-  const double norms = static_cast<double>(modified.norm() * regular.norm());
-  result.cos_modified_regular = norms > 0 ? dot / norms : 0.0;
-  result.agree_fraction = static_cast<double>(sign_agreement(modified, regular));
+  const double norms = static_cast<double>(std::sqrt(sums.modified_norm2) *
+                                           std::sqrt(sums.regular_norm2));
+  result.cos_modified_regular = norms > 0 ? static_cast<double>(sums.dot) / norms : 0.0;
+  result.agree_fraction =
+      static_cast<double>(detail::agreement_fraction<Scalar>(agreeing, modified.size()));
   return result;
 }
 

@@ -84,18 +84,22 @@ struct SweepBuffers {
     diagnostics.params_overlapped = overlapped;
   }
 
-  /// Reports ‖λ‖ as λ_n, and its first non-finite entry unless one is already reported.
+  /// Reports ‖λ‖ as λ_n, and its first non-finite entry unless one is already reported (a
+  /// scan only when ‖λ‖² is not finite).
   void record_adjoint(Index n) {
-    diagnostics.adjoint_norms[static_cast<std::size_t>(n)] = static_cast<double>(lambda.norm());
-    if (!diagnostics.first_non_finite)
+    const Scalar squares = lambda.squaredNorm();
+    diagnostics.adjoint_norms[static_cast<std::size_t>(n)] =
+        static_cast<double>(std::sqrt(squares));
+    if (!diagnostics.first_non_finite && !squares_show_all_finite(squares))
       note_first_non_finite(Quantity::Adjoint, n, lambda, diagnostics.first_non_finite);
   }
 
-  /// Records λ_0 and reports the finished `gradient`.
+  /// Records λ_0 and reports the finished `gradient` (likewise).
   void end(const Vector<Scalar>& gradient) {
     record_adjoint(0);
-    diagnostics.grad_norm2 = static_cast<double>(gradient.squaredNorm());
-    if (!diagnostics.first_non_finite)
+    const Scalar squares = gradient.squaredNorm();
+    diagnostics.grad_norm2 = static_cast<double>(squares);
+    if (!diagnostics.first_non_finite && !squares_show_all_finite(squares))
       diagnostics.first_non_finite = first_non_finite_component(gradient);
   }
 };

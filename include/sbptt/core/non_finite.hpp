@@ -37,4 +37,18 @@ template <class Derived>
   return std::nullopt;  // unreachable: allFinite was false
 }
 
+/// Whether `sum`, a sum of squares of some entries, shows that all of them are finite without
+/// a scan: a NaN or an infinite entry makes it NaN or infinite (squares are never negative,
+/// so no two infinities cancel). A finite-but-huge entry can overflow it too: then the caller
+/// scans and finds nothing. Under -ffinite-math-only the compiler may assume the test away,
+/// so there it never answers yes.
+template <class Scalar>
+[[nodiscard]] bool squares_show_all_finite([[maybe_unused]] Scalar sum) {
+#if defined(__FINITE_MATH_ONLY__) && __FINITE_MATH_ONLY__
+  return false;
+#else
+  return std::isfinite(sum);
+#endif
+}
+
 }  // namespace sbptt

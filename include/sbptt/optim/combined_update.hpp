@@ -26,7 +26,7 @@
 #include <utility>
 
 #include "sbptt/core/error.hpp"
-#include "sbptt/core/sign.hpp"  // tf_sign, signs_agree, sign_agreement
+#include "sbptt/core/sign.hpp"  // signs_agree, agreement_pass, sign_agreement
 #include "sbptt/core/types.hpp"
 #include "sbptt/optim/clip.hpp"
 
@@ -52,14 +52,8 @@ Index combine_counting(const Vector<Scalar>& g_modified, const Vector<Scalar>& g
   // Sizes are equal here, so the resize is a no-op when `out` aliases an input, and each
   // component is read before it is written: aliasing either input is safe.
   out.resize(g_modified.size());
-  Index agreeing = 0;
-  for (Index i = 0; i < g_modified.size(); ++i) {
-    const Scalar modified = g_modified(i);
-    const bool keep = signs_agree(modified, g_regular(i));
-    out(i) = keep ? modified : Scalar(0);
-    agreeing += keep ? 1 : 0;
-  }
-  return agreeing;
+  return agreement_pass<Scalar>(g_modified.data(), g_regular.data(), g_modified.size(),
+                                out.data(), nullptr);
 }
 
 }  // namespace detail

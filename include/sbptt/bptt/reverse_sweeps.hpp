@@ -73,7 +73,13 @@ struct ReverseSweeps {
       const bool flows = !truncated_at(n, truncation);
       adjoint_products(e, {&full, &physics_only}, n, flows, true);
       network_backward(e, full, n, result.regular, flows ? &full.input_adjoint : nullptr);
-      network_backward(e, physics_only, n, result.modified, nullptr);
+      // At the last step both sweeps start from λ_m = the loss seed, so their μ are the same
+      // numbers, and so are the parameter products both gradients start with (from 0).
+      if (n == e.steps_ - 1 && physics_only.mu == full.mu) {
+        result.modified = result.regular;
+      } else {
+        network_backward(e, physics_only, n, result.modified, nullptr);
+      }
       advance(full, flows, flows);
       advance(physics_only, flows, false);
     }

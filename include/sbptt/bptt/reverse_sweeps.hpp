@@ -10,6 +10,7 @@
 /// dropped where the truncation window cuts (flow_mode.hpp).
 #include <atomic>
 #include <cstddef>
+#include <cstring>
 #include <initializer_list>
 
 #include "sbptt/bptt/batch_physics.hpp"
@@ -75,7 +76,7 @@ struct ReverseSweeps {
       network_backward(e, full, n, result.regular, flows ? &full.input_adjoint : nullptr);
       // At the last step both sweeps start from λ_m = the loss seed, so their μ are the same
       // numbers, and so are the parameter products both gradients start with (from 0).
-      if (n == e.steps_ - 1 && physics_only.mu == full.mu) {
+      if (n == e.steps_ - 1 && same_bits(physics_only.mu, full.mu)) {
         result.modified = result.regular;
       } else {
         network_backward(e, physics_only, n, result.modified, nullptr);
@@ -158,6 +159,15 @@ private:
     } else {
       e.packed_controller_.backward(workspace, s.mu, gradient, dx);
     }
+  }
+
+  /// Whether `a` and `b` hold the same bits (−0 and +0 differ, equal NaNs do not).
+  template <class Scalar>
+  static bool same_bits(const Matrix<Scalar>& a, const Matrix<Scalar>& b) {
+    if (a.rows() != b.rows() || a.cols() != b.cols()) return false;
+    return a.size() == 0 ||
+           std::memcmp(a.data(), b.data(), sizeof(Scalar) * static_cast<std::size_t>(a.size())) ==
+               0;
   }
 
   /// λ_n of engine.hpp's file comment from the products of step n: A_nᵀλ_{n+1} when `physics`,

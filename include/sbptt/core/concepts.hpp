@@ -143,7 +143,9 @@ concept BatchSimulator =
 /// - `void backward(const Workspace& ws, const Matrix<Scalar>& dY, Vector<Scalar>& grad,
 ///   Matrix<Scalar>* dX) const`: **adds** (∂N/∂θ)ᵀ dY, summed over the batch, to `grad`; if
 ///   `dX` is not null, sets `*dX = (∂N/∂x)ᵀ dY` (input_dim × B). Passing null is how the
-///   gradient is stopped at the network input, and it skips that work.
+///   gradient is stopped at the network input, and it skips that work; what is added to
+///   `grad` must be the same numbers either way (the combined update's pair on one thread
+///   takes g_M's first terms from g_R's, bptt/reverse_sweeps.hpp).
 template <class C>
 concept Controller = detail::HasControllerSizes<C> && detail::HasControllerParams<C> &&
                      detail::HasControllerForward<C> && detail::HasControllerBackward<C>;

@@ -9,8 +9,10 @@
 /// Two zeros agree; one zero and one non-zero do not. NaN never agrees: for g_R this is what TF
 /// does (an overflowing component is masked out); for g_M it keeps a NaN out of the optimizer.
 /// An empty pair of vectors has nothing that disagrees, hence 1.
+#include <bit>
 #include <cmath>
 #include <concepts>
+#include <cstdint>
 #include <type_traits>
 
 #include <Eigen/Core>
@@ -31,6 +33,19 @@ template <std::floating_point Scalar>
   return static_cast<int>(x > Scalar(0)) - static_cast<int>(x < Scalar(0));
 }
 
+/// Whether `x` is a NaN, from its bits (all exponent bits set, a mantissa bit set), which no
+/// floating-point option can assume away.
+template <std::floating_point Scalar>
+[[nodiscard]] bool nan_by_bits(Scalar x) {
+  if constexpr (std::is_same_v<Scalar, float>) {
+    return (std::bit_cast<std::uint32_t>(x) & 0x7fffffffU) > 0x7f800000U;
+  } else if constexpr (std::is_same_v<Scalar, double>) {
+    return (std::bit_cast<std::uint64_t>(x) & 0x7fffffffffffffffULL) > 0x7ff0000000000000ULL;
+  } else {
+    return std::isnan(x);
+  }
+}
+
 /// Whether component i keeps g_M under the combination rule (see the file comment): both
 /// positive, both negative or both zero, which every comparison with a NaN fails. Written as
 /// three comparisons joined without branches, so that the loops over a gradient (11301
@@ -39,6 +54,11 @@ template <std::floating_point Scalar>
 template <std::floating_point Scalar>
 [[nodiscard]] bool signs_agree(Scalar modified, Scalar regular) {
   const Scalar zero(0);
+#if defined(__FINITE_MATH_ONLY__) && __FINITE_MATH_ONLY__
+  // There the compiler may take a NaN to compare like a number (GCC 12 counted NaN against 0
+  // as agreeing), so NaN is told by its bits.
+  if (nan_by_bits(modified) || nan_by_bits(regular)) return false;
+#endif
   return ((modified > zero) & (regular > zero)) | ((modified < zero) & (regular < zero)) |
          ((modified == zero) & (regular == zero));
 }
@@ -108,7 +128,7 @@ Index agreement_pass(const Scalar* modified, const Scalar* regular, Index n, Sca
       const Packet m = ei::ploadu<Packet>(modified + i);
       const Packet r = ei::ploadu<Packet>(regular + i);
       const auto keep = agreeing_lanes(m, r);
-      agreeing += __builtin_popcount(static_cast<unsigned>(keep));
+      agreeing += std::popcount(static_cast<unsigned>(keep));
       if (combined != nullptr) {
         if constexpr (std::is_same_v<Scalar, float>) {
           _mm512_storeu_ps(combined + i, _mm512_maskz_mov_ps(keep, m));
@@ -129,17 +149,29 @@ Index agreement_pass(const Scalar* modified, const Scalar* regular, Index n, Sca
     }
   }
 #endif
-  for (; i < n; ++i) {
-    const Scalar m = modified[i];
-    const Scalar r = regular[i];
-    const bool keep = signs_agree(m, r);
-    agreeing += keep ? 1 : 0;
-    if (combined != nullptr) combined[i] = keep ? m : Scalar(0);
-    if (sums != nullptr) {
+  // One loop per case, each without branches: GCC 12 vectorises these (the loops of a build
+  // without AVX-512), not one with the cases tested inside (`combine` of 13,004 floats in an
+  // SSE2 build, the count unused: 3.2 µs in a loop of its own, 12.8 in the shared one).
+  if (sums != nullptr) {
+    for (; i < n; ++i) {
+      const Scalar m = modified[i];
+      const Scalar r = regular[i];
+      const bool keep = signs_agree(m, r);
+      agreeing += keep ? 1 : 0;
+      if (combined != nullptr) combined[i] = keep ? m : Scalar(0);
       sums->dot += m * r;
       sums->modified_norm2 += m * m;
       sums->regular_norm2 += r * r;
     }
+  } else if (combined != nullptr) {
+    for (; i < n; ++i) {
+      const Scalar m = modified[i];
+      const bool keep = signs_agree(m, regular[i]);
+      combined[i] = keep ? m : Scalar(0);
+      agreeing += keep ? 1 : 0;
+    }
+  } else {
+    for (; i < n; ++i) agreeing += signs_agree(modified[i], regular[i]) ? 1 : 0;
   }
   return agreeing;
 }

@@ -58,7 +58,7 @@ template <class Scalar>
   detail::require(modified.size() == regular.size(), "compare: g_R size = ", regular.size(),
                   ", expected the g_M size ", modified.size());
   detail::PairSums<Scalar> sums;
-  constexpr bool one_pass = detail::kPairSumsInRegisters<Scalar>;
+  constexpr bool one_pass = detail::pair_sums_in_registers<Scalar>;
   const Index agreeing = detail::agreement_pass<Scalar>(modified.data(), regular.data(),
                                                         modified.size(), nullptr,
                                                         one_pass ? &sums : nullptr);

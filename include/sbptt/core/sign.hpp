@@ -99,7 +99,7 @@ struct PairSums {
 /// Whether `agreement_pass` sums in registers (AVX-512, float or double). Elsewhere its sums go
 /// one component at a time, and Eigen's reductions are faster.
 template <class Scalar>
-inline constexpr bool kPairSumsInRegisters =
+inline constexpr bool pair_sums_in_registers =
 #if defined(EIGEN_VECTORIZE_AVX512)
     std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>;
 #else
@@ -119,12 +119,12 @@ Index agreement_pass(const Scalar* modified, const Scalar* regular, Index n, Sca
   Index agreeing = 0;
   Index i = 0;
 #if defined(EIGEN_VECTORIZE_AVX512)
-  if constexpr (kPairSumsInRegisters<Scalar>) {
+  if constexpr (pair_sums_in_registers<Scalar>) {
     namespace ei = Eigen::internal;
     using Packet = typename ei::packet_traits<Scalar>::type;
-    constexpr auto kLanes = static_cast<Index>(64 / sizeof(Scalar));
+    constexpr auto lanes = static_cast<Index>(64 / sizeof(Scalar));
     Packet dot = ei::pset1<Packet>(Scalar(0)), m2 = dot, r2 = dot;
-    for (; i + kLanes <= n; i += kLanes) {
+    for (; i + lanes <= n; i += lanes) {
       const Packet m = ei::ploadu<Packet>(modified + i);
       const Packet r = ei::ploadu<Packet>(regular + i);
       const auto keep = agreeing_lanes(m, r);

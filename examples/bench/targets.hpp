@@ -24,6 +24,7 @@ inline const Row* find_row(const std::vector<Row>& rows, const std::string& task
 }
 
 /// The speed targets (docs/benchmarks.md), measured in this run: one line each, met or MISSED.
+/// A ratio shows three decimals, so that one printed as the target is never MISSED.
 inline void summarize(const std::vector<Row>& rows, const double peak[2], Index threads) {
   std::printf("\ntargets (%s code; 1 thread unless stated):\n", sbptt::instruction_set());
   const auto verdict = [](bool met) { return met ? "met" : "MISSED"; };
@@ -61,7 +62,7 @@ inline void summarize(const std::vector<Row>& rows, const double peak[2], Index 
       const Row* r = row_of(task, scalar, "R");
       if (c == nullptr || r == nullptr) continue;
       const double ratio = c->result.ms_epoch / r->result.ms_epoch;
-      std::printf("  %-9s %-6s C/R epoch time %.2f (target <= 1.3): %s\n", task, scalar, ratio,
+      std::printf("  %-9s %-6s C/R epoch time %.3f (target <= 1.3): %s\n", task, scalar, ratio,
                   verdict(ratio <= 1.3));
     }
   }
@@ -71,7 +72,7 @@ inline void summarize(const std::vector<Row>& rows, const double peak[2], Index 
         const Row* r = row_of(task, "float", method);
         if (r == nullptr) continue;
         const double speedup = r->result.ms_epoch / r->result.ms_threads;
-        std::printf("  %-9s float %s: 2 threads %.2fx faster than 1 (target >= %.2f): %s "
+        std::printf("  %-9s float %s: 2 threads %.3fx faster than 1 (target >= %.2f): %s "
                     "(cross-core round trip %.0f ns)\n",
                     task, method, speedup, target, verdict(speedup >= target),
                     r->result.round_trip_ns);

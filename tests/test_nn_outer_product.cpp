@@ -25,16 +25,18 @@ TEMPLATE_TEST_CASE("dW += D X^T within the rounding bound, nothing written outsi
   constexpr S kSentinel = S(-7.5);
   std::uint64_t seed = 100;
   // cols (float panels of 16): below one register, one register of either type, 3 panels and
-  // a masked one (53), 5 panels (a block of 3 and one of 2), 100 (6 + 4 masked), the
+  // a masked one (53), 5 panels (a block of 3 and one of 2), 100 (6 + 4), the
   // convolution's 180 (3 blocks, then 2 and 4 masked as one block); 21 and 37 (one or two whole
   // panels and a masked one, starting the row); 41 (the same in double after a block of 3);
   // rows: 1, 2, odd, the paper's 100. Rows narrower than a register go one at a time in passes
   // of every 2nd (17 × 10 float, 19 × 5 double), 3rd (21 × 6 float) or 8th row (23 × 2
-  // float); rows of one entry go to Eigen (30 × 1).
+  // float); rows of one entry go to Eigen (30 × 1). A quarter of a register after whole panels
+  // or alone (100 and 52 in float, 26 and 2 in double; quarter_strip.hpp) goes 4 rows a register,
+  // the last 1 … 3 rows on their own (17 × 52, 6 × 26, 3 × 100, 23 × 2).
   for (const auto& [rows, cols] :
        {std::pair<Index, Index>{1, 100}, {2, 100}, {3, 10}, {5, 8}, {7, 16}, {100, 100},
         {100, 24}, {60, 180}, {17, 53}, {33, 64}, {9, 80}, {17, 10}, {19, 5}, {21, 4}, {21, 6},
-        {23, 2}, {30, 1}, {18, 37}, {18, 21}, {9, 41}}) {
+        {23, 2}, {30, 1}, {18, 37}, {18, 21}, {9, 41}, {17, 52}, {6, 26}, {3, 100}}) {
     for (const Index n : {1, 3, 7, 8, 9, 16, 21, 56}) {
       const Matrix<S> d = random_matrix<S>(rows, n, ++seed, 1.0);
       const Matrix<S> x = random_matrix<S>(cols, n, ++seed, 1.0);
@@ -120,7 +122,8 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel sums each entry in sample or
   // block starts the row). Rows narrower than a register (1 … 17 rows, the paper's 100 × 10,
   // an odd 97, 2 and 3 entries); a partial panel in one block with 1 or 2 whole panels,
   // starting the row or after blocks of 3; alone after them (100 × 100); the convolution's
-  // 60 × 180.
+  // 60 × 180; a quarter of a register's columns, alone or after whole panels, 4 rows a
+  // register (quarter_strip.hpp).
   using S = TestType;
   constexpr Index kLanes = sizeof(S) == 4 ? 16 : 8;
   std::uint64_t seed = 900;
@@ -132,6 +135,13 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel sums each entry in sample or
       {17, 3 * kLanes + 5},  {29, kLanes / 4},     {5, 2},           {7, kLanes},
       {5, 2 * kLanes}};
   for (Index rows = 1; rows <= 17; ++rows) shapes.emplace_back(rows, kLanes / 2);
+  // A quarter of a register left after whole panels or alone (quarter_strip.hpp), 4 rows a
+  // register and the last 1 … 3 rows on their own.
+  for (Index rows = 1; rows <= 9; ++rows) {
+    shapes.emplace_back(rows, 6 * kLanes + kLanes / 4);
+    shapes.emplace_back(rows, 3 * kLanes + kLanes / 4);
+    shapes.emplace_back(rows, kLanes / 4);
+  }
   for (const auto& [rows, cols] : shapes) {
     if (!sbptt::outer_product_kernel_applies<S>(cols)) continue;
     for (const Index n : {1, 8, 9, 21}) {

@@ -30,6 +30,7 @@
 #include "sbptt/core/types.hpp"
 #include "sbptt/core/unroll.hpp"
 #include "sbptt/core/first_lanes.hpp"
+#include "sbptt/nn/quarter_strip.hpp"
 
 namespace sbptt {
 namespace detail {
@@ -92,6 +93,8 @@ private:
       columns<Samples, 3, true, kMaskedRows>(dw, rows, cols, d, x, scale, first);
     } else if (left == 1) {
       columns<Samples, 2, true, kMaskedRows>(dw, rows, cols, d, x, scale, first);
+    } else if (cols - first == QuarterStrip<Scalar>::kWidth) {
+      QuarterStrip<Scalar>::template add<Samples>(dw, rows, cols, d, x, scale, first);
     } else if (full_panels == 0) {
       columns<Samples, 1, true, kMaskedRows>(dw, rows, cols, d, x, scale, first);
     } else {

@@ -74,7 +74,8 @@ private:
 
   /// One pass over dW adding `Samples` samples' outer products: blocks of kPanels column
   /// panels, then one more block with the whole panels left and a row's partial last panel
-  /// (on its own when no whole panel is left).
+  /// (on its own when no whole panel is left; by quarter_strip.hpp when it fills a quarter of
+  /// a register).
   template <int Samples>
   static void samples(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
                       const Scalar* scale) {

@@ -9,7 +9,7 @@
 /// Here one register holds the quarters of 4 rows (row i + r in lanes r·w … r·w + w − 1, w the
 /// quarter's width). X's quarter of a sample is broadcast to the 4 places once per call;
 /// d_ik … d_{i+3,k} come in by one load and are spread over their rows' lanes by one permute;
-/// the rows' quarters go in and out as 128-bit pieces. The product took 653–663 ns.
+/// the rows' quarters go in and out as 128-bit pieces. The product took 664–672 ns.
 ///
 /// Each entry is still ((dW_ij + d_i0 x'_j0) + d_i1 x'_j1) + … in sample order with fused
 /// multiply-adds, x' = s·x rounded: the panel kernel's order, so the results are the same bit

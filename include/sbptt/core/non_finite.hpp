@@ -1,8 +1,13 @@
 #pragma once
 /// \file The one scan for NaN and Inf: where the first non-finite entry of a matrix or vector
-/// is, so that every report (engine, trainer, programs) names the same entry.
+/// is, so that every report (engine, trainer, programs) names the same entry; and NaN told by
+/// its bits, for code that must see it under -ffinite-math-only (the sign rule, core/sign.hpp).
+#include <bit>
 #include <cmath>
+#include <concepts>
+#include <cstdint>
 #include <optional>
+#include <type_traits>
 
 #include <Eigen/Core>
 
@@ -51,4 +56,21 @@ template <class Scalar>
 #endif
 }
 
+namespace detail {
+
+/// Whether `x` is a NaN, from its bits (all exponent bits set, a mantissa bit set), which no
+/// floating-point option can assume away. Eigen's `numext::isnan` is no substitute: built
+/// with clang 14 and -ffinite-math-only it answers false for a NaN.
+template <std::floating_point Scalar>
+[[nodiscard]] bool nan_by_bits(Scalar x) {
+  if constexpr (std::is_same_v<Scalar, float>) {
+    return (std::bit_cast<std::uint32_t>(x) & 0x7fffffffU) > 0x7f800000U;
+  } else if constexpr (std::is_same_v<Scalar, double>) {
+    return (std::bit_cast<std::uint64_t>(x) & 0x7fffffffffffffffULL) > 0x7ff0000000000000ULL;
+  } else {
+    return std::isnan(x);
+  }
+}
+
+}  // namespace detail
 }  // namespace sbptt

@@ -172,3 +172,41 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel sums each entry in sample or
   // Where the kernel exists at all (AVX-512 builds), these shapes must have reached it.
   if (sbptt::outer_product_kernel_applies<S>(1 << 20)) CHECK(kernel_cases > 0);
 }
+
+TEMPLATE_TEST_CASE("db += D s: each bias entry summed in sample order, bit for bit, nothing "
+                   "written past the bias", "[nn][outer]", float, double) {
+  // outer_product.hpp's promise for the bias: ((b_i + d_i0 s_0) + d_i1 s_1) + …, fused with a
+  // scale, whatever the rows: blocks of 4 registers, the 1 … 3 registers left and a masked
+  // last one. The scale exists only where the register kernel runs.
+  using S = TestType;
+  constexpr Index kGuard = 32;
+  constexpr S kSentinel = S(-7.5);
+  constexpr Index cols = 24;
+  std::uint64_t seed = 1700;
+  std::vector<Index> row_counts = {100, 60, 128, 129};
+  for (Index rows = 1; rows <= 70; ++rows) row_counts.push_back(rows);
+  for (const Index rows : row_counts) {
+    for (const Index n : {1, 8, 9, 120}) {
+      for (const bool scaled : {false, true}) {
+        if (scaled && !sbptt::outer_product_kernel_applies<S>(cols)) continue;
+        const Matrix<S> d = random_matrix<S>(rows, n, ++seed, 1.0);
+        const Matrix<S> x = random_matrix<S>(cols, n, ++seed, 1.0);
+        const Matrix<S> scale = random_matrix<S>(n, 1, ++seed, 3.0);
+        const Matrix<S> start = random_matrix<S>(rows, 1, ++seed, 1.0);
+        sbptt::Vector<S> grad = sbptt::Vector<S>::Constant(rows * cols + rows + kGuard, kSentinel);
+        grad.segment(rows * cols, rows) = start;
+        sbptt::add_weight_and_bias_products(grad.data(), rows, cols, d.data(), x.data(), n,
+                                            scaled ? scale.data() : nullptr);
+        INFO("rows " << rows << " n " << n << " scaled " << scaled);
+        REQUIRE((grad.tail(kGuard).array() == kSentinel).all());
+        for (Index i = 0; i < rows; ++i) {
+          S expected = start(i);
+          for (Index k = 0; k < n; ++k)
+            expected = scaled ? std::fma(d(i, k), scale(k), expected) : expected + d(i, k);
+          INFO("bias entry " << i);
+          REQUIRE(grad(rows * cols + i) == expected);
+        }
+      }
+    }
+  }
+}

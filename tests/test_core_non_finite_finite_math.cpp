@@ -7,6 +7,7 @@
 #include <bit>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 
 #include "sbptt/core/non_finite.hpp"
 
@@ -50,6 +51,18 @@ TEMPLATE_TEST_CASE("under -ffinite-math-only first_non_finite still finds NaN an
       REQUIRE(got.has_value());
       CHECK(got->row == i % m.rows());
       CHECK(got->column == i / m.rows());
+      // The same through a block that starts at column 2 and a map of the whole matrix.
+      const Index column = i / m.rows();
+      const auto in_block = sbptt::first_non_finite(with.middleCols(2, 4));
+      if (column >= 2 && column < 6) {
+        REQUIRE(in_block.has_value());
+        CHECK(in_block->row == i % m.rows());
+        CHECK(in_block->column == column - 2);
+      }
+      const auto in_map =
+          sbptt::first_non_finite(Eigen::Map<const Matrix<S>>(with.data(), m.rows(), m.cols()));
+      REQUIRE(in_map.has_value());
+      CHECK(in_map->column == column);
     }
   }
 }

@@ -176,14 +176,14 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel sums each entry in sample or
 TEMPLATE_TEST_CASE("db += D s: each bias entry summed in sample order, bit for bit, nothing "
                    "written past the bias", "[nn][outer]", float, double) {
   // outer_product.hpp's promise for the bias: ((b_i + d_i0 s_0) + d_i1 s_1) + …, fused with a
-  // scale, whatever the rows: blocks of 4 registers, the 1 … 3 registers left and a masked
-  // last one. The scale exists only where the register kernel runs.
+  // scale, whatever the rows: whole blocks of registers, the registers left, a masked last
+  // one, rows within one register. The scale exists only where the register kernel runs.
   using S = TestType;
   constexpr Index kGuard = 32;
   constexpr S kSentinel = S(-7.5);
   constexpr Index cols = 24;
   std::uint64_t seed = 1700;
-  std::vector<Index> row_counts = {100, 60, 128, 129};
+  std::vector<Index> row_counts = {100, 128, 129};
   for (Index rows = 1; rows <= 70; ++rows) row_counts.push_back(rows);
   for (const Index rows : row_counts) {
     for (const Index n : {1, 8, 9, 120}) {
@@ -204,7 +204,7 @@ TEMPLATE_TEST_CASE("db += D s: each bias entry summed in sample order, bit for b
           for (Index k = 0; k < n; ++k)
             expected = scaled ? std::fma(d(i, k), scale(k), expected) : expected + d(i, k);
           INFO("bias entry " << i);
-          REQUIRE(grad(rows * cols + i) == expected);
+          CHECK(grad(rows * cols + i) == expected);
         }
       }
     }

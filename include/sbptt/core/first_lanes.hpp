@@ -27,7 +27,7 @@ EIGEN_ALWAYS_INLINE Mask first_lanes_mask(Index count) {
 
 template <class Scalar>
 EIGEN_ALWAYS_INLINE FullPacket<Scalar> load_first_lanes(const Scalar* from, Index count) {
-  static_assert(std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>);
+  static_assert(FloatOrDouble<Scalar>);
   if constexpr (std::is_same_v<Scalar, float>) {
     return _mm512_maskz_loadu_ps(first_lanes_mask<__mmask16>(count), from);
   } else {
@@ -38,7 +38,7 @@ EIGEN_ALWAYS_INLINE FullPacket<Scalar> load_first_lanes(const Scalar* from, Inde
 template <class Scalar>
 EIGEN_ALWAYS_INLINE void store_first_lanes(Scalar* to, const FullPacket<Scalar>& value,
                                            Index count) {
-  static_assert(std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>);
+  static_assert(FloatOrDouble<Scalar>);
   if constexpr (std::is_same_v<Scalar, float>) {
     _mm512_mask_storeu_ps(to, first_lanes_mask<__mmask16>(count), value);
   } else {

@@ -26,7 +26,7 @@ namespace detail {
 
 /// The bits of |x| and of +Inf as unsigned integers, which no floating-point option can assume
 /// away: |x| is finite below +Inf's bits and a NaN above them.
-template <class Scalar>
+template <FloatOrDouble Scalar>
 [[nodiscard]] auto magnitude_and_infinity_bits(Scalar x) {
   if constexpr (std::is_same_v<Scalar, float>) {
     return std::pair{std::bit_cast<std::uint32_t>(x) & 0x7fffffffU, 0x7f800000U};
@@ -36,14 +36,13 @@ template <class Scalar>
   }
 }
 
-template <class Scalar>
-inline constexpr bool kBitsKnown = std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>;
-
-/// Whether `x` is finite, by its bits: built with clang 14 and -ffinite-math-only, Eigen's
-/// `isFinite` answers true for a NaN (tests/test_core_non_finite_finite_math.cpp).
+/// Whether `x` is finite, by its bits for float and double: built with clang 14 and
+/// -ffinite-math-only, Eigen's `isFinite` answers true for a NaN
+/// (tests/test_core_non_finite_finite_math.cpp). Other scalars (long double, half) go to
+/// Eigen's test, which that flag may still defeat.
 template <class Scalar>
 [[nodiscard]] bool finite_by_bits(Scalar x) {
-  if constexpr (kBitsKnown<Scalar>) {
+  if constexpr (FloatOrDouble<Scalar>) {
     const auto [magnitude, infinity] = magnitude_and_infinity_bits(x);
     return magnitude < infinity;
   } else {
@@ -51,11 +50,11 @@ template <class Scalar>
   }
 }
 
-/// Whether `x` is a NaN, by its bits: built with clang 14 and -ffinite-math-only, Eigen's
-/// `numext::isnan` answers false for a NaN.
+/// Whether `x` is a NaN, by its bits for float and double: built with clang 14 and
+/// -ffinite-math-only, Eigen's `numext::isnan` answers false for a NaN.
 template <std::floating_point Scalar>
 [[nodiscard]] bool nan_by_bits(Scalar x) {
-  if constexpr (kBitsKnown<Scalar>) {
+  if constexpr (FloatOrDouble<Scalar>) {
     const auto [magnitude, infinity] = magnitude_and_infinity_bits(x);
     return magnitude > infinity;
   } else {
@@ -71,7 +70,7 @@ template <std::floating_point Scalar>
 /// NaN or infinite (Eigen's `allFinite` compares entry by entry and stops early, which does
 /// not vectorise: 2.9 µs against 0.34 µs for the 11301 parameters of the cart pole's network).
 /// A program built with -ffinite-math-only (-ffast-math) lets the compiler assume that no NaN
-/// exists and drop that test; there every entry is scanned by its bits.
+/// exists and drop that test; there every call scans every entry by its bits, one at a time.
 template <class Derived>
 [[nodiscard]] std::optional<EntryIndex> first_non_finite(const Eigen::DenseBase<Derived>& values) {
 #if !defined(__FINITE_MATH_ONLY__) || !__FINITE_MATH_ONLY__

@@ -87,7 +87,7 @@ struct PairSums {
 template <class Scalar>
 inline constexpr bool pair_sums_in_registers =
 #if defined(EIGEN_VECTORIZE_AVX512)
-    std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>;
+    FloatOrDouble<Scalar>;
 #else
     false;
 #endif

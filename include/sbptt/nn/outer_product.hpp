@@ -21,8 +21,6 @@
 /// fused multiply-adds, x' = s·x rounded (x itself without a scale), whatever the shapes;
 /// Eigen's product has an order of its own. Either way the order depends only on the shapes,
 /// so results do not depend on the thread count.
-#include <type_traits>
-
 #include <Eigen/Core>
 
 #include "sbptt/core/count_dispatch.hpp"
@@ -194,9 +192,8 @@ private:
   }
 };
 
-/// The registers of `add_sample_sums`: blocks of kRegisters registers of rows, each an
-/// independent chain of additions over the samples, then the rows left (the last register
-/// masked).
+/// The registers of `add_sample_sums`: blocks of kRegisters registers of rows, then the rows
+/// left (the last register masked).
 template <class Scalar>
 class SampleSums {
 public:
@@ -212,7 +209,9 @@ public:
   }
 
 private:
-  static constexpr int kRegisters = 4;
+  // Registers summed at once, each its own chain of additions: for 100 rows × 8 samples in
+  // float 2 took 17–18.4 ns, 4 and 8 18.0–18.7, and 1 19.0–23.5 (two probes).
+  static constexpr int kRegisters = 2;
 
   template <bool Scaled>
   static void rows_in_blocks(Scalar* b, Index rows, const Scalar* d, Index n,
@@ -251,9 +250,14 @@ private:
         }
       }
     }
-    store_first_lanes(b + (Registers - 1) * kLanes, acc[Registers - 1], last_lanes);
     SBPTT_UNROLL
-    for (int q = 0; q < Registers - 1; ++q) Eigen::internal::pstoreu(b + q * kLanes, acc[q]);
+    for (int q = 0; q < Registers; ++q) {
+      if (q == Registers - 1) {
+        store_first_lanes(b + q * kLanes, acc[q], last_lanes);
+      } else {
+        Eigen::internal::pstoreu(b + q * kLanes, acc[q]);
+      }
+    }
   }
 };
 #endif
@@ -265,7 +269,7 @@ private:
 template <class Scalar>
 [[nodiscard]] constexpr bool outer_product_kernel_applies([[maybe_unused]] Index cols) {
 #if defined(EIGEN_VECTORIZE_AVX512)
-  if constexpr (std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>)
+  if constexpr (FloatOrDouble<Scalar>)
     return cols >= 2;
 #endif
   return false;
@@ -278,7 +282,7 @@ template <class Scalar>
 void add_outer_products(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
                         Index n, const Scalar* scale = nullptr) {
 #if defined(EIGEN_VECTORIZE_AVX512)
-  if constexpr (std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>) {
+  if constexpr (FloatOrDouble<Scalar>) {
     if (outer_product_kernel_applies<Scalar>(cols)) {
       detail::OuterProductKernel<Scalar>::run(dw, rows, cols, d, x, n, scale);
       return;
@@ -295,28 +299,22 @@ void add_outer_products(Scalar* dw, Index rows, Index cols, const Scalar* d, con
 namespace detail {
 
 /// db += D s, each entry summed in sample order, ((b_i + d_i0 s_0) + d_i1 s_1) + … (fused
-/// multiply-adds with a scale), whatever the rows and the alignment. Eigen's `rowwise().sum()`
-/// grouped the samples in its own way, and differently for the rows it reached by registers and
-/// those before and after them (where they fell depended on db's address), and took 42–66 ns
-/// for a bias of 100 rows and 8 samples, against 15–16 for the registers below
-/// (docs/benchmark-runs.md, twenty-first run).
+/// multiply-adds with a scale, which only AVX-512 builds take), whatever the rows and the
+/// alignment. Eigen's `rowwise().sum()` grouped the samples in its own way, and differently for
+/// the rows it reached by registers and those before and after them (where they fell depended
+/// on db's address), and took longer (docs/benchmark-runs.md, twenty-first run).
 template <class Scalar>
 void add_sample_sums(Scalar* b, Index rows, const Scalar* d, Index n, const Scalar* scale) {
 #if defined(EIGEN_VECTORIZE_AVX512)
-  if constexpr (std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>) {
+  if constexpr (FloatOrDouble<Scalar>) {
     SampleSums<Scalar>::run(b, rows, d, n, scale);
     return;
   }
 #endif
+  require(scale == nullptr, "add_weight_and_bias_products: a scale where the register kernels "
+          "do not run; expected none");
   Eigen::Map<Vector<Scalar>> bias(b, rows);
-  for (Index k = 0; k < n; ++k) {
-    const Eigen::Map<const Vector<Scalar>> column(d + k * rows, rows);
-    if (scale == nullptr) {
-      bias += column;
-    } else {
-      bias += scale[k] * column;
-    }
-  }
+  for (Index k = 0; k < n; ++k) bias += Eigen::Map<const Vector<Scalar>>(d + k * rows, rows);
 }
 
 }  // namespace detail

@@ -25,7 +25,6 @@
 /// order, too, depends on the shapes only.
 #include <algorithm>
 #include <cmath>
-#include <type_traits>
 
 #include <Eigen/Core>
 
@@ -274,7 +273,7 @@ private:
       return;
     }
 #if defined(EIGEN_VECTORIZE_AVX512)
-    if constexpr (std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>) {
+    if constexpr (FloatOrDouble<Scalar>) {
       detail::store_first_lanes(to, value, count);
       return;
     }

@@ -73,8 +73,7 @@ struct LaneRows {
 
 private:
 #if defined(EIGEN_VECTORIZE_AVX512)
-  static constexpr bool kTransposeInRegisters =
-      std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>;
+  static constexpr bool kTransposeInRegisters = FloatOrDouble<Scalar>;
   using Packet = typename Eigen::internal::packet_traits<Scalar>::type;
   static Packet zero() { return Eigen::internal::pset1<Packet>(Scalar(0)); }
 

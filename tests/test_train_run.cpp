@@ -10,7 +10,9 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <sstream>
 #include <string>
+#include <vector>
 #include <unistd.h>
 
 #include "sbptt/bptt/losses.hpp"
@@ -220,6 +222,42 @@ TEST_CASE("checkpoint: an epoch whose squared update norm overflowed reads back"
   CHECK(back.last->update_norm2 == std::numeric_limits<double>::infinity());
   c.last->update_norm2 = std::numeric_limits<double>::quiet_NaN();  // never a squared norm
   CHECK_THROWS_AS(parse_checkpoint<double>(checkpoint_text(c), "test.checkpoint"), ParseError);
+}
+
+TEST_CASE("checkpoint: an error names the line that is wrong, whichever it is", "[train]") {
+  // Every line but the first (the magic line has its own message) is spoiled in turn: a
+  // number becomes 'x', a key's value becomes 'x'. The message must name that line; numbers
+  // were reported one line early (the line was counted after the message was made).
+  Checkpoint<double> c;
+  c.settings = {{"method", "C"}};
+  c.epoch = 3;
+  c.params = Vector<double>::Constant(3, 0.5);
+  c.best_params = c.params;
+  c.adam_m = Vector<double>::Constant(3, 0.25);
+  c.adam_v = c.adam_m;
+  c.last = EpochRecord{};
+  c.last->epoch = 3;
+  const std::string text = checkpoint_text(c);
+  std::vector<std::string> lines;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  REQUIRE(lines.size() > 20);
+  for (std::size_t k = 1; k < lines.size(); ++k) {
+    if (lines[k].starts_with("shuffle ")) continue;  // the generator's own text, kept as it is
+    std::vector<std::string> spoiled = lines;
+    const std::size_t space = spoiled[k].find(' ');
+    spoiled[k] = space == std::string::npos ? "x" : spoiled[k].substr(0, space + 1) + "x";
+    std::string broken;
+    for (const auto& line : spoiled) broken += line + "\n";
+    const std::string line_number = "line " + std::to_string(k + 1) + ":";
+    INFO("line " << k + 1 << " '" << lines[k] << "' spoiled as '" << spoiled[k] << "'");
+    CHECK_THROWS_WITH(parse_checkpoint<double>(broken, "test.checkpoint"),
+                      Catch::Contains("checkpoint 'test.checkpoint', " + line_number));
+  }
+  // A last line without its end names that line, not the one before.
+  const std::string cut = text.substr(0, text.size() - 1);
+  CHECK_THROWS_WITH(parse_checkpoint<double>(cut, "test.checkpoint"),
+                    Catch::Contains("line " + std::to_string(lines.size()) + ": the line has no end"));
 }
 
 TEST_CASE("run: a checkpoint of other settings is refused, naming the setting", "[train]") {

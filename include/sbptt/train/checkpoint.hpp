@@ -101,13 +101,17 @@ public:
     return line.size() > key.size() ? line.substr(key.size() + 1) : std::string_view{};
   }
 
+  // The line is read before `where()` names it: as two arguments of one call the two could be
+  // evaluated in either order (GCC took `where()` first, one line early).
   template <class Number>
   Number number(std::string_view key) {
-    return parse_finite<Number>(value(key), where());
+    const std::string_view text = value(key);
+    return parse_finite<Number>(text, where());
   }
 
   long integer(std::string_view key) {
-    const double number = parse_finite<double>(value(key), where());
+    const std::string_view text = value(key);
+    const double number = parse_finite<double>(text, where());
     require<ParseError>(number == static_cast<double>(static_cast<long long>(number)), where(),
                         ": expected a whole number for '", key, "'");
     return static_cast<long>(number);
@@ -119,7 +123,10 @@ public:
     require<ParseError>(count >= 0 && count <= 100'000'000, where(), ": ", count,
                         " numbers; expected 0 to 10^8");
     Vector<Scalar> values(count);
-    for (long i = 0; i < count; ++i) values(i) = parse_finite<Scalar>(next(), where());
+    for (long i = 0; i < count; ++i) {
+      const std::string_view text = next();
+      values(i) = parse_finite<Scalar>(text, where());
+    }
     return values;
   }
 
@@ -127,7 +134,8 @@ public:
     require<ParseError>(position_ < text_.size(), "checkpoint '", path_, "' ends after line ",
                         line_, "; expected more (the file is incomplete)");
     const std::size_t end = text_.find('\n', position_);
-    require<ParseError>(end != std::string_view::npos, where(), ": the line has no end");
+    require<ParseError>(end != std::string_view::npos, "checkpoint '", path_, "', line ",
+                        line_ + 1, ": the line has no end");
     const std::string_view line = text_.substr(position_, end - position_);
     position_ = end + 1;
     ++line_;
@@ -241,7 +249,8 @@ template <class Scalar>
   c.adam_t = in.integer("adam_t");
   c.adam_m = in.vector<Scalar>("adam_m");
   c.adam_v = in.vector<Scalar>("adam_v");
-  detail::require<ParseError>(in.next() == "end", in.where(), ": expected 'end'");
+  const std::string_view end = in.next();
+  detail::require<ParseError>(end == "end", in.where(), ": expected 'end'");
   return c;
 }
 

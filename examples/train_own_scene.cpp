@@ -1,14 +1,22 @@
 // A user's own scene (the point mass of point_mass.hpp) trained with the library's driver:
 // combined update, a test set, a CSV log, the best parameters kept, early stop, checkpoints.
 // Rerun it after a kill and it resumes from the checkpoint.
-//   train_own_scene [DIRECTORY]      (writes log.csv, run.checkpoint, best.params there)
+//   train_own_scene [DIRECTORY]      (writes log.csv, run.checkpoint, best.params there;
+//                                     in the working directory without one)
 #include <cstdio>
+#include <exception>
+#include <filesystem>
 #include <string>
 
 #include "point_mass.hpp"
 
-int main(int argc, char** argv) {
-  const std::string dir = argc > 1 ? std::string(argv[1]) + "/" : "";
+namespace {
+
+constexpr const char* kUsage = "usage: train_own_scene [DIRECTORY]  (an existing directory; "
+                               "log.csv, run.checkpoint and best.params go there)";
+
+/// The run of the file comment with its files in `dir`; returns the exit code.
+int run_in(const std::filesystem::path& dir) {
   using Loss = sbptt::SquaredDistanceLoss<PointMass::State>;
   const PointMass sim;
   auto network = sbptt::Network<double>::mlp(2, {32, 32}, 1);
@@ -24,13 +32,57 @@ int main(int argc, char** argv) {
   const auto result = sbptt::run_training(
       trainer, train, test,
       {.epochs = 200, .evaluate_every = 5, .patience = 10, .restore_best = true,
-       .log_csv = dir + "log.csv", .checkpoint = dir + "run.checkpoint",
-       .save_params = dir + "best.params"},
+       .log_csv = (dir / "log.csv").string(), .checkpoint = (dir / "run.checkpoint").string(),
+       .save_params = (dir / "best.params").string()},
       {.on_epoch = [](const sbptt::EpochRecord& r) {
         if (r.test_loss && r.epoch % 50 == 0)
           std::printf("epoch %3ld  test loss %.3e\n", r.epoch, *r.test_loss);
       }});
-  std::printf("best test loss %.3e in epoch %ld of %ld\n", result.best_loss, result.best_epoch,
-              result.epochs);
-  return result.end == sbptt::RunEnd::Finished || result.end == sbptt::RunEnd::EarlyStop ? 0 : 1;
+  switch (result.end) {
+    case sbptt::RunEnd::NonFinite:
+      std::fprintf(stderr, "train_own_scene: stopped: %s\n",
+                   sbptt::describe(*result.stop_event).c_str());
+      return 3;
+    case sbptt::RunEnd::OutputFailed:
+      std::fprintf(stderr, "train_own_scene: %s\n", result.output_error.c_str());
+      return 1;
+    case sbptt::RunEnd::Finished:
+    case sbptt::RunEnd::EarlyStop:
+    case sbptt::RunEnd::Requested:
+      std::printf("best test loss %.3e in epoch %ld of %ld\n", result.best_loss,
+                  result.best_epoch, result.epochs);
+      return 0;
+  }
+  return 1;  // unreachable: every RunEnd is handled above
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::string argument = argc > 1 ? argv[1] : ".";
+  if (argument == "--help") {
+    std::printf("%s\n", kUsage);
+    return 0;
+  }
+  if (argc > 2) {
+    std::fprintf(stderr, "train_own_scene: %d arguments, expected at most one DIRECTORY (%s)\n",
+                 argc - 1, kUsage);
+    return 2;
+  }
+  if (argument.starts_with('-')) {
+    std::fprintf(stderr, "train_own_scene: unknown flag '%s' (%s)\n", argument.c_str(), kUsage);
+    return 2;
+  }
+  std::error_code error;
+  if (argument.empty() || !std::filesystem::is_directory(argument, error)) {
+    std::fprintf(stderr, "train_own_scene: DIRECTORY = '%s', expected an existing directory (%s)\n",
+                 argument.c_str(), kUsage);
+    return 2;
+  }
+  try {
+    return run_in(argument);
+  } catch (const std::exception& e) {  // the library's errors name the file and what was wrong
+    std::fprintf(stderr, "train_own_scene: %s\n", e.what());
+    return 1;
+  }
 }

@@ -63,11 +63,11 @@ int main(int argc, char** argv) {
   const fs::path self = own_executable(argv[0]);
   const fs::path own_dir = self.parent_path();
   const fs::path bin_dir = options.bin_dir.empty() ? own_dir : fs::path(options.bin_dir);
-  if (options.dry_run) {
-    print_plan(options, plan, bin_dir);
-    return 0;
-  }
   try {
+    if (options.dry_run) {
+      print_plan(options, plan, bin_dir);
+      return 0;
+    }
     if (options.emit == "parallel") return emit_parallel(options, plan, self, bin_dir);
     if (options.emit == "slurm") return emit_slurm(options, plan, self, bin_dir);
     if (options.merge) {
@@ -76,12 +76,7 @@ int main(int argc, char** argv) {
       if (options.plot && plot(options, own_dir) == 130) return 130;
       return code;
     }
-    for (const auto& run : plan) {
-      const fs::path program = bin_dir / run.info().program;
-      if (!is_executable(program))
-        throw sbptt::IoError(concat("no executable task program '", program.string(),
-                                    "'; build the examples or pass --bin-dir DIR"));
-    }
+    for (const auto& run : plan) require_task_program(run, bin_dir);
     install_signal_handlers();
     Sweep sweep(options, plan, bin_dir);
     const int code = sweep.execute();

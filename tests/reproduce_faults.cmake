@@ -86,6 +86,23 @@ string(REGEX REPLACE "[^\n]*guidance[^\n]*\n" "" undamaged_cartpole "${undamaged
 check("summary.csv after the repair equals the undamaged one (timing aside, no guidance row)"
       repaired STREQUAL undamaged_cartpole)
 
+# A NaN in a finished run's log: the programs never write one (a non-finite epoch has no row),
+# so it is damage, not a result; --merge took it for a run whose last test loss is unknown.
+file(STRINGS "${runs}/cartpole_p4_C_norm_s42.csv" rows)
+list(POP_BACK rows last)
+string(REGEX REPLACE "^([0-9]+,[^,]*,[^,]*,)[^,]*" "\\1nan" last "${last}")
+list(APPEND rows "${last}")
+list(JOIN rows "\n" text)
+file(WRITE "${runs}/cartpole_p4_C_norm_s42.csv" "${text}\n")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --merge --out "${out}" RESULT_VARIABLE rc
+                OUTPUT_VARIABLE merge_out ERROR_VARIABLE merge_err)
+check("--merge over a NaN test loss: exit 1, the run named damaged, not finite\n${merge_out}${merge_err}"
+      rc EQUAL 1 AND "${merge_out}${merge_err}" MATCHES
+      "cartpole_p4_C_norm_s42[^\n]*'nan' is not finite[^\n]*damaged")
+file(READ "${out}/summary.csv" merged)
+check("--merge over a NaN test loss: no summary row for the run"
+      NOT merged MATCHES "cartpole_p4_C_norm_s42")
+
 # --- 2. limits shared with the task programs; a missing python ------------------------------
 foreach(flag epochs samples)
   execute_process(COMMAND "${REPRODUCE}" ${grid} --${flag} 2000000 --out "${WORK_DIR}/limits"

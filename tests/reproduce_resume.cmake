@@ -50,6 +50,13 @@ execute_process(COMMAND "${REPRODUCE}" --tasks cartpole --complexities 4 --metho
                 OUTPUT_VARIABLE out ERROR_QUIET)
 check("--dry-run shows --threads 4 on the command line" rc EQUAL 0 AND out MATCHES
       "cartpole --poles 4 [^\n]* --threads 4 --csv ")
+# A dry run measures with the task programs, so a --bin-dir without them is an error before the
+# measurement, in words (it was an uncaught exception, exit 134).
+execute_process(COMMAND "${REPRODUCE}" --tasks cartpole --complexities 4 --methods C --seeds 1
+                --bin-dir "${WORK_DIR}/no_such_dir" --dry-run --out "${WORK_DIR}/dry"
+                RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+check("--dry-run with a --bin-dir without programs: exit 1 naming the program\n${out}${err}"
+      rc EQUAL 1 AND err MATCHES "no executable task program '[^']*no_such_dir/cartpole'")
 # The reviewers profile: the cart chain, 1-3 links x R, M, C, S x 3 seeds, through cartpole.
 execute_process(COMMAND "${REPRODUCE}" --profile reviewers --epochs 2 --samples 8
                 --bin-dir "${WORK_DIR}/fake" --dry-run --out "${WORK_DIR}/dry"

@@ -60,7 +60,7 @@ inline double time_probe(Run probe, long epochs, const fs::path& bin_dir, long t
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (code != 0)
-    throw sbptt::IoError(concat("reproduce: measuring ", probe.name(), ": ", argv.front(),
+    throw sbptt::IoError(concat("measuring ", probe.name(), ": ", argv.front(),
                                 " exited with ", code, "; expected a working task program"));
   return seconds;
 }
@@ -85,6 +85,7 @@ inline MeasuredCosts measure_costs(const std::vector<Run>& plan, const fs::path&
       if (run.task == t && (hardest == nullptr || run.order_key() > hardest->order_key()))
         hardest = &run;
     if (hardest == nullptr) continue;
+    require_task_program(*hardest, bin_dir);
     TaskCost cost;
     for (const Method method : {Method::Regular, Method::Combined}) {
       Run probe = *hardest;

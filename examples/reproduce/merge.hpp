@@ -35,7 +35,14 @@ inline int merge(const Options& o, const std::vector<Run>& plan) {
               "missing\n",
               done, plan.size(), running.size(), missing.size());
   for (const auto& name : running) std::printf("  running: %s\n", name.c_str());
-  for (const auto& name : missing) std::printf("  missing: %s\n", name.c_str());
+  for (const auto& name : missing) {
+    const auto damaged = finished.damaged.find(name);
+    if (damaged == finished.damaged.end()) {
+      std::printf("  missing: %s\n", name.c_str());
+    } else {
+      std::printf("  damaged: %s: %s\n", name.c_str(), damaged->second.c_str());
+    }
+  }
   return running.empty() && missing.empty() ? 0 : 1;
 }
 

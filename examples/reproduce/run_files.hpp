@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include <sbptt/core/error.hpp>
+
 #include "grid.hpp"
 #include "processes.hpp"
 
@@ -19,6 +21,14 @@ namespace reproduce {
 /// runs/<name><suffix>: the files of one run.
 inline fs::path run_file(const fs::path& runs, const Run& run, const char* suffix) {
   return runs / (run.name() + suffix);
+}
+
+/// Throws unless the task program of `run` in `bin_dir` can be executed.
+inline void require_task_program(const Run& run, const fs::path& bin_dir) {
+  const fs::path program = bin_dir / run.info().program;
+  if (!is_executable(program))
+    throw sbptt::IoError(concat("no executable task program '", program.string(),
+                                "'; build the examples or pass --bin-dir DIR"));
 }
 
 /// The task program's command line. --threads is passed here and kept out of Run::flags(),

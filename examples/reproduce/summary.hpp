@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include <sbptt/core/number_text.hpp>
 #include <sbptt/train/training_log.hpp>
 
 #include "grid.hpp"
@@ -50,13 +51,10 @@ inline Summary summarize(const Run& run, const fs::path& csv) {
     const std::string where = concat("'", csv.string(), "', line ", i + 1);
     if (fields.size() != 8)
       throw sbptt::ParseError(concat(where, ": ", fields.size(), " fields, expected 8"));
+    // Finite decimal numbers only: the programs never log a NaN (a non-finite epoch has no
+    // row), so one here is damage, not a result.
     auto number = [&](std::size_t k) {
-      char* end = nullptr;
-      const double v = std::strtod(fields[k].c_str(), &end);
-      if (fields[k].empty() || end != fields[k].c_str() + fields[k].size())
-        throw sbptt::ParseError(concat(where, ", field ", k + 1, ": '", fields[k],
-                                       "' is not a number"));
-      return v;
+      return sbptt::detail::parse_finite<double>(fields[k], concat(where, ", field ", k + 1));
     };
     if (number(0) != static_cast<double>(i))
       throw sbptt::ParseError(concat(where, ": epoch ", fields[0], ", expected ", i));

@@ -1,11 +1,9 @@
 #pragma once
 // Strict parsing of command-line values: a whole token must be a number, in range, and finite;
 // every failure names the flag, the text and what was expected.
-#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <string>
 #include <string_view>
 #include <system_error>
@@ -40,21 +38,26 @@ namespace sbptt::examples {
   return value;
 }
 
-/// Parses `text` as a whole finite number in [low, high] (strtod: accepts 1e-3, rejects
-/// trailing text, nan and inf; a value beyond double's range is out of range, not "inf").
+/// Parses `text` as a whole finite decimal number in [low, high], as the files are read
+/// (core/number_text.hpp): 1e-3 and one leading '+', but no hexadecimal (strtod took 0x10 for
+/// 16), no blanks, nan or inf; a value beyond double's range is out of range, not "inf".
 [[nodiscard]] inline double parse_number(std::string_view flag, std::string_view text, double low,
                                          double high) {
-  const std::string copy(text);
-  char* end = nullptr;
-  errno = 0;
-  const double value = copy.empty() ? 0.0 : std::strtod(copy.c_str(), &end);
-  if (copy.empty() || end != copy.c_str() + copy.size())
+  std::string_view digits = text;
+  if (digits.size() > 1 && digits.front() == '+' && digits[1] != '-' && digits[1] != '+')
+    digits.remove_prefix(1);
+  double value = 0;
+  const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
+  const bool whole = !digits.empty() && end == digits.data() + digits.size();
+  const auto out_of_range = [&] {
+    return InvalidArgument(detail::concat(flag, " ", text, " is out of range; expected a finite "
+                                                          "number in [", shown(low), ", ", shown(high), "]"));
+  };
+  if (error == std::errc::result_out_of_range && whole) throw out_of_range();
+  if (error != std::errc() || !whole)
     throw InvalidArgument(detail::concat(flag, " '", text, "' is not a number; expected a number "
                                                            "in [", shown(low), ", ", shown(high), "]"));
-  const bool overflow = errno == ERANGE && std::isinf(value);
-  if (overflow || !std::isfinite(value) || value < low || value > high)
-    throw InvalidArgument(detail::concat(flag, " ", text, " is out of range; expected a finite "
-                                                          "number in [", shown(low), ", ", shown(high), "]"));
+  if (!std::isfinite(value) || value < low || value > high) throw out_of_range();
   return value;
 }
 

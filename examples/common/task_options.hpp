@@ -269,6 +269,9 @@ inline void require_float_range(const char* flag, double value) {
   }
   if (!cli.parse(argc, argv)) return false;
 
+  // The switches' callbacks run in the order they were declared, not given: --double won.
+  detail::require(!(cli.given("--float") && cli.given("--double")), "--float and --double both "
+                  "given; expected one of them (double is the default)");
   detail::require(!(o.chain && o.physical), "--model chain and --physical both given; expected "
                                            "one cart-pole model");
   detail::require(!o.chain || o.poles <= 3, "--poles ", o.poles, " with --model chain; expected "

@@ -197,7 +197,8 @@ TEST_CASE("--dump-gradients refuses the flags of training instead of ignoring th
   }
 }
 
-TEST_CASE("numbers beyond the type's range are out of range, naming the flag", "[programs]") {
+TEST_CASE("numbers beyond the type's range, numbers not in decimals and contradicting switches "
+          "are refused, naming the flag", "[programs]") {
   struct Case {
     std::string program, arguments, expected;
   };
@@ -212,7 +213,12 @@ TEST_CASE("numbers beyond the type's range are out of range, naming the flag", "
              "--clip-threshold 1e-60 does not fit --float"},
         Case{"rotation", "--k", "--k needs a value"},
         Case{"bench", "--repeats 0", "--repeats 0 is out of range; expected an integer in [1, 100]"},
-        Case{"accuracy", "--frobnicate", "unknown flag '--frobnicate'; accepted flags: --csv"}}) {
+        Case{"accuracy", "--frobnicate", "unknown flag '--frobnicate'; accepted flags: --csv"},
+        // Decimal numbers only, as in every file the programs read: strtod took 0x10 for 16.
+        Case{"toy", "--lr 0x10", "--lr '0x10' is not a number; expected a number in [1e-300, "
+                                 "1e+300]"},
+        Case{"toy", "--lr=' 1e-3'", "--lr ' 1e-3' is not a number"},
+        Case{"cartpole", "--double --float --epochs 1", "--float and --double both given"}}) {
     const Result r = run(c.program, c.arguments);
     INFO(c.program << " " << c.arguments << "\n" << r.output);
     CHECK(r.status == 2);

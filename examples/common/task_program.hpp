@@ -6,8 +6,11 @@
 //
 // Exit codes: 0 success, 1 error (unreadable file, out of memory, ...), 2 bad flags, 3 a
 // non-finite value stopped training (--save-params still saves the parameters the trainer rolled
-// back to: those of the last logged epoch, or the initial ones).
+// back to: those of the last logged epoch, or the initial ones), 128 + the signal: SIGINT or
+// SIGTERM stopped training after the epoch it came in (its log row, checkpoint and parameters
+// written; a second one ends the program at once).
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <iostream>
 #include <new>
@@ -21,6 +24,20 @@
 #include "task_options.hpp"
 
 namespace sbptt::examples {
+
+namespace detail_task {
+
+/// The signal (SIGINT, SIGTERM) that asked training to stop after its current epoch, or 0.
+inline volatile std::sig_atomic_t stop_signal = 0;
+
+/// Notes the signal and gives it back its default action, so that a second one ends the
+/// program at once.
+extern "C" inline void request_stop(int signal) {
+  stop_signal = signal;
+  std::signal(signal, SIG_DFL);
+}
+
+}  // namespace detail_task
 
 /// "100 steps of dt 0.01, T 1" for the header line (the toy is a map: steps only).
 inline std::string describe(Task task, const Horizon& time) {
@@ -186,7 +203,10 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                    r.epoch, r.batch_loss, loss(r.train_loss).c_str(), loss(r.test_loss).c_str(),
                    r.seconds);
   };
+  callbacks.should_stop = [](const EpochRecord&) { return detail_task::stop_signal != 0; };
+  for (const int signal : {SIGINT, SIGTERM}) std::signal(signal, detail_task::request_stop);
   const RunResult<Scalar> result = run_training(trainer, data.train, data.test, run, callbacks);
+  for (const int signal : {SIGINT, SIGTERM}) std::signal(signal, SIG_DFL);
   if (skips > shown_skips)
     std::fprintf(stderr, "%s: %ld skipped batches in all (%ld not listed)\n", name, skips,
                  skips - shown_skips);
@@ -217,8 +237,19 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                            "the best was %.9g in epoch %ld\n",
                    name, o.patience, result.epochs, result.best_loss, result.best_epoch);
       break;
-    case RunEnd::Finished:
-    case RunEnd::Requested: break;
+    case RunEnd::Requested: {
+      const int signal = detail_task::stop_signal;
+      const std::string resume =
+          o.checkpoint.empty()
+              ? std::string("without --checkpoint a rerun starts from epoch 1")
+              : detail::concat("checkpoint '", o.checkpoint,
+                               "' holds it: run the same command again to resume");
+      std::fprintf(stderr, "%s: stopped by %s after epoch %ld; %s%s\n", name,
+                   signal == SIGINT ? "SIGINT" : "SIGTERM", result.epochs, resume.c_str(),
+                   saved.c_str());
+      return 128 + signal;
+    }
+    case RunEnd::Finished: break;
   }
   if (result.last && result.last->test_loss)
     std::printf("final test loss %.9g\n", *result.last->test_loss);

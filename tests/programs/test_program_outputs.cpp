@@ -49,10 +49,10 @@ struct Outcome {
 
 /// Runs `program` with `arguments` through `sh -c` (`prefix` goes first, e.g. a ulimit);
 /// output goes to a file. While it runs, `kill_when` is asked every 100 µs; once it says
-/// true, the process gets SIGKILL.
+/// true, the process gets `kill_signal`.
 Outcome launch(const std::string& program, const std::string& arguments,
                const std::string& prefix = "", const std::function<bool()>& kill_when = {},
-               const std::string& wrapper = "") {
+               const std::string& wrapper = "", int kill_signal = SIGKILL) {
   const fs::path output =
       fs::temp_directory_path() / ("sbptt_outputs_" + std::to_string(getpid()) + ".out");
   const std::string command =
@@ -71,7 +71,7 @@ Outcome launch(const std::string& program, const std::string& arguments,
         info.si_pid != 0)
       break;  // it ended by itself
     if (kill_when()) {
-      kill(pid, SIGKILL);
+      kill(pid, kill_signal);
       break;
     }
     std::this_thread::sleep_for(std::chrono::microseconds(100));
@@ -264,6 +264,44 @@ TEST_CASE("killed with SIGKILL at random epochs, a rerun with --checkpoint ends 
     REQUIRE(last.status == 0);
     CHECK(kills >= 3);
     CHECK(resumes >= 3);
+    CHECK(file_text(dir / "p.txt") == params);
+    CHECK(without_seconds(file_text(log_path)) == without_seconds(log));
+  }
+}
+
+TEST_CASE("SIGINT or SIGTERM stops after the current epoch, keeps its work and says so; the "
+          "rerun ends bit for bit as one uninterrupted run", "[programs]") {
+  // Checkpoints only every 1000 epochs: what the rerun resumes from is written on the signal.
+  for (const int signal : {SIGINT, SIGTERM}) {
+    const fs::path dir = fresh_directory("interrupt");
+    const fs::path log_path = dir / "log.csv";
+    const std::string common = "--poles 2 --samples 16 --steps 40 --batch 2 --epochs 30 --csv " +
+                               log_path.string() + " --save-params " + (dir / "p.txt").string();
+    const Outcome whole = launch("cartpole", common);
+    REQUIRE(whole.status == 0);
+    const std::string params = file_text(dir / "p.txt"), log = file_text(log_path);
+    fs::remove(dir / "p.txt");
+    fs::remove(log_path);
+    const auto rows = [&] {
+      const std::string text = file_text(log_path);
+      return text.empty() ? 0L : static_cast<long>(std::count(text.begin(), text.end(), '\n')) - 1;
+    };
+    const std::string resumable = common + " --checkpoint " + (dir / "run.checkpoint").string() +
+                                  " --checkpoint-every 1000";
+    const Outcome stopped =
+        launch("cartpole", resumable, "", [&] { return rows() >= 3; }, "", signal);
+    INFO((signal == SIGINT ? "SIGINT" : "SIGTERM") << "\n" << stopped.output);
+    REQUIRE(stopped.status == 128 + signal);
+    const long done = rows();
+    CHECK(done >= 3);
+    CHECK(done < 30);
+    CHECK(contains(stopped.output, "stopped by " + std::string(signal == SIGINT ? "SIGINT" : "SIGTERM") +
+                                       " after epoch " + std::to_string(done)));
+    CHECK(contains(stopped.output, "run the same command again to resume"));
+    CHECK(fs::exists(dir / "p.txt"));
+    const Outcome rerun = launch("cartpole", resumable);
+    REQUIRE(rerun.status == 0);
+    CHECK(contains(rerun.output, "resuming after epoch " + std::to_string(done)));
     CHECK(file_text(dir / "p.txt") == params);
     CHECK(without_seconds(file_text(log_path)) == without_seconds(log));
   }

@@ -213,6 +213,7 @@ TEST_CASE("checkpoint: an epoch whose squared update norm overflowed reads back"
   // A double gradient of norm 1e200 is finite and clips correctly; its square is +inf, and the
   // log says so. The checkpoint written after that epoch must still resume the run.
   Checkpoint<double> c;
+  c.epoch = 7;
   c.last = EpochRecord{};
   c.last->epoch = 7;
   c.last->update_norm2 = std::numeric_limits<double>::infinity();
@@ -282,6 +283,86 @@ TEST_CASE("run: a checkpoint of other settings is refused, naming the setting", 
   Setup<double> other_data(Method::Regular, 3);
   CHECK_THROWS_WITH(run_training(other_data.trainer, spread<double>(6, -0.9), test, settings),
                     Catch::Contains("train set"));
+}
+
+TEST_CASE("run: a checkpoint or log changed by hand is refused before any work, naming what",
+          "[train]") {
+  // A run of 4 epochs with its checkpoint and log; each case edits one line of the checkpoint
+  // (or one row of the log) and resumes towards 6 epochs. Resumed, such a checkpoint cut the
+  // log mid-row or repeated epochs, and an impossible Adam state was refused without the file.
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  const fs::path checkpoint = scratch("edited.checkpoint"), log = scratch("edited.csv");
+  RunSettings settings;
+  settings.epochs = 4;
+  settings.checkpoint = checkpoint.string();
+  settings.log_csv = log.string();
+  const auto fresh = [&] {
+    fs::remove(checkpoint);
+    fs::remove(log);
+    Setup<double> s(Method::Combined);
+    REQUIRE(run_training(s.trainer, train, test, settings).end == RunEnd::Finished);
+  };
+  // The first line of `path` that starts with `starts` gets `by` instead of that start (the
+  // checkpoint's key and value; the log's epoch, so that its size stays).
+  const auto replace_line = [](const fs::path& path, const std::string& starts, const std::string& by) {
+    std::istringstream in(file_text(path));
+    std::string text, line;
+    bool found = false;
+    while (std::getline(in, line)) {
+      if (!found && line.starts_with(starts)) {
+        line = by + (starts.ends_with(",") ? line.substr(starts.size()) : std::string());
+        found = true;
+      }
+      text += line + "\n";
+    }
+    REQUIRE(found);
+    std::ofstream(path, std::ios::trunc) << text;
+  };
+  struct Case {
+    bool edit_log;  ///< else the checkpoint
+    std::string starts, by, expected;
+    bool names_log;  ///< the message names the log, else the checkpoint
+  };
+  for (const Case& c : {
+           Case{false, "log_bytes ", "log_bytes 100", "do not hold the rows of epochs 1 to 4",
+                true},
+           Case{false, "epoch ", "epoch 3", "best_epoch 4; expected 0 to 3", false},
+           Case{false, "best_epoch ", "best_epoch 9", "best_epoch 9; expected 0 to 4", false},
+           Case{false, "adam_t ", "adam_t -1", "adam_t -1; expected 0 to", false},
+           Case{false, "since_best ", "since_best -3", "since_best -3; expected 0 to 4", false},
+           Case{true, "3,", "7,", "row 3 is missing or does not start with '3,'", true}}) {
+    fresh();
+    replace_line(c.edit_log ? log : checkpoint, c.starts, c.by);
+    INFO((c.edit_log ? "log" : "checkpoint") << ": '" << c.starts << "…' → '" << c.by << "'");
+    Setup<double> again(Method::Combined);
+    RunSettings longer = settings;
+    longer.epochs = 6;
+    CHECK_THROWS_WITH(run_training(again.trainer, train, test, longer),
+                      Catch::Contains(c.expected) &&
+                          Catch::Contains((c.names_log ? log : checkpoint).filename().string()));
+  }
+  // The last record of another epoch than the checkpoint's (best_epoch left within range).
+  fresh();
+  replace_line(checkpoint, "best_epoch ", "best_epoch 0");
+  replace_line(checkpoint, "since_best ", "since_best 0");
+  replace_line(checkpoint, "epoch ", "epoch 3");
+  Setup<double> third(Method::Combined);
+  CHECK_THROWS_WITH(run_training(third.trainer, train, test, settings),
+                    Catch::Contains("edited.checkpoint") &&
+                        Catch::Contains("the last record is of epoch 4; expected the "
+                                        "checkpoint's epoch 3"));
+  // A negative second moment, one of adam_v's numbers.
+  fresh();
+  std::string text = file_text(checkpoint);
+  const std::size_t at = text.find("adam_v ");
+  REQUIRE(at != std::string::npos);
+  const std::size_t entry = text.find('\n', at) + 1;
+  text.replace(entry, text.find('\n', entry) - entry, "-1");
+  std::ofstream(checkpoint, std::ios::trunc) << text;
+  Setup<double> again(Method::Combined);
+  CHECK_THROWS_WITH(run_training(again.trainer, train, test, settings),
+                    Catch::Contains("edited.checkpoint") &&
+                        Catch::Contains("adam_v has a negative entry"));
 }
 
 TEST_CASE("run: a log that cannot be written still saves the parameters", "[train]") {

@@ -109,11 +109,14 @@ public:
     return parse_finite<Number>(text, where());
   }
 
-  long integer(std::string_view key) {
+  /// A whole number in [low, high]: a value the run could not have written is damage.
+  long integer(std::string_view key, double low = 0, double high = 1e15) {
     const std::string_view text = value(key);
     const double number = parse_finite<double>(text, where());
     require<ParseError>(number == static_cast<double>(static_cast<long long>(number)), where(),
                         ": expected a whole number for '", key, "'");
+    require<ParseError>(number >= low && number <= high, where(), ": ", key, " ", number,
+                        "; expected ", low, " to ", high);
     return static_cast<long>(number);
   }
 
@@ -217,10 +220,10 @@ template <class Scalar>
   }
   c.epoch = in.integer("epoch");
   c.shuffle_state = std::string(in.value("shuffle"));
-  c.log_bytes = in.integer("log_bytes");
+  c.log_bytes = in.integer("log_bytes", -1);  // −1: made without a log
   c.skipped_batches = in.integer("skipped_batches");
-  c.since_best = in.integer("since_best");
-  c.best_epoch = in.integer("best_epoch");
+  c.since_best = in.integer("since_best", 0, static_cast<double>(c.epoch));
+  c.best_epoch = in.integer("best_epoch", 0, static_cast<double>(c.epoch));
   c.best_loss = in.number<double>("best_loss");
   const std::string_view last = in.value("last");
   if (!last.empty()) {
@@ -242,13 +245,26 @@ template <class Scalar>
     r.cos_m_r = detail::optional_field(fields[5], where);
     r.agree_fraction = detail::optional_field(fields[6], where);
     r.seconds = detail::parse_finite<double>(fields[7], where);
+    detail::require<ParseError>(r.epoch == c.epoch, where, ": the last record is of epoch ",
+                                r.epoch, "; expected the checkpoint's epoch ", c.epoch);
     c.last = r;
   }
   c.params = in.vector<Scalar>("params");
+  // The other vectors are empty (no evaluation yet, an optimizer without moments) or as long.
+  auto require_length = [&](const Vector<Scalar>& v, const char* key) {
+    detail::require<ParseError>(v.size() == 0 || v.size() == c.params.size(), in.where(), ": ",
+                                key, " has ", v.size(), " numbers; expected 0 or ",
+                                c.params.size(), " (as params)");
+  };
   c.best_params = in.vector<Scalar>("best_params");
+  require_length(c.best_params, "best_params");
   c.adam_t = in.integer("adam_t");
   c.adam_m = in.vector<Scalar>("adam_m");
+  require_length(c.adam_m, "adam_m");
   c.adam_v = in.vector<Scalar>("adam_v");
+  require_length(c.adam_v, "adam_v");
+  detail::require<ParseError>((c.adam_v.array() >= Scalar(0)).all(), in.where(),
+                              ": adam_v has a negative entry; expected squares' averages (>= 0)");
   const std::string_view end = in.next();
   detail::require<ParseError>(end == "end", in.where(), ": expected 'end'");
   return c;

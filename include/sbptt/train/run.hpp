@@ -224,7 +224,7 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
       detail::require<IoError>(resumed->log_bytes >= 0, "checkpoint '", settings.checkpoint,
                                "' was made without a training log; expected one (the run "
                                "would have a log without its first epochs)");
-      log = TrainingLogFile::resume(settings.log_csv, resumed->log_bytes);
+      log = TrainingLogFile::resume(settings.log_csv, resumed->log_bytes, resumed->epoch);
     }
   } else if (!settings.log_csv.empty()) {
     log = TrainingLogFile::create(settings.log_csv);

@@ -99,9 +99,11 @@ public:
   }
 
   /// Continues the log at `path` from its first `size` bytes (the size recorded with a
-  /// checkpoint): later rows, written after that checkpoint, are cut off. Throws `IoError`
-  /// when the file is missing, does not start with the header, or is shorter than `size`.
-  static TrainingLogFile resume(const std::string& path, long long size) {
+  /// checkpoint), which must hold the header and the rows of epochs 1 … `rows`: later rows,
+  /// written after that checkpoint, are cut off. Throws `IoError` when the file is missing,
+  /// does not start with the header, is shorter than `size`, or its first `size` bytes are not
+  /// those rows, whole (a checkpoint or a log edited by hand, or the log of another run).
+  static TrainingLogFile resume(const std::string& path, long long size, long rows) {
     TrainingLogFile log(path);
     struct stat info {};
     detail::require<IoError>(::fstat(log.fd_, &info) == 0 && info.st_size >= size,
@@ -114,6 +116,7 @@ public:
     detail::require<IoError>(got == static_cast<::ssize_t>(start.size()) && start == header_line,
                              "training log '", path, "' does not start with the header '",
                              training_log_header, "'");
+    log.require_rows(size, rows);
     detail::require<IoError>(::ftruncate(log.fd_, size) == 0, "cannot cut training log '",
                              path, "' back to ", size, " bytes: ", detail::os_reason(errno));
     log.size_ = size;
@@ -135,6 +138,33 @@ public:
   TrainingLogFile& operator=(const TrainingLogFile&) = delete;
   ~TrainingLogFile() {
     if (fd_ >= 0) ::close(fd_);
+  }
+
+  /// The file's first `size` bytes are the header and whole rows numbered 1 … `rows`.
+  void require_rows(long long size, long rows) const {
+    std::string text(static_cast<std::size_t>(size), '\0');
+    const ::ssize_t got = ::pread(fd_, text.data(), text.size(), 0);
+    detail::require<IoError>(got == static_cast<::ssize_t>(text.size()), "cannot read training "
+                             "log '", path_, "': ", detail::os_reason(errno));
+    const std::size_t header_end = text.find('\n');
+    detail::require<IoError>(header_end != std::string::npos, "training log '", path_,
+                             "': the checkpoint records ", size, " bytes, less than its header");
+    std::size_t line_start = header_end + 1;
+    for (long epoch = 1; epoch <= rows; ++epoch) {
+      const std::string number = std::to_string(epoch) + ",";
+      const std::size_t end = text.find('\n', line_start);
+      detail::require<IoError>(end != std::string::npos && text.compare(line_start, number.size(),
+                                                                        number) == 0,
+                               "training log '", path_, "': its first ", size,
+                               " bytes, as the checkpoint records, do not hold the rows of "
+                               "epochs 1 to ", rows, " (row ", epoch, " is missing or does not "
+                               "start with '", number, "'); the log or the checkpoint was "
+                               "changed");
+      line_start = end + 1;
+    }
+    detail::require<IoError>(line_start == text.size(), "training log '", path_, "': its first ",
+                             size, " bytes, as the checkpoint records, hold more than the rows "
+                             "of epochs 1 to ", rows, "; the log or the checkpoint was changed");
   }
 
   /// Appends the row of `record` with one write. Throws `IoError` (e.g. disk full).

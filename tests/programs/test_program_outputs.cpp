@@ -219,27 +219,40 @@ TEST_CASE("a replaced output keeps its owner and permission bits", "[programs]")
   CHECK(file_text(params) != "0\n0\n");
 }
 
+/// A short cart-pole run in `dir` (log.csv, p.txt), done once uninterrupted: its parameters
+/// and log, the outputs then removed for the interrupted runs to write again.
+struct CartPoleRun {
+  fs::path dir, log_path;
+  std::string common;  ///< the flags of the run
+  std::string params, log;
+
+  CartPoleRun(const std::string& directory, const std::string& variant)
+      : dir(fresh_directory(directory)), log_path(dir / "log.csv"),
+        common("--poles 2 --samples 16 --steps 40 --batch 2 --epochs 30 " + variant + " --csv " +
+               log_path.string() + " --save-params " + (dir / "p.txt").string()) {
+    const Outcome whole = launch("cartpole", common);
+    REQUIRE(whole.status == 0);
+    params = file_text(dir / "p.txt");
+    log = file_text(log_path);
+    fs::remove(dir / "p.txt");
+    fs::remove(log_path);
+  }
+
+  /// Rows of the log so far (the header aside; a row being written counts once complete).
+  [[nodiscard]] long rows() const {
+    const std::string text = file_text(log_path);
+    return text.empty() ? 0L : static_cast<long>(std::count(text.begin(), text.end(), '\n')) - 1;
+  }
+};
+
 TEST_CASE("killed with SIGKILL at random epochs, a rerun with --checkpoint ends bit for bit "
           "as one uninterrupted run", "[programs]") {
   std::mt19937 random(12345);
   for (const std::string variant : {"--method R", "--method C", "--method R --float",
                                     "--method C --float"}) {
-    const fs::path dir = fresh_directory("kill");
-    const fs::path log_path = dir / "log.csv";
-    const std::string common = "--poles 2 --samples 16 --steps 40 --batch 2 --shuffle --epochs 30 " +
-                               variant + " --csv " + log_path.string() + " --save-params " +
-                               (dir / "p.txt").string();
-    const Outcome whole = launch("cartpole", common);
-    REQUIRE(whole.status == 0);
-    const std::string params = file_text(dir / "p.txt"), log = file_text(log_path);
-    fs::remove(dir / "p.txt");
-    fs::remove(log_path);
-
-    // Rows of the log so far (the header aside; a row being written counts once complete).
-    const auto rows = [&] {
-      const std::string text = file_text(log_path);
-      return text.empty() ? 0L : static_cast<long>(std::count(text.begin(), text.end(), '\n')) - 1;
-    };
+    const CartPoleRun run("kill", "--shuffle " + variant);
+    const auto& [dir, log_path, common, params, log] = run;
+    const auto rows = [&] { return run.rows(); };
     const std::string resumable = common + " --checkpoint " + (dir / "run.checkpoint").string();
     int kills = 0, resumes = 0;
     long killed_at = 0;
@@ -273,19 +286,9 @@ TEST_CASE("SIGINT or SIGTERM stops after the current epoch, keeps its work and s
           "rerun ends bit for bit as one uninterrupted run", "[programs]") {
   // Checkpoints only every 1000 epochs: what the rerun resumes from is written on the signal.
   for (const int signal : {SIGINT, SIGTERM}) {
-    const fs::path dir = fresh_directory("interrupt");
-    const fs::path log_path = dir / "log.csv";
-    const std::string common = "--poles 2 --samples 16 --steps 40 --batch 2 --epochs 30 --csv " +
-                               log_path.string() + " --save-params " + (dir / "p.txt").string();
-    const Outcome whole = launch("cartpole", common);
-    REQUIRE(whole.status == 0);
-    const std::string params = file_text(dir / "p.txt"), log = file_text(log_path);
-    fs::remove(dir / "p.txt");
-    fs::remove(log_path);
-    const auto rows = [&] {
-      const std::string text = file_text(log_path);
-      return text.empty() ? 0L : static_cast<long>(std::count(text.begin(), text.end(), '\n')) - 1;
-    };
+    const CartPoleRun run("interrupt", "");
+    const auto& [dir, log_path, common, params, log] = run;
+    const auto rows = [&] { return run.rows(); };
     const std::string resumable = common + " --checkpoint " + (dir / "run.checkpoint").string() +
                                   " --checkpoint-every 1000";
     const Outcome stopped =

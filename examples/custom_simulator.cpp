@@ -6,7 +6,12 @@
 
 #include "point_mass.hpp"
 
-int main() {
+int main(int argc, char** argv) {
+  if (argc > 1) {
+    std::fprintf(stderr, "custom_simulator takes no arguments (it trains the point mass of "
+                         "docs/api.md); got '%s'\n", argv[1]);
+    return 2;
+  }
   using Loss = sbptt::SquaredDistanceLoss<PointMass::State>;
   const PointMass sim;
   auto network = sbptt::Network<double>::mlp(2, {32, 32}, 1);

@@ -140,33 +140,6 @@ public:
     if (fd_ >= 0) ::close(fd_);
   }
 
-  /// The file's first `size` bytes are the header and whole rows numbered 1 … `rows`.
-  void require_rows(long long size, long rows) const {
-    std::string text(static_cast<std::size_t>(size), '\0');
-    const ::ssize_t got = ::pread(fd_, text.data(), text.size(), 0);
-    detail::require<IoError>(got == static_cast<::ssize_t>(text.size()), "cannot read training "
-                             "log '", path_, "': ", detail::os_reason(errno));
-    const std::size_t header_end = text.find('\n');
-    detail::require<IoError>(header_end != std::string::npos, "training log '", path_,
-                             "': the checkpoint records ", size, " bytes, less than its header");
-    std::size_t line_start = header_end + 1;
-    for (long epoch = 1; epoch <= rows; ++epoch) {
-      const std::string number = std::to_string(epoch) + ",";
-      const std::size_t end = text.find('\n', line_start);
-      detail::require<IoError>(end != std::string::npos && text.compare(line_start, number.size(),
-                                                                        number) == 0,
-                               "training log '", path_, "': its first ", size,
-                               " bytes, as the checkpoint records, do not hold the rows of "
-                               "epochs 1 to ", rows, " (row ", epoch, " is missing or does not "
-                               "start with '", number, "'); the log or the checkpoint was "
-                               "changed");
-      line_start = end + 1;
-    }
-    detail::require<IoError>(line_start == text.size(), "training log '", path_, "': its first ",
-                             size, " bytes, as the checkpoint records, hold more than the rows "
-                             "of epochs 1 to ", rows, "; the log or the checkpoint was changed");
-  }
-
   /// Appends the row of `record` with one write. Throws `IoError` (e.g. disk full).
   void append(const EpochRecord& record) {
     const std::string row = training_log_row(record);
@@ -190,6 +163,34 @@ public:
   [[nodiscard]] const std::string& path() const { return path_; }
 
 private:
+  /// The file's first `size` bytes are the header and whole rows numbered 1 … `rows`.
+  void require_rows(long long size, long rows) const {
+    std::string text(static_cast<std::size_t>(size), '\0');
+    const ::ssize_t got = ::pread(fd_, text.data(), text.size(), 0);
+    detail::require<IoError>(got == static_cast<::ssize_t>(text.size()), "cannot read the first ",
+                             size, " bytes of training log '", path_, "': ",
+                             got < 0 ? detail::os_reason(errno) : std::string("it is shorter"));
+    const std::size_t header_end = text.find('\n');
+    detail::require<IoError>(header_end != std::string::npos, "training log '", path_,
+                             "': the checkpoint records ", size, " bytes, less than its header");
+    std::size_t line_start = header_end + 1;
+    for (long epoch = 1; epoch <= rows; ++epoch) {
+      const std::string number = std::to_string(epoch) + ",";
+      const std::size_t end = text.find('\n', line_start);
+      detail::require<IoError>(end != std::string::npos && text.compare(line_start, number.size(),
+                                                                        number) == 0,
+                               "training log '", path_, "': its first ", size,
+                               " bytes, as the checkpoint records, do not hold the rows of "
+                               "epochs 1 to ", rows, " (row ", epoch, " is missing or does not "
+                               "start with '", number, "'); the log or the checkpoint was "
+                               "changed");
+      line_start = end + 1;
+    }
+    detail::require<IoError>(line_start == text.size(), "training log '", path_, "': its first ",
+                             size, " bytes, as the checkpoint records, hold more than the rows "
+                             "of epochs 1 to ", rows, "; the log or the checkpoint was changed");
+  }
+
   explicit TrainingLogFile(const std::string& path) : path_(path) {
     fd_ = ::open(path.c_str(), O_RDWR | O_APPEND | O_CLOEXEC);
     detail::require<IoError>(fd_ >= 0, "cannot open training log '", path, "': ",

@@ -258,6 +258,14 @@ private:
       } catch (const sbptt::ParseError& e) {
         failure = e.what();
       }
+    } else if (WIFEXITED(status) && (WEXITSTATUS(status) == 128 + SIGINT ||
+                                     WEXITSTATUS(status) == 128 + SIGTERM)) {
+      // The task programs stop after the epoch in which SIGINT or SIGTERM came, checkpoint
+      // written (docs/programs.md): as after a kill, the run keeps its checkpoint.
+      if (interrupted) return;  // we stopped it, or Slurm's scancel stopped us both
+      const int signal = WEXITSTATUS(status) - 128;
+      failure = concat("stopped by signal ", signal, " (", strsignal(signal),
+                       "); its checkpoint is kept");
     } else if (WIFEXITED(status)) {
       const int code = WEXITSTATUS(status);
       failure = code == 2   ? "exit code 2 (bad flags)"

@@ -136,12 +136,11 @@ public:
   std::string_view next() {
     require<ParseError>(position_ < text_.size(), "checkpoint '", path_, "' ends after line ",
                         line_, "; expected more (the file is incomplete)");
+    ++line_;  // the line being read, for where()
     const std::size_t end = text_.find('\n', position_);
-    require<ParseError>(end != std::string_view::npos, "checkpoint '", path_, "', line ",
-                        line_ + 1, ": the line has no end");
+    require<ParseError>(end != std::string_view::npos, where(), ": the line has no end");
     const std::string_view line = text_.substr(position_, end - position_);
     position_ = end + 1;
-    ++line_;
     return line;
   }
 

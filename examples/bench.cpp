@@ -21,7 +21,10 @@
 //   ms Nt, xNt   the same epoch with --threads N threads, and the speed-up over 1 thread
 //   rt ns        right after those epochs, the round trip of a cache line between two
 //                threads (bench/rows.hpp): the machine's cost of a hand-off, which varies
-//                (docs/benchmark-runs.md, eleventh run); "-" with one thread
+//                (docs/benchmark-runs.md, eleventh run); "-" with one thread. The
+//                two-thread verdicts add how much slower the main thread reads lines the
+//                other core wrote than its own (about 1: the cores share their last-level
+//                cache; CSV other_core_read_ratio)
 //   sim ns       one simulator step plus one full VJP (Aᵀλ and Bᵀλ) per sample, on the
 //                states of the last training batch (the per-sample work of the engine;
 //                for a BatchSimulator, the batched calls' time over the batch size)

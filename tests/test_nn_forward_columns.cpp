@@ -5,7 +5,8 @@
 // (which reads the im2col matrices too); parts on two threads at once give the same. Being
 // equal to the sample alone says nothing of the sample alone being right, so the forward pass
 // is also held within round-off of a long-double evaluation. Layer widths leave partial
-// registers, so the tanh runs on padded registers at every offset.
+// registers, so the tanh runs on padded registers at every offset. The outputs may be written
+// over the inputs.
 #include <catch2/catch.hpp>
 
 #include <cmath>
@@ -130,6 +131,27 @@ TEMPLATE_TEST_CASE("forward in parts on two threads at once equals one pass", "[
       for (Index l = 0; l < net.num_layers(); ++l)
         REQUIRE(same<S>(ws.layer_output(l), whole_ws.layer_output(l)));
     }
+  }
+}
+
+TEMPLATE_TEST_CASE("the outputs may take the inputs' place", "[nn][columns]", float, double) {
+  // forward(v, v, ws): the output is written into the matrix the input is read from, whether
+  // or not the widths differ (the first network keeps 5, the others do not).
+  using S = TestType;
+  std::vector<Network<S>> nets = networks<S>();
+  nets.insert(nets.begin(), Network<S>::mlp(5, {7}, 5));
+  sbptt::testing::randomize(nets.front(), 19, 1.0);
+  for (const auto& net : nets) {
+    INFO(net.describe());
+    const Matrix<S> x = random_matrix<S>(net.input_dim(), 6, 8, 1.0);
+    Matrix<S> y;
+    typename Network<S>::Workspace ws, in_place_ws;
+    net.forward(x, y, ws);
+    Matrix<S> v = x;
+    net.forward(v, v, in_place_ws);
+    REQUIRE(same<S>(v, y));
+    for (Index l = 0; l < net.num_layers(); ++l)
+      REQUIRE(same<S>(in_place_ws.layer_output(l), ws.layer_output(l)));
   }
 }
 

@@ -43,6 +43,7 @@ struct RowResult {
   long long nx = 0, steps = 0, params = 0;  ///< state size (Nx for quantum), horizon, θ size
   double ms_epoch = 0, gflop = 0, ms_threads = 0, sim_ns = 0;
   double round_trip_ns = 0;  ///< `cross_core_round_trip_ns` after the N-thread epochs (0: none)
+  double other_core_reads = 0;  ///< `other_core_read_ratio` after them (0: none)
   double trajectory_bytes = 0, rss_kib = 0;
   int ok = 0;
   char error[200] = {};
@@ -109,6 +110,57 @@ inline double cross_core_round_trip_ns() {
   partner.join();
   std::nth_element(ns.begin(), ns.begin() + static_cast<std::ptrdiff_t>(ns.size() / 2), ns.end());
   return ns[ns.size() / 2];
+}
+
+/// How many times longer this thread takes to read 4 MiB that another thread has just written
+/// than 4 MiB it wrote itself (one load a cache line, best of 5 reads each): about 1 when the
+/// two threads' cores share their last-level cache, about the cost of a read from memory when
+/// they do not. The 4 MiB are past a core's own caches (1 MiB of L2 on the machine of
+/// docs/benchmark-runs.md) and well within a shared L3. There a probe of the same reads gave
+/// 0.73–1.74 while the round trip was mostly fast (76–100 ns in 36 of 42 runs) and 2.26–3.12
+/// while it was slow (366–799 ns), the other core's lines then as slow as memory's
+/// (twenty-second run): in its slow state the host runs the two virtual cores where they share
+/// no cache.
+inline double other_core_read_ratio() {
+  constexpr std::size_t kLines = (std::size_t{4} << 20) / 64;
+  constexpr int kReads = 5;
+  constexpr std::size_t kPerLine = 64 / sizeof(long long);
+  std::vector<long long> lines(kLines * kPerLine);
+  std::atomic<int> turn{0};
+  const auto wait_for = [&](int value) {
+    for (int spins = 0; turn.load(std::memory_order_acquire) != value; ++spins)
+      if (spins % 4096 == 4095) std::this_thread::yield();
+  };
+  const auto write_all = [&](long long value) {
+    for (std::size_t i = 0; i < lines.size(); ++i) lines[i] = value + static_cast<long long>(i);
+  };
+  long long sum = 0;  // stored below into a volatile, so that no load can be dropped
+  const auto timed_read = [&] {
+    const double start = now_ms();
+    for (std::size_t line = 0; line < kLines; ++line) sum += lines[line * kPerLine];
+    return now_ms() - start;
+  };
+  double other = 1e300, own = 1e300;
+  std::thread writer([&] {
+    for (int r = 0; r < kReads; ++r) {
+      wait_for(2 * r);
+      write_all(r);
+      turn.store(2 * r + 1, std::memory_order_release);
+    }
+  });
+  for (int r = 0; r < kReads; ++r) {
+    wait_for(2 * r + 1);
+    other = std::min(other, timed_read());
+    turn.store(2 * r + 2, std::memory_order_release);
+  }
+  writer.join();
+  for (int r = 0; r < kReads; ++r) {
+    write_all(r);
+    own = std::min(own, timed_read());
+  }
+  volatile long long sink = sum;
+  static_cast<void>(sink);
+  return other / own;
 }
 
 /// ns per sample of `step` + full `vjp` over the stored trajectory of the engine.
@@ -178,6 +230,7 @@ RowResult measure(const Settings& settings, const Sim& sim,
     } else {
       r.ms_threads = best;
       r.round_trip_ns = cross_core_round_trip_ns();
+      r.other_core_reads = other_core_read_ratio();
     }
     if (settings.threads == 1) r.ms_threads = r.ms_epoch;
     if (settings.threads == 1) break;

@@ -108,25 +108,34 @@ TEMPLATE_TEST_CASE("every entry of the product is its bias plus the terms in col
                    "[nn][packed]", float, double) {
   // The order of the file comment, with fused multiply-adds where the build has them: one
   // independent truth for every block shape at once (the batch test above only ties them).
+  // A packed from W (rows × cols, row-major) and from the transpose of W (cols × rows), whose
+  // panels are copied by different code.
   using S = TestType;
   for (const Index rows : panel_row_counts<S>()) {
-    const Index cols = 29;
-    const Matrix<S> w = random_matrix<S>(rows * cols, 1, 15, 1.0);
-    const Matrix<S> b = random_matrix<S>(rows, 1, 16, 1.0);
-    PackedMatrix<S> a;
-    a.pack(w.data(), rows, cols, false, b.data());
-    for (const Index n : {Index{1}, Index{2}, Index{3}, Index{4}, Index{7}, Index{8}, Index{13}}) {
-      const Matrix<S> x = random_matrix<S>(cols, n, 17 + n, 1.0);
-      // NaN until written: an entry that no block computes cannot pass.
-      Matrix<S> y = Matrix<S>::Constant(rows, n, std::numeric_limits<S>::quiet_NaN());
-      a.multiply(x.data(), cols, n, y.data(), rows);
-      for (Index j = 0; j < n; ++j) {
-        for (Index i = 0; i < rows; ++i) {
-          S sum = b(i);
-          for (Index k = 0; k < cols; ++k)
-            sum = sbptt::detail::fused_multiply_add(w(i * cols + k), x(k, j), sum);
-          INFO("rows " << rows << " n " << n << " entry (" << i << ", " << j << ")");
-          REQUIRE(y(i, j) == sum);
+    for (const bool transpose : {false, true}) {
+      const Index cols = 29;
+      const Matrix<S> w = random_matrix<S>(rows * cols, 1, 15, 1.0);
+      const Matrix<S> b = random_matrix<S>(rows, 1, 16, 1.0);
+      const auto entry = [&](Index i, Index k) {
+        return transpose ? w(k * rows + i) : w(i * cols + k);
+      };
+      PackedMatrix<S> a;
+      a.pack(w.data(), transpose ? cols : rows, transpose ? rows : cols, transpose, b.data());
+      for (const Index n :
+           {Index{1}, Index{2}, Index{3}, Index{4}, Index{7}, Index{8}, Index{13}}) {
+        const Matrix<S> x = random_matrix<S>(cols, n, 17 + n, 1.0);
+        // NaN until written: an entry that no block computes cannot pass.
+        Matrix<S> y = Matrix<S>::Constant(rows, n, std::numeric_limits<S>::quiet_NaN());
+        a.multiply(x.data(), cols, n, y.data(), rows);
+        for (Index j = 0; j < n; ++j) {
+          for (Index i = 0; i < rows; ++i) {
+            S sum = b(i);
+            for (Index k = 0; k < cols; ++k)
+              sum = sbptt::detail::fused_multiply_add(entry(i, k), x(k, j), sum);
+            INFO("rows " << rows << " transpose " << transpose << " n " << n << " entry (" << i
+                         << ", " << j << ")");
+            REQUIRE(y(i, j) == sum);
+          }
         }
       }
     }

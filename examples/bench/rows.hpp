@@ -43,7 +43,7 @@ struct RowResult {
   long long nx = 0, steps = 0, params = 0;  ///< state size (Nx for quantum), horizon, θ size
   double ms_epoch = 0, gflop = 0, ms_threads = 0, sim_ns = 0;
   double round_trip_ns = 0;  ///< `cross_core_round_trip_ns` after the N-thread epochs (0: none)
-  double other_core_reads = 0;  ///< `other_core_read_ratio` after them (0: none)
+  double other_core_read_ratio = 0;  ///< `other_core_read_ratio()` after them (0: none)
   double trajectory_bytes = 0, rss_kib = 0;
   int ok = 0;
   char error[200] = {};
@@ -77,6 +77,13 @@ double measure_peak() {
   return best;
 }
 
+/// Waits until `flag` holds `value`, spinning, and yielding now and then so that it also ends on
+/// a machine with one free core.
+inline void spin_until(const std::atomic<int>& flag, int value) {
+  for (int spins = 0; flag.load(std::memory_order_acquire) != value; ++spins)
+    if (spins % 4096 == 4095) std::this_thread::yield();
+}
+
 /// Median over batches of the time of one round trip of a cache line between two threads,
 /// each waiting for the other's store: the price of every hand-off between the engine's
 /// threads. On the machine of docs/benchmark-runs.md (eleventh run) it swings between about 80
@@ -87,11 +94,7 @@ inline double cross_core_round_trip_ns() {
   constexpr int kBatches = 12;  // 11 kept: an odd count has one middle value
   constexpr int kTrips = 2000;  // per batch
   alignas(64) std::atomic<int> ball{0};
-  // Spins, yielding now and then so that it also ends on a machine with one free core.
-  const auto wait_for = [&](int value) {
-    for (int spins = 0; ball.load(std::memory_order_acquire) != value; ++spins)
-      if (spins % 4096 == 4095) std::this_thread::yield();
-  };
+  const auto wait_for = [&](int value) { spin_until(ball, value); };
   std::thread partner([&] {
     for (int i = 0; i < kBatches * kTrips; ++i) {
       wait_for(2 * i + 1);
@@ -114,23 +117,21 @@ inline double cross_core_round_trip_ns() {
 
 /// How many times longer this thread takes to read 4 MiB that another thread has just written
 /// than 4 MiB it wrote itself (one load a cache line, best of 5 reads each): about 1 when the
-/// two threads' cores share their last-level cache, about the cost of a read from memory when
+/// two threads' cores share their last-level cache, nearly the cost of a read from memory when
 /// they do not. The 4 MiB are past a core's own caches (1 MiB of L2 on the machine of
-/// docs/benchmark-runs.md) and well within a shared L3. There a probe of the same reads gave
-/// 0.73–1.74 while the round trip was mostly fast (76–100 ns in 36 of 42 runs) and 2.26–3.12
-/// while it was slow (366–799 ns), the other core's lines then as slow as memory's
-/// (twenty-second run): in its slow state the host runs the two virtual cores where they share
-/// no cache.
+/// docs/benchmark-runs.md) and well within a shared L3. The threads are not pinned, as the
+/// engine's are not: about 1 can also mean that both ran on one core. On that machine a probe
+/// of the same reads, its threads pinned, gave 0.73–1.74 while the round trip was mostly fast
+/// (76–100 ns in 36 of 42 runs) and 2.26–3.12 while it was slow (366–799 ns), the other core's
+/// lines then nearly as slow as memory's (twenty-second run): in its slow state the host runs
+/// the two virtual cores where they share no cache.
 inline double other_core_read_ratio() {
   constexpr std::size_t kLines = (std::size_t{4} << 20) / 64;
   constexpr int kReads = 5;
   constexpr std::size_t kPerLine = 64 / sizeof(long long);
   std::vector<long long> lines(kLines * kPerLine);
-  std::atomic<int> turn{0};
-  const auto wait_for = [&](int value) {
-    for (int spins = 0; turn.load(std::memory_order_acquire) != value; ++spins)
-      if (spins % 4096 == 4095) std::this_thread::yield();
-  };
+  alignas(64) std::atomic<int> turn{0};
+  const auto wait_for = [&](int value) { spin_until(turn, value); };
   const auto write_all = [&](long long value) {
     for (std::size_t i = 0; i < lines.size(); ++i) lines[i] = value + static_cast<long long>(i);
   };
@@ -229,8 +230,6 @@ RowResult measure(const Settings& settings, const Sim& sim,
       r.trajectory_bytes = static_cast<double>(trainer.engine().trajectory().bytes());
     } else {
       r.ms_threads = best;
-      r.round_trip_ns = cross_core_round_trip_ns();
-      r.other_core_reads = other_core_read_ratio();
     }
     if (settings.threads == 1) r.ms_threads = r.ms_epoch;
     if (settings.threads == 1) break;
@@ -238,6 +237,11 @@ RowResult measure(const Settings& settings, const Sim& sim,
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
   r.rss_kib = static_cast<double>(usage.ru_maxrss);
+  // After the RSS, whose peak would otherwise include the 4 MiB of the reads.
+  if (settings.threads > 1) {
+    r.round_trip_ns = cross_core_round_trip_ns();
+    r.other_core_read_ratio = other_core_read_ratio();
+  }
   r.ok = 1;
   return r;
 }

@@ -76,7 +76,7 @@ inline void summarize(const std::vector<Row>& rows, const double peak[2], Index 
                     "(cross-core round trip %.0f ns; the other core's lines read %.1fx as "
                     "slowly as this one's)\n",
                     task, method, speedup, target, verdict(speedup >= target),
-                    r->result.round_trip_ns, r->result.other_core_reads);
+                    r->result.round_trip_ns, r->result.other_core_read_ratio);
       }
     }
   } else {
@@ -112,7 +112,7 @@ inline void write_csv(const Settings& settings, const std::vector<Row>& rows,
                   row.task.c_str(), row.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
                   r.params, r.ms_epoch, r.gflop, gflops, p, gflops / p,
                   static_cast<long long>(settings.threads), r.ms_threads,
-                  r.ms_epoch / r.ms_threads, r.round_trip_ns, r.other_core_reads, r.sim_ns,
+                  r.ms_epoch / r.ms_threads, r.round_trip_ns, r.other_core_read_ratio, r.sim_ns,
                   r.trajectory_bytes, r.rss_kib);
     text += line;
   }

@@ -119,7 +119,7 @@ public:
 
   /// Y = N(X; θ).
   /// \param x   inputs, input_dim() × B, one sample per column
-  /// \param y   outputs, resized to output_dim() × B
+  /// \param y   outputs, resized to output_dim() × B; may be `x`
   /// \param ws  records what `backward` needs; reused buffers, resized only when B changes
   void forward(const Matrix<Scalar>& x, Matrix<Scalar>& y, Workspace& ws) const {
     check_params_size();

@@ -85,7 +85,8 @@ public:
         Scalar* panel = data_.data() + p * kLanes * cols_;
         const Scalar* source = row_major + p * kLanes;
         // A whole panel's column as one register: copy_n of a run only known at run time
-        // was a library call per column (guidance's 100 × 100 Wᵀ: 3.7 µs against 0.6).
+        // was a library call per column (100 × 100 Wᵀ in float: 3.5–3.7 µs against
+        // 0.60–0.62; docs/benchmark-runs.md, twenty-second run).
         if (lanes == kLanes) {
           for (Index c = 0; c < cols_; ++c)
             Eigen::internal::pstoreu(panel + c * kLanes,
@@ -139,10 +140,11 @@ public:
         // 100 × 100; docs/benchmark-runs.md, fifteenth run.)
         constexpr bool last_three = 3 * width + 4 < EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS;
         const Index paired = last_three && panels >= 3 && panels % 2 == 1 ? panels - 3 : panels;
-        // Four panels a block where their accumulators fit (half blocks with AVX-512): each
-        // broadcast of X then feeds twice the multiply-adds (100 × 100 × 4 in float: 355 ns
-        // against 381; docs/benchmark-runs.md, twenty-second run).
-        if constexpr (4 * width + 5 <= EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS) {
+        // Four panels a block where their accumulators, weights and a broadcast fit, with no
+        // register spare (half blocks with AVX-512): each broadcast of X then feeds twice the
+        // multiply-adds (100 × 100 × 4 in float: 354.5–358.5 ns against 379.6–392.6;
+        // docs/benchmark-runs.md, twenty-second run).
+        if constexpr (4 * width + 4 + 1 <= EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS) {
           for (; p + 4 <= full_panels && p + 4 <= paired; p += 4)
             block<4, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
         }
@@ -279,8 +281,9 @@ private:
 
   /// The columns of a whole panel (kLanes rows of the row-major `source`, leading dimension
   /// `ld`) into `panel`, kLanes × kLanes tiles at a time, each transposed in registers
-  /// (AVX-512 only); returns the columns done, the rest being fewer than a tile. Entry by entry
-  /// the panels of a 100 × 100 W in float took 2.7 µs, against 0.6 µs for the same bytes of Wᵀ.
+  /// (AVX-512 only); returns the columns done, the rest being fewer than a tile. A 100 × 100 W
+  /// in float: 2.7–2.8 µs entry by entry, 0.81–0.84 µs by tiles (docs/benchmark-runs.md,
+  /// twenty-second run).
   Index pack_tiles([[maybe_unused]] const Scalar* source, [[maybe_unused]] Index ld,
                    [[maybe_unused]] Scalar* panel) const {
     Index c = 0;

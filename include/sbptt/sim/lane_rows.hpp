@@ -16,7 +16,6 @@
 /// in and 28 out per block: entry by entry, about 0.15–0.2 ns an entry;
 /// docs/benchmark-runs.md, eighteenth run).
 #include <algorithm>
-#include <type_traits>
 
 #include <Eigen/Core>
 

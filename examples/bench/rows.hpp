@@ -94,10 +94,9 @@ inline double cross_core_round_trip_ns() {
   constexpr int kBatches = 12;  // 11 kept: an odd count has one middle value
   constexpr int kTrips = 2000;  // per batch
   alignas(64) std::atomic<int> ball{0};
-  const auto wait_for = [&](int value) { spin_until(ball, value); };
   std::thread partner([&] {
     for (int i = 0; i < kBatches * kTrips; ++i) {
-      wait_for(2 * i + 1);
+      spin_until(ball, 2 * i + 1);
       ball.store(2 * i + 2, std::memory_order_release);
     }
   });
@@ -106,7 +105,7 @@ inline double cross_core_round_trip_ns() {
     const double start = now_ms();
     for (int i = batch * kTrips; i < (batch + 1) * kTrips; ++i) {
       ball.store(2 * i + 1, std::memory_order_release);
-      wait_for(2 * i + 2);
+      spin_until(ball, 2 * i + 2);
     }
     if (batch > 0) ns.push_back((now_ms() - start) * 1e6 / kTrips);
   }
@@ -131,7 +130,6 @@ inline double other_core_read_ratio() {
   constexpr std::size_t kPerLine = 64 / sizeof(long long);
   std::vector<long long> lines(kLines * kPerLine);
   alignas(64) std::atomic<int> turn{0};
-  const auto wait_for = [&](int value) { spin_until(turn, value); };
   const auto write_all = [&](long long value) {
     for (std::size_t i = 0; i < lines.size(); ++i) lines[i] = value + static_cast<long long>(i);
   };
@@ -144,13 +142,13 @@ inline double other_core_read_ratio() {
   double other = 1e300, own = 1e300;
   std::thread writer([&] {
     for (int r = 0; r < kReads; ++r) {
-      wait_for(2 * r);
+      spin_until(turn, 2 * r);
       write_all(r);
       turn.store(2 * r + 1, std::memory_order_release);
     }
   });
   for (int r = 0; r < kReads; ++r) {
-    wait_for(2 * r + 1);
+    spin_until(turn, 2 * r + 1);
     other = std::min(other, timed_read());
     turn.store(2 * r + 2, std::memory_order_release);
   }

@@ -258,27 +258,21 @@ private:
       } catch (const sbptt::ParseError& e) {
         failure = e.what();
       }
-    } else if (WIFEXITED(status) && (WEXITSTATUS(status) == 128 + SIGINT ||
-                                     WEXITSTATUS(status) == 128 + SIGTERM)) {
-      // The task programs stop after the epoch in which SIGINT or SIGTERM came, checkpoint
-      // written (docs/programs.md): as after a kill, the run keeps its checkpoint.
+    } else if (const int signal = stopping_signal(status); signal != 0) {
+      // A run stopped by a signal keeps its checkpoint, whether killed by it or ended on it.
       if (interrupted) return;  // we stopped it, or Slurm's scancel stopped us both
-      const int signal = WEXITSTATUS(status) - 128;
-      failure = concat("stopped by signal ", signal, " (", strsignal(signal),
-                       "); its checkpoint is kept");
+      const bool killed = WIFSIGNALED(status);
+      failure = concat(killed ? "killed" : "stopped", " by signal ", signal, " (",
+                       strsignal(signal), killed ? ")" : "); its checkpoint is kept");
     } else if (WIFEXITED(status)) {
       const int code = WEXITSTATUS(status);
       failure = code == 2   ? "exit code 2 (bad flags)"
                 : code == 127 ? "exit code 127 (could not execute the program)"
                               : concat("exit code ", code);
       // The program failed, perhaps on its checkpoint (refused, or its log cut): the next
-      // attempt starts over. A run killed by a signal keeps its checkpoint.
+      // attempt starts over.
       if (fs::remove(run_file(runs_, run, ".checkpoint")))
         failure += "; its checkpoint was removed, the next sweep redoes it from epoch 1";
-    } else if (WIFSIGNALED(status)) {
-      if (interrupted) return;  // we stopped it
-      failure = concat("killed by signal ", WTERMSIG(status), " (", strsignal(WTERMSIG(status)),
-                       ")");
     }
     failures_.push_back(concat("  ", name, ": ", failure, "; log ", partial_log.string(),
                                ":\n", tail_of(partial_log, 3)));

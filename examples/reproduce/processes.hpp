@@ -91,6 +91,16 @@ inline std::string describe_status(int status) {
   return "ended";
 }
 
+/// The signal that stopped a task program, or 0: the one that killed it, or SIGINT or SIGTERM
+/// when it ended on them with exit code 128 + the signal, after the epoch in which they came
+/// and with its checkpoint written (docs/programs.md).
+inline int stopping_signal(int status) {
+  if (WIFSIGNALED(status)) return WTERMSIG(status);
+  if (!WIFEXITED(status)) return 0;
+  const int signal = WEXITSTATUS(status) - 128;
+  return signal == SIGINT || signal == SIGTERM ? signal : 0;
+}
+
 inline bool is_executable(const fs::path& path) {
   return ::access(path.c_str(), X_OK) == 0 && fs::is_regular_file(path);
 }

@@ -410,3 +410,38 @@ TEST_CASE("run: outputs that are one file are refused before any work", "[train]
   CHECK_THROWS_WITH(run_training(s.trainer, spread<double>(4, 0.1), spread<double>(2, 0.1), settings),
                     Catch::Contains("are the same file"));
 }
+
+TEST_CASE("run: a checkpoint past the epochs asked for is refused before any work", "[train]") {
+  // Resumed, the run of 4 epochs ended at once as if it had trained 2, and saved the
+  // parameters of epoch 4 in place of epoch 2's.
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  const fs::path checkpoint = scratch("past.checkpoint"), log = scratch("past.csv");
+  const fs::path params = scratch("past_params.txt");
+  for (const auto& path : {checkpoint, log, params}) fs::remove(path);
+  RunSettings settings;
+  settings.epochs = 4;
+  settings.checkpoint = checkpoint.string();
+  settings.log_csv = log.string();
+  Setup<double> first(Method::Regular);
+  REQUIRE(run_training(first.trainer, train, test, settings).end == RunEnd::Finished);
+  const std::string checkpoint_text = file_text(checkpoint), log_text = file_text(log);
+
+  Setup<double> shorter(Method::Regular);
+  settings.epochs = 2;
+  settings.save_params = params.string();
+  CHECK_THROWS_WITH(run_training(shorter.trainer, train, test, settings),
+                    Catch::Contains("past.checkpoint") && Catch::Contains("epoch 4") &&
+                        Catch::Contains("epochs = 2") && Catch::Contains("expected epochs >= 4"));
+  CHECK(file_text(checkpoint) == checkpoint_text);
+  CHECK(file_text(log) == log_text);
+  CHECK(!fs::exists(params));
+
+  // As many epochs as the checkpoint holds: a finished run, nothing trained.
+  Setup<double> same(Method::Regular);
+  settings.epochs = 4;
+  const auto result = run_training(same.trainer, train, test, settings);
+  CHECK(result.resumed_from == 4);
+  CHECK(result.epochs == 4);
+  CHECK(same.policy.params() == first.policy.params());
+  CHECK(file_text(log) == log_text);
+}

@@ -22,7 +22,8 @@
 /// the optimizer's, fingerprints of the data and of the initial parameters, and the caller's
 /// `identity`); the log is cut back to its size at that checkpoint. The result is bitwise the
 /// one of an uninterrupted run (the seconds column aside, which is wall time). `epochs` is not
-/// part of the identity: a finished run can be continued with a larger `epochs`.
+/// part of the identity: a finished run can be continued with a larger `epochs`; a smaller
+/// one than the checkpoint's is refused.
 #include <chrono>
 #include <cstdint>
 #include <cstring>
@@ -206,6 +207,13 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
     detail::require<ParseError>(resumed->params.size() == params.size(), "checkpoint '",
                                 settings.checkpoint, "' has ", resumed->params.size(),
                                 " parameters; expected ", params.size());
+    // Resumed, it would end at once and hand back the parameters of the later epoch as if
+    // they were those of `epochs`.
+    detail::require(resumed->epoch <= settings.epochs, "run_training: checkpoint '",
+                    settings.checkpoint, "' is at epoch ", resumed->epoch, ", past epochs = ",
+                    settings.epochs, "; expected epochs >= ", resumed->epoch,
+                    " (a run is not wound back: for ", settings.epochs,
+                    " epochs, start without this checkpoint)");
     if constexpr (detail::AdamLike<Optimizer>) {
       trainer.optimizer().restore(resumed->adam_m, resumed->adam_v, resumed->adam_t);
     }

@@ -9,8 +9,9 @@
 #      exit code in the log), also a run of an earlier sweep that the next one does not plan,
 #      and checks that the next sweep exits 0, names each damaged run, redoes exactly the
 #      planned ones, and that its summary.csv equals the undamaged sweep's (timing aside);
-#   2. checks that --epochs and --samples above the task programs' limit, and a --python that
-#      does not exist, are refused with exit 2 before any work;
+#   2. checks that --epochs and --samples above the task programs' limit, a --python that
+#      does not exist and an --out that is a file or lies under one are refused with exit 2
+#      before any work;
 #   3. interrupts the runner while it plots (a fake python and plot script that leave a
 #      temporary PNG behind): exit 130, no "no plots" message, no plots/.tmp.* left;
 #   4. (when strace is installed) traces a sweep: every file the runner renames into place was
@@ -117,6 +118,21 @@ execute_process(COMMAND "${REPRODUCE}" ${grid} --python "${WORK_DIR}/nonexistent
 check("--python <missing>: exit 2 naming the flag, no matplotlib advice (${err})"
       rc EQUAL 2 AND err MATCHES "--python" AND NOT err MATCHES "matplotlib")
 check("--python <missing>: nothing was started" NOT EXISTS "${WORK_DIR}/python")
+# --out naming a file, or a path under one: refused up front, naming the flag and the file, in
+# every mode (a sweep stopped at its first write with "filesystem error: cannot create
+# directories", exit 1, and --dry-run planned into it).
+file(WRITE "${WORK_DIR}/a_file" "kept\n")
+foreach(out "${WORK_DIR}/a_file" "${WORK_DIR}/a_file/results")
+  foreach(mode "" --dry-run --merge "--emit;parallel")
+    execute_process(COMMAND "${REPRODUCE}" ${grid} ${mode} --out "${out}" TIMEOUT 20
+                    RESULT_VARIABLE rc OUTPUT_VARIABLE text ERROR_VARIABLE err)
+    check("--out ${out} ${mode}: exit 2 naming --out and the file (${err})"
+          rc EQUAL 2 AND err MATCHES "--out '${out}'" AND err MATCHES "a_file' is a file"
+          AND NOT text MATCHES ".")
+  endforeach()
+endforeach()
+file(READ "${WORK_DIR}/a_file" kept)
+check("--out <a file>: the file is unchanged" kept STREQUAL "kept\n")
 
 # --- 3. an interrupt while plotting ----------------------------------------------------------
 # The fake python imports anything and runs the script with sh; the fake plot script writes a

@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include <unistd.h>
+
 #include <sbptt/optim/clip.hpp>
 #include <sbptt/train/method.hpp>
 
@@ -79,6 +81,26 @@ inline std::string parse_choice(const std::string& flag, const std::string& text
   for (std::size_t k = 0; k < choices.size(); ++k)
     expected += concat(k == 0 ? "" : k + 1 == choices.size() ? " or " : ", ", choices[k]);
   throw InvalidArgument(concat(flag, " '", text, "' is unknown; expected ", expected));
+}
+
+/// --out is a folder, or a path where one can be made, that this user may write in (a dry
+/// run only reads it): otherwise every mode would fail at its first write, with the file
+/// system's words and without the flag.
+inline void require_output_folder(const Options& o) {
+  std::error_code error;
+  fs::path existing = fs::absolute(o.out, error);
+  while (!fs::exists(existing, error) && existing.has_relative_path())
+    existing = existing.parent_path();
+  if (!fs::is_directory(existing, error)) {
+    const std::string what = fs::is_regular_file(existing, error) ? "is a file" : "is not a folder";
+    const bool itself = existing == fs::absolute(o.out, error);
+    throw InvalidArgument(concat("--out '", o.out, "'",
+                                 itself ? "" : concat(": '", existing.string(), "'"), " ", what,
+                                 "; expected a folder, or a path where one can be made"));
+  }
+  if (!o.dry_run && ::access(existing.c_str(), W_OK | X_OK) != 0)
+    throw InvalidArgument(concat("--out '", o.out, "': this user may not write in '",
+                                 existing.string(), "'; expected a folder it may write in"));
 }
 
 inline Options parse_options(int argc, const char* const* argv) {
@@ -169,6 +191,7 @@ inline Options parse_options(int argc, const char* const* argv) {
   if (!o.run.empty() && o.shard_count > 1)
     throw InvalidArgument("--run and --shard exclude each other; --run names one run");
   if (!o.run.empty()) o.plot = false;  // one run of many: --merge draws the figures
+  require_output_folder(o);
   return o;
 }
 

@@ -88,12 +88,13 @@ inline std::string parse_choice(const std::string& flag, const std::string& text
 /// system's words and without the flag.
 inline void require_output_folder(const Options& o) {
   std::error_code error;
-  fs::path existing = fs::absolute(o.out, error);
+  const fs::path out = fs::absolute(o.out, error);
+  fs::path existing = out;
   while (!fs::exists(existing, error) && existing.has_relative_path())
     existing = existing.parent_path();
   if (!fs::is_directory(existing, error)) {
     const std::string what = fs::is_regular_file(existing, error) ? "is a file" : "is not a folder";
-    const bool itself = existing == fs::absolute(o.out, error);
+    const bool itself = existing == out;
     throw InvalidArgument(concat("--out '", o.out, "'",
                                  itself ? "" : concat(": '", existing.string(), "'"), " ", what,
                                  "; expected a folder, or a path where one can be made"));

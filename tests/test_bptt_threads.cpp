@@ -181,6 +181,19 @@ TEST_CASE("threads: quantum control with a CNN is bitwise identical", "[bptt][th
   check_thread_independence(sim, net, quantum_objective(sim, 4), 16, train, test, 8);
 }
 
+// A grid size known only at run time (`quantum --nx` other than 32) takes the per-sample step
+// and VJP instead of the lanes of a fixed Nx.
+TEMPLATE_TEST_CASE("threads: quantum control on a run-time grid is bitwise identical",
+                   "[bptt][threads]", float, double) {
+  const Schrodinger1D<TestType, Eigen::Dynamic> sim(16);
+  Network<TestType> net = testing::quantum_cnn<TestType>(16, 60);
+  Rng rng(44);
+  glorot_uniform(net, rng);
+  const Matrix<TestType> train = sim.initial_states(rng, 16);
+  const Matrix<TestType> test = sim.initial_states(rng, 40);
+  check_thread_independence(sim, net, quantum_objective(sim, 4), 16, train, test, 8);
+}
+
 TEST_CASE("threads: evaluate reports the same first non-finite value for any thread count",
           "[bptt][threads]") {
   const CartPole<double, 1> sim;

@@ -150,9 +150,13 @@ TEST_CASE("--init-params then --save-params keeps 17-digit values exactly", "[pr
 
 TEST_CASE("--threads 2 trains to the same parameters, bit for bit, as one thread", "[programs]") {
   // Quantum with split_above_ns's default splits its per-sample loops, and C runs its two
-  // sweeps at once: every threaded path of the engine is on.
+  // sweeps at once: every threaded path of the engine is on. On a grid of run-time size
+  // (--nx other than 32) the quantum step is a per-sample call, not the batched lanes; so
+  // are double guidance's and the cart pole's.
   for (const std::string& call : {std::string("cartpole --poles 2 --method C --epochs 2 --samples 16 --steps 20"),
-                                  std::string("quantum --method C --epochs 1 --samples 16 --steps 8")}) {
+                                  std::string("quantum --method C --epochs 1 --samples 16 --steps 8"),
+                                  std::string("quantum --nx 16 --method C --epochs 1 --samples 16 --steps 8"),
+                                  std::string("guidance --method C --epochs 1 --samples 16 --steps 8")}) {
     const std::string program = call.substr(0, call.find(' '));
     const std::string arguments = call.substr(call.find(' ') + 1);
     const fs::path one = scratch(program + "_t1.params"), two = scratch(program + "_t2.params");

@@ -23,6 +23,16 @@ struct SampleScratch {
   }
 };
 
+/// P(t.x, t.u) into t.x_next for one sample, never inlined. The forward pass on one thread,
+/// the forward pass in parts on several and the evaluation each loop over the samples; inlined
+/// into each loop, a per-sample simulator's step was compiled once per loop, GCC vectorised and
+/// contracted the copies differently, and results depended on the thread count in their last
+/// bits (the quantum program in double on a run-time grid, --nx 16).
+template <class Sim, class Scratch>
+[[gnu::noinline]] void step_sample(const Sim& sim, Scratch& t) {
+  sim.step(t.x, t.u, t.x_next);
+}
+
 /// x_next = P(x, u) for every column (x_next sized state_dim × B by the caller).
 template <class Sim, class Scalar, class ForEachSample>
 void step_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& u,
@@ -33,7 +43,7 @@ void step_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>&
     for_each_sample([&](Index b, auto& t) {
       t.x = x.col(b);
       t.u = u.col(b);
-      sim.step(t.x, t.u, t.x_next);
+      step_sample(sim, t);
       x_next.col(b) = t.x_next;
     });
   }

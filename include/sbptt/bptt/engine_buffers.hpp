@@ -179,23 +179,32 @@ public:
     if (pool != nullptr && parallel && batch > 1) {
       if (fork()) {
         auto task = [&](Index b, Index worker) {
-          f(b, scratch[static_cast<std::size_t>(worker)]);
+          one_sample(f, b, scratch[static_cast<std::size_t>(worker)]);
         };
         pool->run(batch, task);
         return;
       }
       if (probing()) {
         const auto start = std::chrono::steady_clock::now();
-        for (Index b = 0; b < batch; ++b) f(b, scratch[0]);
+        for (Index b = 0; b < batch; ++b) one_sample(f, b, scratch[0]);
         record(std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - start)
                    .count());
         return;
       }
     }
-    for (Index b = 0; b < batch; ++b) f(b, scratch[0]);
+    for (Index b = 0; b < batch; ++b) one_sample(f, b, scratch[0]);
   }
 
 private:
+  /// f(b, scratch), never inlined, so that the three loops above run one machine copy of f.
+  /// Inlined into each loop, the quantum step of a run-time grid (a per-sample call) was
+  /// compiled three times, GCC vectorised and contracted the copies differently, and the
+  /// quantum program's results in double depended on --threads in the last bits.
+  template <class F, class Scratch>
+  [[gnu::noinline]] static void one_sample(F& f, Index b, Scratch& scratch) {
+    f(b, scratch);
+  }
+
   double threshold_ns_;
   int runs_ = 0;
   double best_ns_ = 0;

@@ -245,8 +245,12 @@ private:
   }
 
   /// Y = N(X) for the samples first … first + X.cols() − 1 of the workspace's batch.
-  void forward_range(const Matrix<Scalar>& x, Index first, Matrix<Scalar>& y, Workspace& ws,
-                     const detail::PackedLayers<Scalar>& packed) const {
+  /// Never inlined, like `inputs_packed`: `forward` and `forward_columns` must run the same
+  /// machine code (the activations' contraction into FMA), or a sample's outputs would
+  /// depend on whether the batch was evaluated whole or in parts.
+  [[gnu::noinline]] void forward_range(const Matrix<Scalar>& x, Index first, Matrix<Scalar>& y,
+                                       Workspace& ws,
+                                       const detail::PackedLayers<Scalar>& packed) const {
     const Index count = x.cols();
     ws.input_.middleCols(first, count) = x;
     const Scalar* in = ws.input_.data() + first * ws.input_.rows();

@@ -48,24 +48,17 @@ std::string describe_coordinates(const mjModel& model) {
   return text;
 }
 
-/// --target as nq numbers; throws naming the flag, the value and the model's coordinates.
-Vector<double> parse_target(const std::string& text, const mjModel& model,
-                            const std::string& file) {
-  detail::require(!text.empty(), "--target is required: ", model.nq,
+/// --target as a vector; throws naming the flag, the value and the model's coordinates unless
+/// it holds nq numbers.
+Vector<double> target_positions(const std::vector<double>& values, const mjModel& model,
+                                const std::string& file) {
+  detail::require(!values.empty(), "--target is required: ", model.nq,
                   " comma-separated positions, one per coordinate of '", file, "': ",
                   describe_coordinates(model));
-  std::vector<double> values;
-  std::size_t start = 0;
-  while (true) {
-    const std::size_t comma = text.find(',', start);
-    const std::string value = text.substr(start, comma - start);
-    values.push_back(examples::parse_number("--target", value, -1e6, 1e6));
-    if (comma == std::string::npos) break;
-    start = comma + 1;
-  }
-  detail::require(static_cast<int>(values.size()) == model.nq, "--target '", text, "' has ",
-                  values.size(), " value(s); expected nq = ", model.nq,
-                  ", one per position coordinate of '", file, "': ", describe_coordinates(model));
+  detail::require(static_cast<int>(values.size()) == model.nq, "--target '",
+                  examples::comma_separated(values), "' has ", values.size(),
+                  " value(s); expected nq = ", model.nq, ", one per position coordinate of '", file,
+                  "': ", describe_coordinates(model));
   return Eigen::Map<const Vector<double>>(values.data(), static_cast<Index>(values.size()));
 }
 
@@ -139,7 +132,7 @@ int run(TaskOptions o) {
   }();
   Rng data_rng(o.seed);
   if (o.check_derivatives) return check_derivatives(sim, o, data_rng);
-  const Vector<double> target = parse_target(o.positions, *model, o.model);
+  const Vector<double> target = target_positions(o.positions, *model, o.model);
   auto data = examples::split_half<Scalar>(initial_states(sim, o.spread, data_rng, 2 * o.samples));
   auto network = Network<Scalar>::mlp(sim.state_dim(), {100, 100}, sim.control_dim());
   Rng init_rng(o.seed + 1);

@@ -2,11 +2,13 @@
 // The command line shared by the task programs (toy, cartpole, guidance, quantum). Defaults are
 // the paper's settings (docs/programs.md); parse_task_options throws InvalidArgument naming the
 // flag, the value and what was expected, before any work.
+#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <sbptt/optim/clip.hpp>
 #include <sbptt/train/method.hpp>
@@ -78,7 +80,7 @@ struct TaskOptions {
   Horizon time{100, 0.01};  ///< steps and dt after --steps / --dt / --T
   // mujoco only: the scene and its task (examples/mujoco.cpp)
   std::string model;            ///< --model FILE.xml
-  std::string positions;        ///< --target q1,...,qN as given (parsed once nq is known)
+  std::vector<double> positions;  ///< --target q1,...,qN (its length is checked once nq is known)
   double spread = 0.1;          ///< initial qpos = qpos0 + U[−spread, spread)
   bool check_derivatives = false;
   /// --steps, --dt, --T as given: mujoco resolves them once the model's timestep is known.
@@ -134,6 +136,17 @@ inline void require_float_range(const char* flag, double value) {
 }
 
 }  // namespace detail_task
+
+/// "q1,q2,...": each number the shortest text that reads back as the same double.
+[[nodiscard]] inline std::string comma_separated(const std::vector<double>& values) {
+  std::string text;
+  for (const double value : values) {
+    char number[32];
+    if (!text.empty()) text += ',';
+    text.append(number, std::to_chars(number, number + sizeof number, value).ptr);
+  }
+  return text;
+}
 
 /// Parses argv for `task` into `o`. Returns false when --help printed the help (exit 0);
 /// throws InvalidArgument on any unknown flag or bad value.
@@ -254,7 +267,16 @@ inline void require_float_range(const char* flag, double value) {
     cli.value("--target", "q1,...,qN",
               "final positions, one per qpos coordinate (nq of them; hinges in radians, compared "
               "as angles); required",
-              "none", [&](const std::string& text) { o.positions = text; });
+              "none", [&](const std::string& text) {
+                o.positions.clear();
+                for (std::size_t start = 0;;) {
+                  const std::size_t comma = text.find(',', start);
+                  o.positions.push_back(
+                      parse_number("--target", text.substr(start, comma - start), -1e6, 1e6));
+                  if (comma == std::string::npos) break;
+                  start = comma + 1;
+                }
+              });
     cli.number("--spread", o.spread, 0, 1e3,
                "initial states: qpos = qpos0 + U[-X, X) per coordinate, qvel = 0");
     cli.flag("--check-derivatives",

@@ -12,9 +12,12 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <fstream>
 #include <iostream>
+#include <iterator>
 #include <new>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -98,8 +101,21 @@ int dump_gradients(const TaskOptions& o, const Sim& sim, Ctrl& controller,
   return 0;
 }
 
+/// FNV-1a of a file's bytes: the same content is the same file wherever it lies.
+inline std::string file_fingerprint(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  detail::require<std::runtime_error>(in.is_open(), "cannot read '", path, "'");
+  const std::string bytes{std::istreambuf_iterator<char>(in), {}};
+  char text[64];
+  std::snprintf(text, sizeof text, "fnv1a %016llx of %zu bytes",
+                static_cast<unsigned long long>(detail::fnv1a(bytes.data(), bytes.size())),
+                bytes.size());
+  return text;
+}
+
 /// The settings besides the trainer's and the optimizer's that decide a task's result; a
-/// checkpoint must have been made with the same.
+/// checkpoint must have been made with the same. (--seed and --spread shape only the data and
+/// the initial parameters, whose fingerprints run_training adds.)
 inline std::vector<RunSetting> task_identity(const TaskOptions& o) {
   std::vector<RunSetting> identity{{"task", to_string(o.task)},
                                    {"--samples", std::to_string(o.samples)},
@@ -116,6 +132,11 @@ inline std::vector<RunSetting> task_identity(const TaskOptions& o) {
   if (o.task == Task::Quantum) {
     identity.push_back({"--target", std::to_string(o.target)});
     identity.push_back({"--nx", std::to_string(o.nx)});
+  }
+  if (o.task == Task::Mujoco) {
+    // The physics is the model file's content, which a path does not pin down.
+    identity.push_back({"--model", file_fingerprint(o.model)});
+    identity.push_back({"--target", comma_separated(o.positions)});
   }
   return identity;
 }

@@ -494,3 +494,35 @@ TEST_CASE("mujoco refuses a model or target it cannot use, naming it", "[program
     CHECK(r.output.find(c.expected) != std::string::npos);
   }
 }
+
+TEST_CASE("mujoco: a checkpoint of another --target or model file is refused, naming it",
+          "[programs][mujoco]") {
+  const std::string original = file_text(model_file("examples/models/double_pendulum.xml"));
+  const fs::path moved = scratch("checkpoint_moved.xml"), damped = scratch("checkpoint_damped.xml");
+  std::ofstream(moved) << original;
+  std::string more_damping = original;
+  more_damping.replace(more_damping.find("damping=\"0.05\""), 14, "damping=\"0.07\"");
+  std::ofstream(damped) << more_damping;
+  const fs::path checkpoint = scratch("mujoco.checkpoint");
+  fs::remove(checkpoint);
+  const std::string common = "--samples 8 --steps 20 --checkpoint " + checkpoint.string() + " ";
+  REQUIRE(run("mujoco", double_pendulum + common + "--epochs 2").status == 0);
+  const Result target = run("mujoco", "--model " + model_file("examples/models/double_pendulum.xml") +
+                                          " --target 0,0 " + common + "--epochs 4");
+  INFO(target.output);
+  CHECK(target.status == 2);
+  CHECK(target.output.find("was made with --target = 3.14159,0; this run has --target = 0,0") !=
+        std::string::npos);
+  const Result model = run("mujoco", "--model " + damped.string() + " --target 3.14159,0 " +
+                                         common + "--epochs 4");
+  INFO(model.output);
+  CHECK(model.status == 2);
+  CHECK(model.output.find("was made with --model = ") != std::string::npos);
+  CHECK(model.output.find("epoch 1 ") == std::string::npos);
+  // The file's content is the model, not its path nor how the target's numbers are spelled.
+  const Result same = run("mujoco", "--model " + moved.string() + " --target 3.14159,0.0 " +
+                                        common + "--epochs 3");
+  INFO(same.output);
+  CHECK(same.status == 0);
+  CHECK(same.output.find("resuming after epoch 2") != std::string::npos);
+}

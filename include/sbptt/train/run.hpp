@@ -26,7 +26,6 @@
 /// one than the checkpoint's is refused.
 #include <chrono>
 #include <cstdint>
-#include <cstring>
 #include <functional>
 #include <type_traits>
 #include <utility>
@@ -93,16 +92,22 @@ struct RunResult {
 
 namespace detail {
 
+/// FNV-1a: `hash` with the `size` bytes at `bytes` folded in.
+[[nodiscard]] inline std::uint64_t fnv1a(const void* bytes, std::size_t size,
+                                         std::uint64_t hash = 1469598103934665603ULL) {
+  const auto* byte = static_cast<const unsigned char*>(bytes);
+  for (std::size_t i = 0; i < size; ++i) hash = (hash ^ byte[i]) * 1099511628211ULL;
+  return hash;
+}
+
 /// FNV-1a of the bytes of a matrix with its shape: equal data gives equal text.
 template <class Derived>
 [[nodiscard]] std::string fingerprint(const Eigen::DenseBase<Derived>& m) {
-  std::uint64_t hash = 1469598103934665603ULL;
+  std::uint64_t hash = fnv1a(nullptr, 0);
   for (Index j = 0; j < m.cols(); ++j) {
     for (Index i = 0; i < m.rows(); ++i) {
       const auto value = m(i, j);
-      unsigned char bytes[sizeof value];
-      std::memcpy(bytes, &value, sizeof value);
-      for (unsigned char b : bytes) hash = (hash ^ b) * 1099511628211ULL;
+      hash = fnv1a(&value, sizeof value, hash);
     }
   }
   char text[64];

@@ -280,7 +280,8 @@ inline void require_float_range(const char* flag, double value) {
     cli.number("--spread", o.spread, 0, 1e3,
                "initial states: qpos = qpos0 + U[-X, X) per coordinate, qvel = 0");
     cli.flag("--check-derivatives",
-             "no training: print the worst error of check_jacobians at 5 initial states",
+             "no training: print the worst error of check_jacobians at 5 initial states; "
+             "refuses the flags of training, --target and the data flags",
              [&] { o.check_derivatives = true; });
   }
   if (task == Task::Quantum) {
@@ -307,16 +308,23 @@ inline void require_float_range(const char* flag, double value) {
     detail_task::require_float_range("--lr", o.lr);
     if (o.clip != ClipMode::None) detail_task::require_float_range("--clip-threshold", o.clip_threshold);
   }
-  if (!o.dump_gradients.empty()) {
-    // These only shape training, which --dump-gradients does not do: refused, not ignored.
+  // A flag a mode does not use is refused, not ignored: the user meant it to matter.
+  const auto refuse = [&](const char* mode, const char* does, std::vector<const char*> flags) {
     for (const char* flag : {"--epochs", "--csv", "--save-params", "--batch", "--lr", "--shuffle",
                              "--method", "--clip", "--clip-threshold", "--on-nonfinite",
                              "--checkpoint", "--checkpoint-every", "--evaluate-every",
                              "--patience"})
-      detail::require(!cli.given(flag), "--dump-gradients evaluates the parameters without "
-                                        "training, so ", flag, " would have no effect; expected "
-                                        "--dump-gradients without ", flag);
-  }
+      flags.push_back(flag);
+    for (const char* flag : flags)
+      detail::require(!cli.given(flag), mode, " ", does, ", so ", flag, " would have no effect; "
+                      "expected ", mode, " without ", flag);
+  };
+  if (!o.dump_gradients.empty())
+    refuse("--dump-gradients", "evaluates the parameters without training", {});
+  if (o.check_derivatives)
+    refuse("--check-derivatives", "checks the model's Jacobians at 5 states without a controller",
+           {"--dump-gradients", "--init-params", "--init-states", "--target", "--samples",
+            "--truncation", "--threads"});
   return true;
 }
 

@@ -526,3 +526,25 @@ TEST_CASE("mujoco: a checkpoint of another --target or model file is refused, na
   CHECK(same.status == 0);
   CHECK(same.output.find("resuming after epoch 2") != std::string::npos);
 }
+
+TEST_CASE("mujoco --check-derivatives refuses the flags it does not use, before any work",
+          "[programs][mujoco]") {
+  const fs::path file = scratch("check_derivatives_output");
+  fs::remove_all(file);
+  const std::string check =
+      "--model " + model_file("examples/models/acrobot.xml") + " --check-derivatives ";
+  for (const std::string& flag : std::vector<std::string>
+       {"--epochs 5", "--csv " + file.string(), "--save-params " + file.string(),
+        "--checkpoint " + file.string(), "--dump-gradients " + file.string(),
+        "--init-params " + file.string(), "--target 1", "--target 1,2", "--samples 4",
+        "--threads 2"}) {
+    const Result r = run("mujoco", check + flag);
+    const std::string name = flag.substr(0, flag.find(' '));
+    INFO(flag << "\n" << r.output);
+    CHECK(r.status == 2);
+    CHECK(r.output.find("so " + name + " would have no effect; expected --check-derivatives "
+                        "without " + name) != std::string::npos);
+    CHECK(r.output.find("worst relative error") == std::string::npos);
+    CHECK_FALSE(fs::exists(file));
+  }
+}

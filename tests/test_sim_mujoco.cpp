@@ -362,7 +362,22 @@ TEST_CASE("mujoco: models that cannot be used are refused with a reason", "[sim]
   const MujocoModelPtr passive_model = load_mujoco_model(passive);
   CHECK_THROWS_WITH(MujocoSimulator<double>(*passive_model),
                     Catch::Contains("no actuator (nu = 0)"));
-  for (const auto& file : {broken, free_body, ball, passive}) std::filesystem::remove(file);
+  // MuJoCo loads a NaN with a warning and steps it into NaN states from the first step.
+  const std::string nan_damping = write_temp_model(
+      "nan_damping.xml",
+      "<mujoco><worldbody><body><joint name='j' type='hinge' damping='nan'/><geom size='0.1'/>"
+      "</body></worldbody><actuator><motor joint='j'/></actuator></mujoco>");
+  const MujocoModelPtr nan_model = load_mujoco_model(nan_damping);
+  CHECK_THROWS_WITH(MujocoSimulator<double>(*nan_model),
+                    Catch::Contains("the model's dof_damping[0] is nan; expected finite"));
+  const MujocoModelPtr edited = load_mujoco_model(model_path(1));
+  edited->opt.gravity[1] = std::numeric_limits<double>::infinity();
+  CHECK_THROWS_WITH(MujocoSimulator<double>(*edited), Catch::Contains("opt.gravity[1] is inf"));
+  edited->opt.gravity[1] = 0;
+  edited->body_mass[2] = -std::numeric_limits<double>::infinity();
+  CHECK_THROWS_WITH(MujocoSimulator<double>(*edited), Catch::Contains("body_mass[2] is -inf"));
+  for (const auto& file : {broken, free_body, ball, passive, nan_damping})
+    std::filesystem::remove(file);
 }
 
 TEST_CASE("mujoco: the simulator owns a copy of the model; sizes are checked",

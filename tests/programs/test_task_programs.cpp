@@ -548,3 +548,20 @@ TEST_CASE("mujoco --check-derivatives refuses the flags it does not use, before 
     CHECK_FALSE(fs::exists(file));
   }
 }
+
+TEST_CASE("mujoco refuses a model with a non-finite number before any work, naming the field",
+          "[programs][mujoco]") {
+  std::string acrobot = file_text(model_file("examples/models/acrobot.xml"));
+  acrobot.replace(acrobot.find("gravity=\"0 0 -9.81\""), 19, "gravity=\"0 0 nan\"");
+  const fs::path file = scratch("acrobot_nan_gravity.xml");
+  std::ofstream(file) << acrobot;
+  for (const char* mode : {" --target 1,2", " --check-derivatives"}) {
+    const Result r = run("mujoco", "--model " + file.string() + mode);
+    INFO(r.output);
+    CHECK(r.status == 2);
+    CHECK(r.output.find("--model '" + file.string() + "': MujocoSimulator: the model's "
+                        "opt.gravity[2] is nan") != std::string::npos);
+    CHECK(r.output.find("initial test loss") == std::string::npos);
+    CHECK(r.output.find("worst relative error") == std::string::npos);
+  }
+}

@@ -22,7 +22,8 @@
 /// in qpos and an angular velocity in qvel). `mjd_transitionFD` differentiates in the tangent
 /// space (nv position coordinates), so A would not be ∂x'/∂x of the (qpos, qvel) state the
 /// engine stores; mapping the tangent space correctly is not done here. Also refused: models
-/// without an actuator (nothing for a controller to drive).
+/// without an actuator (nothing for a controller to drive), and models with a NaN or ±Inf in
+/// an option or array (named; MuJoCo only prints a warning, and every step from them is NaN).
 ///
 /// Threads: the `mjModel` is read-only after construction; every call leases an `mjData`
 /// from a pool for its whole duration, so no `mjData` is ever used by two threads at once and
@@ -42,11 +43,13 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
 #include <Eigen/Core>
 #include <mujoco/mujoco.h>
+#include <mujoco/mjxmacro.h>
 
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
@@ -108,6 +111,31 @@ inline bool mujoco_step_failed(const mjData& data) {
     if (warning.number != 1 || warning.lastinfo != -1) return true;
   }
   return false;
+}
+
+/// "name[i] is nan" for the first non-finite real number of the model (its options, then its
+/// arrays, in MuJoCo's own list of them, mjxmacro.h), or empty. MuJoCo loads a NaN with only a
+/// printed warning, and every step from it is NaN.
+inline std::string first_non_finite_field(const mjModel& model) {
+  std::string found;
+  const auto scan = [&found](const char* name, const auto* values, long count) {
+    if constexpr (std::is_floating_point_v<std::remove_cvref_t<decltype(*values)>>)
+      for (long i = 0; i < count && found.empty(); ++i)
+        if (!std::isfinite(values[i])) found = concat(name, "[", i, "] is ", values[i]);
+  };
+#define X(type, name) scan("opt." #name, &model.opt.name, 1);
+  MJOPTION_FLOATS
+#undef X
+#define X(name, size) scan("opt." #name, model.opt.name, size);
+  MJOPTION_VECTORS
+#undef X
+  const mjModel* m = &model;
+  MJMODEL_POINTERS_PREAMBLE(m)
+#define X(type, name, rows, columns) \
+  scan(#name, model.name, static_cast<long>(model.rows) * (columns));
+  MJMODEL_POINTERS
+#undef X
+  return found;
 }
 
 /// One `mjData` with the row-major Jacobian buffers of `mjd_transitionFD`.
@@ -187,7 +215,7 @@ public:
   using ControlJacobian = Matrix<Scalar>;  ///< (2 nv + na) × nu
 
   /// Copies `model` (later changes to it do not reach the simulator). Throws InvalidArgument
-  /// for a model with nq ≠ nv, without actuators, or a bad option.
+  /// for a model with nq ≠ nv, without actuators, with a NaN or ±Inf, or a bad option.
   explicit MujocoSimulator(const mjModel& model, const MujocoOptions& options = {})
       : options_(options) {
     detail::require(model.nq == model.nv, "MujocoSimulator: the model has nq = ", model.nq,
@@ -200,6 +228,9 @@ public:
                                    "so a controller has nothing to drive; expected nu >= 1");
     detail::require(std::isfinite(options.fd_step) && options.fd_step > 0,
                     "MujocoSimulator: fd_step = ", options.fd_step, ", expected a finite ε > 0");
+    const std::string non_finite = detail::first_non_finite_field(model);
+    detail::require(non_finite.empty(), "MujocoSimulator: the model's ", non_finite,
+                    "; expected finite numbers in all its options and arrays");
     detail::require(model.opt.timestep > 0, "MujocoSimulator: the model's timestep = ",
                     model.opt.timestep, ", expected > 0");
     mjModel* copy = mj_copyModel(nullptr, &model);

@@ -340,44 +340,40 @@ TEST_CASE("mujoco: models that cannot be used are refused with a reason", "[sim]
   const std::string broken = write_temp_model("broken.xml", "<mujoco><worldbody><body>");
   CHECK_THROWS_WITH(load_mujoco_model(broken),
                     Catch::Contains(broken) && Catch::Contains("XML parse error"));
-  const std::string free_body = write_temp_model(
-      "free.xml",
-      "<mujoco><worldbody><body><freejoint name='f'/><geom size='0.1'/></body></worldbody>"
-      "<actuator><general joint='f' gear='1 0 0 0 0 0'/></actuator></mujoco>");
-  const MujocoModelPtr free_model = load_mujoco_model(free_body);
-  CHECK_THROWS_WITH(MujocoSimulator<double>(*free_model),
-                    Catch::Contains("nq = 7") && Catch::Contains("nv = 6"));
-  const std::string ball = write_temp_model(
-      "ball.xml",
-      "<mujoco><worldbody><body><joint name='j' type='ball'/><geom size='0.1'/></body>"
-      "</worldbody><actuator><general joint='j' gear='1 0 0 0 0 0'/></actuator></mujoco>");
-  const MujocoModelPtr ball_model = load_mujoco_model(ball);
-  CHECK_THROWS_WITH(MujocoSimulator<double>(*ball_model),
-                    Catch::Contains("nq = 4") && Catch::Contains("nv = 3") &&
-                        Catch::Contains("quaternion"));
-  const std::string passive = write_temp_model(
-      "passive.xml",
-      "<mujoco><worldbody><body><joint type='hinge'/><geom size='0.1'/></body></worldbody>"
-      "</mujoco>");
-  const MujocoModelPtr passive_model = load_mujoco_model(passive);
-  CHECK_THROWS_WITH(MujocoSimulator<double>(*passive_model),
-                    Catch::Contains("no actuator (nu = 0)"));
+  struct Refused {
+    std::string name, text, reason;
+  };
   // MuJoCo loads a NaN with a warning and steps it into NaN states from the first step.
-  const std::string nan_damping = write_temp_model(
-      "nan_damping.xml",
-      "<mujoco><worldbody><body><joint name='j' type='hinge' damping='nan'/><geom size='0.1'/>"
-      "</body></worldbody><actuator><motor joint='j'/></actuator></mujoco>");
-  const MujocoModelPtr nan_model = load_mujoco_model(nan_damping);
-  CHECK_THROWS_WITH(MujocoSimulator<double>(*nan_model),
-                    Catch::Contains("the model's dof_damping[0] is nan; expected finite"));
+  for (const Refused& r :
+       {Refused{"free.xml",
+                "<mujoco><worldbody><body><freejoint name='f'/><geom size='0.1'/></body>"
+                "</worldbody><actuator><general joint='f' gear='1 0 0 0 0 0'/></actuator></mujoco>",
+                "nq = 7 position coordinates but nv = 6"},
+        Refused{"ball.xml",
+                "<mujoco><worldbody><body><joint name='j' type='ball'/><geom size='0.1'/></body>"
+                "</worldbody><actuator><general joint='j' gear='1 0 0 0 0 0'/></actuator></mujoco>",
+                "nq = 4 position coordinates but nv = 3 velocity coordinates (a free or ball "
+                "joint: its orientation is a quaternion"},
+        Refused{"passive.xml",
+                "<mujoco><worldbody><body><joint type='hinge'/><geom size='0.1'/></body>"
+                "</worldbody></mujoco>",
+                "no actuator (nu = 0)"},
+        Refused{"nan_damping.xml",
+                "<mujoco><worldbody><body><joint name='j' type='hinge' damping='nan'/><geom "
+                "size='0.1'/></body></worldbody><actuator><motor joint='j'/></actuator></mujoco>",
+                "the model's dof_damping[0] is nan; expected finite"}}) {
+    const std::string file = write_temp_model(r.name, r.text);
+    const MujocoModelPtr model = load_mujoco_model(file);
+    CHECK_THROWS_WITH(MujocoSimulator<double>(*model), Catch::Contains(r.reason));
+    std::filesystem::remove(file);
+  }
   const MujocoModelPtr edited = load_mujoco_model(model_path(1));
   edited->opt.gravity[1] = std::numeric_limits<double>::infinity();
   CHECK_THROWS_WITH(MujocoSimulator<double>(*edited), Catch::Contains("opt.gravity[1] is inf"));
   edited->opt.gravity[1] = 0;
   edited->body_mass[2] = -std::numeric_limits<double>::infinity();
   CHECK_THROWS_WITH(MujocoSimulator<double>(*edited), Catch::Contains("body_mass[2] is -inf"));
-  for (const auto& file : {broken, free_body, ball, passive, nan_damping})
-    std::filesystem::remove(file);
+  std::filesystem::remove(broken);
 }
 
 TEST_CASE("mujoco: the simulator owns a copy of the model; sizes are checked",

@@ -121,10 +121,12 @@ inline std::vector<RunSetting> task_identity(const TaskOptions& o) {
                                    {"--samples", std::to_string(o.samples)},
                                    {"--steps", std::to_string(o.time.steps)},
                                    {"--dt", detail::concat(o.time.dt)}};
-  if (o.task == Task::CartPole || o.task == Task::Guidance)
-    identity.push_back({"--physical", o.physical ? "yes" : "no"});
-  if (o.task == Task::CartPole) identity.push_back({"--poles", std::to_string(o.poles)});
+  if (o.task == Task::CartPole) {
+    identity.push_back({"--model", o.chain ? "chain" : o.physical ? "physical" : "reference"});
+    identity.push_back({"--poles", std::to_string(o.poles)});
+  }
   if (o.task == Task::Guidance) {
+    identity.push_back({"--physical", o.physical ? "yes" : "no"});
     identity.push_back({"--drivers", std::to_string(o.drivers)});
     identity.push_back({"--evaders", std::to_string(o.evaders)});
     identity.push_back({"--rc", detail::concat(o.rc)});

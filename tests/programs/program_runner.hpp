@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -22,7 +23,10 @@ struct Result {
 /// Runs `program` through the shell; `shell_prefix` (e.g. a ulimit) goes before it.
 inline Result run(const std::string& program, const std::string& arguments,
            const std::string& shell_prefix = "") {
-  const std::string command = shell_prefix + std::string(SBPTT_EXAMPLES_DIR) + "/" + program +
+  // SBPTT_EXAMPLES_DIR (environment) runs the tests against other builds of the programs (e.g.
+  // those from before a fix), as in test_program_outputs.cpp.
+  const char* override_dir = std::getenv("SBPTT_EXAMPLES_DIR");
+  const std::string command = shell_prefix + (override_dir ? override_dir : SBPTT_EXAMPLES_DIR) + "/" + program +
                               " " + arguments + " 2>&1";
   Result result;
   FILE* pipe = popen(command.c_str(), "r");

@@ -565,3 +565,29 @@ TEST_CASE("mujoco refuses a model with a non-finite number before any work, nami
     CHECK(r.output.find("worst relative error") == std::string::npos);
   }
 }
+
+TEST_CASE("a checkpoint of another cart pole model is refused, naming the flag", "[programs]") {
+  // Each pair differs only in the model: resumed, the second run would continue the first
+  // one's training on other physics (mujoco's --model and --target: the test above).
+  struct Case {
+    std::string program, first, second, expected;
+  };
+  int n = 0;
+  for (const Case& c :
+       {Case{"cartpole", "--poles 2 --model chain", "--poles 2",
+             "was made with --model = chain; this run has --model = reference"},
+        Case{"cartpole", "--physical", "", "was made with --model = physical; this run has "
+                                           "--model = reference"}}) {
+    const fs::path file = scratch("identity" + std::to_string(++n) + ".checkpoint");
+    fs::remove(file);
+    const std::string checkpoint = " --samples 4 --steps 5 --checkpoint " + file.string();
+    const Result first = run(c.program, c.first + checkpoint + " --epochs 2");
+    INFO(c.program << " " << c.first << " | " << c.second << "\n" << first.output);
+    REQUIRE(first.status == 0);
+    const Result second = run(c.program, c.second + checkpoint + " --epochs 4");
+    INFO(second.output);
+    CHECK(second.status == 2);
+    CHECK(second.output.find(c.expected) != std::string::npos);
+    CHECK(second.output.find("resuming") == std::string::npos);
+  }
+}

@@ -11,6 +11,12 @@ namespace sbptt::examples::limits {
 /// steps), and low enough that a typo of a few zeros is a flag error rather than an allocation
 /// failure an hour in.
 inline constexpr long max_count = 1'000'000;
+/// --dt and --T, and the dt or T the other time flags imply: beyond them the paper's tasks
+/// no longer give a finite loss (10⁶ steps of dt 1e6 gave a test loss of nan).
+inline constexpr double min_dt = 1e-12;
+inline constexpr double max_dt = 1e6;
+inline constexpr double min_horizon = 1e-12;
+inline constexpr double max_horizon = 1e9;
 /// --threads (a task program's threads over the samples of a batch, the runner's per run) and
 /// the runner's --jobs.
 inline constexpr long max_threads = 256;

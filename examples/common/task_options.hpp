@@ -111,6 +111,16 @@ inline long whole_steps(double horizon, double dt, const std::string& flags) {
   return static_cast<long>(steps);
 }
 
+/// `value`, the dt or T (`name`) that `flags` imply; throws unless it lies in the range of its
+/// own flag (3 steps over T = 1e-12 would step by 3.3e-13).
+inline double derived(const char* name, double value, double low, double high,
+                      const std::string& flags) {
+  detail::require(value >= low && value <= high, flags, ": ", name, " = ", shown(value),
+                  " is out of range; expected ", name, " in [", shown(low), ", ", shown(high),
+                  "], as for --", name);
+  return value;
+}
+
 /// The time-stepping rules of docs/programs.md: --steps alone keeps dt (T changes); --dt alone
 /// keeps T and --T alone keeps dt (steps adapt, T must be a whole number of steps); two of
 /// them fix the third; all three is an error.
@@ -118,8 +128,16 @@ inline Horizon resolve(Horizon paper, std::optional<long> steps, std::optional<d
                        std::optional<double> horizon) {
   detail::require(!(steps && dt && horizon), "--steps, --dt and --T all given; expected at "
                                              "most two of them (T = steps · dt)");
-  if (steps && horizon) return {*steps, *horizon / static_cast<double>(*steps)};
-  if (steps) return {*steps, dt.value_or(paper.dt)};
+  if (steps && horizon)
+    return {*steps, derived("dt", *horizon / static_cast<double>(*steps), limits::min_dt,
+                            limits::max_dt, detail::concat("--steps ", *steps, " with --T ",
+                                                           shown(*horizon)))};
+  if (steps) {
+    const Horizon time{*steps, dt.value_or(paper.dt)};
+    derived("T", time.horizon(), limits::min_horizon, limits::max_horizon,
+            detail::concat("--steps ", *steps, dt ? " with --dt " : " at dt ", shown(time.dt)));
+    return time;
+  }
   if (dt && horizon) return {whole_steps(*horizon, *dt, "--dt with --T"), *dt};
   if (dt) return {whole_steps(paper.horizon(), *dt, "--dt " + shown(*dt)), *dt};
   if (horizon) return {whole_steps(*horizon, paper.dt, "--T " + shown(*horizon)), paper.dt};
@@ -210,12 +228,16 @@ inline void require_float_range(const char* flag, double value) {
               "time step; alone it keeps T, which must then be a whole number of steps; a number "
               "in [1e-12, 1e6]",
               task == Task::Mujoco ? "the model's timestep" : shown(paper.dt),
-              [&](const std::string& text) { dt = parse_number("--dt", text, 1e-12, 1e6); });
+              [&](const std::string& text) {
+                dt = parse_number("--dt", text, limits::min_dt, limits::max_dt);
+              });
     cli.value("--T", "X",
               detail::concat("horizon T = steps · dt; alone it keeps dt (a whole number of steps, "
                              "at most ", many, "); a number in [1e-12, 1e9]"),
               task == Task::Mujoco ? "steps times dt" : shown(paper.horizon()),
-              [&](const std::string& text) { horizon = parse_number("--T", text, 1e-12, 1e9); });
+              [&](const std::string& text) {
+                horizon = parse_number("--T", text, limits::min_horizon, limits::max_horizon);
+              });
   }
   cli.flag("--float", "compute in float (default: double)", [&] { o.use_float = true; });
   cli.flag("--double", "compute in double (the default)", [&] { o.use_float = false; });

@@ -226,6 +226,15 @@ TEST_CASE("bad flags get exit code 2 and a message naming the value", "[programs
                         Case{"toy", "--poles 2", "unknown flag '--poles'"},
                         Case{"guidance", "--rc", "--rc needs a value"},
                         Case{"cartpole", "--method X", "method 'X' is unknown"},
+                        // A dt or T derived from the others keeps to its own flag's range.
+                        Case{"cartpole", "--steps 3 --T 1e-12",
+                             "--steps 3 with --T 1e-12: dt = 3.33333333333333e-13 is out of range; "
+                             "expected dt in [1e-12, 1000000]"},
+                        Case{"cartpole", "--steps 1 --T 1e9 --epochs 1 --samples 2",
+                             "--steps 1 with --T 1000000000: dt = 1000000000 is out of range"},
+                        Case{"cartpole", "--steps 1000000 --dt 1e6 --epochs 0 --samples 1",
+                             "--steps 1000000 with --dt 1000000: T = 1000000000000 is out of range; "
+                             "expected T in [1e-12, 1000000000]"},
                         Case{"cartpole", "--samples 1000000000", "--samples 1000000000 is out of range"},
                         Case{"guidance", "--steps 1000001", "--steps 1000001 is out of range"},
                         Case{"cartpole", "--T 1e9", "expected at most 1000000 steps"},
@@ -237,6 +246,7 @@ TEST_CASE("bad flags get exit code 2 and a message naming the value", "[programs
     INFO(c.program << " " << c.arguments << "\n" << r.output);
     CHECK(r.status == 2);
     CHECK(r.output.find(c.expected) != std::string::npos);
+    CHECK(r.output.find("initial test loss") == std::string::npos);
   }
 }
 

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <functional>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -28,11 +29,21 @@ public:
     app_.get_formatter()->column_width(40);
   }
 
-  /// A flag taking a value that `set` converts (and throws InvalidArgument on).
+  /// A flag taking a value that `set` converts (and throws InvalidArgument on); a message that
+  /// does not start with the flag gets it in front.
   CLI::Option* value(const std::string& flag, const std::string& type_name,
                      const std::string& meaning, const std::string& default_shown,
                      std::function<void(const std::string&)> set) {
-    CLI::Option* option = app_.add_option_function<std::string>(flag, std::move(set), meaning);
+    // The library's parsers (parse_method, parse_clip_mode) cannot know which flag they read.
+    auto named = [flag, set = std::move(set)](const std::string& text) {
+      try {
+        set(text);
+      } catch (const InvalidArgument& e) {
+        if (std::string_view(e.what()).starts_with(flag)) throw;
+        throw InvalidArgument(detail::concat(flag, ": ", e.what()));
+      }
+    };
+    CLI::Option* option = app_.add_option_function<std::string>(flag, std::move(named), meaning);
     option->type_name(type_name);
     if (!default_shown.empty()) option->default_str(default_shown);
     return option;

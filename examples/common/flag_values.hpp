@@ -20,12 +20,21 @@ namespace sbptt::examples {
   return text;
 }
 
-/// Parses `text` as a whole integer in [low, high].
+/// `text` without the one leading '+' that the files accept (core/number_text.hpp) and
+/// from_chars does not; "++1" and "+-1" keep theirs, and are refused.
+[[nodiscard]] inline std::string_view without_plus(std::string_view text) {
+  if (text.size() > 1 && text.front() == '+' && text[1] != '-' && text[1] != '+')
+    text.remove_prefix(1);
+  return text;
+}
+
+/// Parses `text` as a whole integer in [low, high] (one leading '+' allowed).
 [[nodiscard]] inline long parse_integer(std::string_view flag, std::string_view text, long low,
                                         long high) {
+  const std::string_view digits = without_plus(text);
   long value = 0;
-  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
-  const bool whole = end == text.data() + text.size();
+  const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
+  const bool whole = end == digits.data() + digits.size();
   if (error == std::errc::result_out_of_range && whole)
     throw InvalidArgument(detail::concat(flag, " ", text, " is out of range; expected an "
                                                           "integer in [", low, ", ", high, "]"));
@@ -43,9 +52,7 @@ namespace sbptt::examples {
 /// 16), no blanks, nan or inf; a value beyond double's range is out of range, not "inf".
 [[nodiscard]] inline double parse_number(std::string_view flag, std::string_view text, double low,
                                          double high) {
-  std::string_view digits = text;
-  if (digits.size() > 1 && digits.front() == '+' && digits[1] != '-' && digits[1] != '+')
-    digits.remove_prefix(1);
+  const std::string_view digits = without_plus(text);
   double value = 0;
   const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
   const bool whole = !digits.empty() && end == digits.data() + digits.size();

@@ -226,6 +226,19 @@ TEST_CASE("numbers beyond the type's range, numbers not in decimals and contradi
   }
 }
 
+TEST_CASE("integer flags take one leading '+', as the numbers do", "[programs]") {
+  const Result plus = run("toy", "--epochs +3 --batch +1");
+  INFO(plus.output);
+  CHECK(plus.status == 0);
+  CHECK(plus.output.find(", 3 epochs,") != std::string::npos);
+  for (const std::string text : {"++3", "+-3", "+"}) {
+    const Result r = run("toy", "--epochs " + text);
+    INFO(text << "\n" << r.output);
+    CHECK(r.status == 2);
+    CHECK(r.output.find("--epochs '" + text + "' is not an integer") != std::string::npos);
+  }
+}
+
 TEST_CASE("bench and accuracy check --csv before measuring and name the user's path",
           "[programs]") {
   for (const std::string program : {"bench", "accuracy"}) {

@@ -225,7 +225,8 @@ TEST_CASE("bad flags get exit code 2 and a message naming the value", "[programs
                         Case{"toy", "--frobnicate", "unknown flag '--frobnicate'"},
                         Case{"toy", "--poles 2", "unknown flag '--poles'"},
                         Case{"guidance", "--rc", "--rc needs a value"},
-                        Case{"cartpole", "--method X", "method 'X' is unknown"},
+                        Case{"cartpole", "--method X", "--method: method 'X' is unknown"},
+                        Case{"cartpole", "--clip Norm", "--clip: clip mode \"Norm\" is not recognised"},
                         // A dt or T derived from the others keeps to its own flag's range.
                         Case{"cartpole", "--steps 3 --T 1e-12",
                              "--steps 3 with --T 1e-12: dt = 3.33333333333333e-13 is out of range; "

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <string>
 
+#include "file_size_limit.hpp"
 #include "point_mass.hpp"
 
 namespace {

@@ -15,6 +15,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "file_size_limit.hpp"
 #include "flag_values.hpp"
 
 namespace sbptt::examples {

@@ -122,11 +122,12 @@ TEST_CASE("--csv appends: each byte of the log is written once", "[programs]") {
 }
 
 TEST_CASE("a log that cannot be written keeps the trained parameters", "[programs]") {
-  // A file-size limit (SIGXFSZ ignored) fails the log's writes with EFBIG, as a full disk does.
+  // A file-size limit fails the log's writes with EFBIG, as a full disk does (the programs
+  // ignore SIGXFSZ, which would kill them silently).
   const fs::path log = scratch("full.csv"), params = scratch("kept.params");
   fs::remove(params);
   const Outcome r = launch("toy", "--epochs 2000 --csv " + log.string() + " --save-params " +
-                                      params.string(), "trap '' XFSZ; ulimit -f 16; ");
+                                      params.string(), "ulimit -f 16; ");
   INFO(r.output);
   CHECK(r.status == 1);
   CHECK(contains(r.output, log.string()));
@@ -140,6 +141,24 @@ TEST_CASE("a log that cannot be written keeps the trained parameters", "[program
   REQUIRE(launch("toy", "--epochs " + std::to_string(epochs) + " --save-params " +
                             clean.string()).status == 0);
   CHECK(file_text(params) == file_text(clean));
+}
+
+TEST_CASE("a file beyond a file-size limit is an error naming it, not a silent death",
+          "[programs]") {
+  const fs::path dir = fresh_directory("file_size_limit");
+  struct Case {
+    std::string program, arguments, file;
+  };
+  for (const Case& c :
+       {Case{"cartpole", "--epochs 3 --samples 8 --save-params " + (dir / "p.txt").string(),
+             (dir / "p.txt").string()},
+        Case{"train_own_scene", dir.string(), (dir / "run.checkpoint").string()}}) {
+    const Outcome r = launch(c.program, c.arguments, "ulimit -f 16; ");
+    INFO(c.program << " " << c.arguments << "\n" << r.output);
+    CHECK(r.status == 1);
+    CHECK(contains(r.output, c.file));
+    CHECK(contains(r.output, "File too large"));
+  }
 }
 
 TEST_CASE("a name too long for its temporary file fails before training", "[programs]") {

@@ -26,8 +26,8 @@ inline Result run(const std::string& program, const std::string& arguments,
   // SBPTT_EXAMPLES_DIR (environment) runs the tests against other builds of the programs (e.g.
   // those from before a fix), as in test_program_outputs.cpp.
   const char* override_dir = std::getenv("SBPTT_EXAMPLES_DIR");
-  const std::string command = shell_prefix + (override_dir ? override_dir : SBPTT_EXAMPLES_DIR) + "/" + program +
-                              " " + arguments + " 2>&1";
+  const std::string command = shell_prefix + (override_dir ? override_dir : SBPTT_EXAMPLES_DIR) +
+                              "/" + program + " " + arguments + " 2>&1";
   Result result;
   FILE* pipe = popen(command.c_str(), "r");
   REQUIRE(pipe != nullptr);

@@ -135,6 +135,17 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
   CHECK(trained_c[0] != trained_r[0]);
 }
 
+template <class Sim>
+void check_quantum_thread_independence(const Sim& sim) {
+  using S = typename Sim::Scalar;
+  Network<S> net = testing::quantum_cnn<S>(16, 12);
+  Rng rng(44);
+  glorot_uniform(net, rng);
+  const Matrix<S> train = sim.initial_states(rng, 16);
+  const Matrix<S> test = sim.initial_states(rng, 40);
+  check_thread_independence(sim, net, quantum_objective(sim, 4), 16, train, test, 8);
+}
+
 template <class Scalar>
 Network<Scalar> seeded_mlp(Index inputs, Index outputs, std::uint64_t seed) {
   auto net = Network<Scalar>::mlp(inputs, {24, 24}, outputs);
@@ -172,26 +183,14 @@ TEMPLATE_TEST_CASE("threads: guidance (continuous loss, regulariser) is bitwise 
 }
 
 TEST_CASE("threads: quantum control with a CNN is bitwise identical", "[bptt][threads]") {
-  const Schrodinger1D<float, 16> sim;
-  Network<float> net = testing::quantum_cnn<float>(16, 12);
-  Rng rng(44);
-  glorot_uniform(net, rng);
-  const Matrix<float> train = sim.initial_states(rng, 16);
-  const Matrix<float> test = sim.initial_states(rng, 40);
-  check_thread_independence(sim, net, quantum_objective(sim, 4), 16, train, test, 8);
+  check_quantum_thread_independence(Schrodinger1D<float, 16>());
 }
 
 // A grid size known only at run time (`quantum --nx` other than 32) takes the per-sample step
 // and VJP instead of the lanes of a fixed Nx.
 TEMPLATE_TEST_CASE("threads: quantum control on a run-time grid is bitwise identical",
                    "[bptt][threads]", float, double) {
-  const Schrodinger1D<TestType, Eigen::Dynamic> sim(16);
-  Network<TestType> net = testing::quantum_cnn<TestType>(16, 60);
-  Rng rng(44);
-  glorot_uniform(net, rng);
-  const Matrix<TestType> train = sim.initial_states(rng, 16);
-  const Matrix<TestType> test = sim.initial_states(rng, 40);
-  check_thread_independence(sim, net, quantum_objective(sim, 4), 16, train, test, 8);
+  check_quantum_thread_independence(Schrodinger1D<TestType, Eigen::Dynamic>(16));
 }
 
 TEST_CASE("threads: evaluate reports the same first non-finite value for any thread count",

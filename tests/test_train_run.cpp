@@ -445,3 +445,31 @@ TEST_CASE("run: a checkpoint past the epochs asked for is refused before any wor
   CHECK(same.policy.params() == first.policy.params());
   CHECK(file_text(log) == log_text);
 }
+
+TEST_CASE("run: a checkpoint made without a log is refused with a log, before resuming",
+          "[train]") {
+  // It was an IoError (exit 1 in the programs, as for a failed write) thrown after on_resume
+  // had announced the resume; it is a setting of the run that differs.
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  const fs::path checkpoint = scratch("no_log.checkpoint"), log = scratch("no_log.csv");
+  fs::remove(checkpoint);
+  fs::remove(log);
+  RunSettings settings;
+  settings.epochs = 2;
+  settings.checkpoint = checkpoint.string();
+  Setup<double> first(Method::Regular);
+  REQUIRE(run_training(first.trainer, train, test, settings).end == RunEnd::Finished);
+
+  Setup<double> again(Method::Regular);
+  settings.epochs = 4;
+  settings.log_csv = log.string();
+  bool announced = false;
+  RunCallbacks callbacks;
+  callbacks.on_resume = [&](long) { announced = true; };
+  CHECK_THROWS_AS(run_training(again.trainer, train, test, settings, callbacks),
+                  InvalidArgument);
+  CHECK_THROWS_WITH(run_training(again.trainer, train, test, settings, callbacks),
+                    Catch::Contains("made without a training log"));
+  CHECK_FALSE(announced);
+  CHECK_FALSE(fs::exists(log));
+}

@@ -219,6 +219,10 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
                     settings.epochs, "; expected epochs >= ", resumed->epoch,
                     " (a run is not wound back: for ", settings.epochs,
                     " epochs, start without this checkpoint)");
+    // A setting of the run that differs, like those above: refused before the resume begins.
+    detail::require(settings.log_csv.empty() || resumed->log_bytes >= 0, "run_training: "
+                    "checkpoint '", settings.checkpoint, "' was made without a training log; "
+                    "expected one (the run would have a log without its first epochs)");
     if constexpr (detail::AdamLike<Optimizer>) {
       trainer.optimizer().restore(resumed->adam_m, resumed->adam_v, resumed->adam_t);
     }
@@ -232,13 +236,9 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
     result.best_params = resumed->best_params;
     result.skipped_batches = resumed->skipped_batches;
     since_best = resumed->since_best;
-    if (callbacks.on_resume) callbacks.on_resume(resumed->epoch);
-    if (!settings.log_csv.empty()) {
-      detail::require<IoError>(resumed->log_bytes >= 0, "checkpoint '", settings.checkpoint,
-                               "' was made without a training log; expected one (the run "
-                               "would have a log without its first epochs)");
+    if (!settings.log_csv.empty())
       log = TrainingLogFile::resume(settings.log_csv, resumed->log_bytes, resumed->epoch);
-    }
+    if (callbacks.on_resume) callbacks.on_resume(resumed->epoch);
   } else if (!settings.log_csv.empty()) {
     log = TrainingLogFile::create(settings.log_csv);
   }

@@ -60,6 +60,7 @@ int run_in(const std::filesystem::path& dir) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  sbptt::examples::ignore_file_size_signal();
   const std::string argument = argc > 1 ? argv[1] : ".";
   if (argument == "--help") {
     std::printf("%s\n", kUsage);

@@ -187,7 +187,9 @@ TEST_CASE("threads: quantum control with a CNN is bitwise identical", "[bptt][th
 }
 
 // A grid size known only at run time (`quantum --nx` other than 32) takes the per-sample step
-// and VJP instead of the lanes of a fixed Nx.
+// and VJP instead of the lanes of a fixed Nx. (This passed before the quantum program's
+// results depended on --threads too: that depended on how GCC compiled the program, and
+// tests/programs/test_task_programs.cpp is its regression test.)
 TEMPLATE_TEST_CASE("threads: quantum control on a run-time grid is bitwise identical",
                    "[bptt][threads]", float, double) {
   check_quantum_thread_independence(Schrodinger1D<TestType, Eigen::Dynamic>(16));

@@ -24,6 +24,7 @@ class CommandLine {
 public:
   CommandLine(std::string program, std::string description)
       : app_(std::move(description), std::move(program)) {
+    ignore_file_size_signal();
     app_.allow_extras();  // unknown flags are reported by parse(), in the words of the others
     app_.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
     app_.set_help_flag("--help", "print every flag with its meaning, default and range; exit");

@@ -1,13 +1,13 @@
 #pragma once
-// Every program that writes files includes this header (through command_line.hpp, or itself):
-// beyond a file-size limit (ulimit -f) a write then fails with EFBIG, which the programs report
-// like a full disk (exit 1, naming the file, --save-params still saved), instead of SIGXFSZ
-// killing them silently with the file unwritten. Done at static initialisation, before main,
-// so that no program can forget it.
+// Beyond a file-size limit (ulimit -f) a write fails with EFBIG once SIGXFSZ is ignored, and
+// the programs report it like a full disk (exit 1, naming the file, --save-params still
+// saved) instead of being killed silently with the file unwritten. `CommandLine`'s
+// constructor calls this, so every program with flags does it first thing; the others call it
+// at the start of main.
 #include <csignal>
 
-namespace sbptt::examples::detail_files {
+namespace sbptt::examples {
 
-inline const bool file_size_signal_ignored = std::signal(SIGXFSZ, SIG_IGN) != SIG_ERR;
+inline void ignore_file_size_signal() { std::signal(SIGXFSZ, SIG_IGN); }
 
-}  // namespace sbptt::examples::detail_files
+}  // namespace sbptt::examples

@@ -273,11 +273,12 @@ inline void require_float_range(const char* flag, double value) {
               "cart-pole equations: the reference's, poles side by side coupled through the cart "
               "(= --physical), or --poles links hinged end to end (1 to 3; docs/simulators.md)",
               "reference", [&](const std::string& text) {
-                if (text == "physical") o.physical = true;
-                else if (text == "chain") o.chain = true;
-                else if (text != "reference")
+                if (text != "reference" && text != "physical" && text != "chain")
                   throw InvalidArgument(detail::concat("--model '", text, "' is unknown; expected "
                                                        "reference, physical or chain"));
+                // Both set each time: the last --model given wins, as for every flag.
+                o.physical = text == "physical";
+                o.chain = text == "chain";
               });
   if (task == Task::Guidance) {
     cli.integer("--drivers", o.drivers, 1, 16, "drivers (2 and 4 evaders run fixed-size)");

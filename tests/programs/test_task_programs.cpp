@@ -588,7 +588,10 @@ TEST_CASE("a checkpoint of another cart pole model is refused, naming the flag",
        {Case{"cartpole", "--poles 2 --model chain", "--poles 2",
              "was made with --model = chain; this run has --model = reference"},
         Case{"cartpole", "--physical", "", "was made with --model = physical; this run has "
-                                           "--model = reference"}}) {
+                                           "--model = reference"},
+        // The last --model given wins (it recorded chain here, and resumed).
+        Case{"cartpole", "--poles 2 --model chain", "--poles 2 --model chain --model reference",
+             "was made with --model = chain; this run has --model = reference"}}) {
     const fs::path file = scratch("identity" + std::to_string(++n) + ".checkpoint");
     fs::remove(file);
     const std::string checkpoint = " --samples 4 --steps 5 --checkpoint " + file.string();

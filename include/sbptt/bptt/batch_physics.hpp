@@ -7,6 +7,7 @@
 /// go through here, so that the two paths are chosen in one place.
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/types.hpp"
+#include "sbptt/core/unroll.hpp"
 
 namespace sbptt::detail {
 
@@ -23,13 +24,11 @@ struct SampleScratch {
   }
 };
 
-/// P(t.x, t.u) into t.x_next for one sample, never inlined. The forward pass on one thread,
-/// the forward pass in parts on several and the evaluation each loop over the samples; inlined
-/// into each loop, a per-sample simulator's step was compiled once per loop, GCC vectorised and
-/// contracted the copies differently, and results depended on the thread count in their last
-/// bits (the quantum program in double on a run-time grid, --nx 16).
+/// P(t.x, t.u) into t.x_next for one sample, in one machine copy (SBPTT_ONE_COPY) for the
+/// forward pass on one thread, the forward pass in parts and the evaluation: compiled into each
+/// of their loops, the quantum step on a run-time grid gave other last bits per thread count.
 template <class Sim, class Scratch>
-[[gnu::noinline]] void step_sample(const Sim& sim, Scratch& t) {
+SBPTT_ONE_COPY void step_sample(const Sim& sim, Scratch& t) {
   sim.step(t.x, t.u, t.x_next);
 }
 

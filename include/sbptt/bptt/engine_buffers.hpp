@@ -13,6 +13,7 @@
 #include "sbptt/core/non_finite.hpp"
 #include "sbptt/core/parallel.hpp"
 #include "sbptt/core/types.hpp"
+#include "sbptt/core/unroll.hpp"
 
 namespace sbptt::detail {
 
@@ -196,12 +197,9 @@ public:
   }
 
 private:
-  /// f(b, scratch), never inlined, so that the three loops above run one machine copy of f.
-  /// Inlined into each loop, the quantum step of a run-time grid (a per-sample call) was
-  /// compiled three times, GCC vectorised and contracted the copies differently, and the
-  /// quantum program's results in double depended on --threads in the last bits.
+  /// f(b, scratch) in one machine copy (SBPTT_ONE_COPY) for the three loops above.
   template <class F, class Scratch>
-  [[gnu::noinline]] static void one_sample(F& f, Index b, Scratch& scratch) {
+  SBPTT_ONE_COPY static void one_sample(F& f, Index b, Scratch& scratch) {
     f(b, scratch);
   }
 

@@ -30,6 +30,7 @@
 #include "sbptt/bptt/reverse_sweeps.hpp"
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/types.hpp"
+#include "sbptt/core/unroll.hpp"
 
 namespace sbptt::detail {
 
@@ -74,12 +75,11 @@ private:
   using Step = SharedSeedStep<Adjoints, Scalar>;
   using Handoff = ParamHandoff<Step, 2>;  // a chain per sweep: g_R and g_M
 
-  /// Never inlined: the calls with and without the hand-off must run the same machine code,
-  /// or the contraction of a·b + c into FMA could differ between them, and the results
-  /// between thread counts.
+  /// One machine copy (SBPTT_ONE_COPY): the calls with and without the hand-off must give the
+  /// same bits, or the results would depend on the thread count.
   template <class Engine, class Pair, class Add>
-  [[gnu::noinline]] void sweep(Engine& e, Pair& result, Index truncation, Handoff* handoff,
-                               Add& add) {
+  SBPTT_ONE_COPY void sweep(Engine& e, Pair& result, Index truncation, Handoff* handoff,
+                            Add& add) {
     const Index batch = e.trajectory_.batch();
     auto& full = e.sweeps_[0];
     auto& physics = e.sweeps_[1];

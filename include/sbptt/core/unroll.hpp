@@ -33,6 +33,20 @@
 #define SBPTT_ALWAYS_INLINE
 #endif
 
+// One machine copy of a function for all its callers: never inlined and, with GCC, never
+// cloned either (`noipa`: with `noinline` alone, constant propagation may still compile a copy
+// for a caller's constant argument). Two paths that must give the same bits (a batch whole and
+// in parts, one thread and several) call the arithmetic they share through such a function;
+// inlined into each, GCC vectorised and contracted the copies differently (docs/design.md,
+// "One machine copy of each per-sample computation").
+#if defined(__GNUC__) && !defined(__clang__)
+#define SBPTT_ONE_COPY __attribute__((noinline, noipa))
+#elif defined(__clang__)
+#define SBPTT_ONE_COPY __attribute__((noinline))
+#else
+#define SBPTT_ONE_COPY
+#endif
+
 namespace sbptt::detail {
 
 /// f(std::integral_constant<int, 0>{}), …, f(std::integral_constant<int, N − 1>{}), in order.

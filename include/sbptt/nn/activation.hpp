@@ -12,6 +12,7 @@
 #include <Eigen/Core>
 
 #include "sbptt/core/types.hpp"
+#include "sbptt/core/unroll.hpp"
 
 namespace sbptt {
 
@@ -107,9 +108,9 @@ void tanh_entrywise_double(Eigen::ArrayBase<Derived>& z) {
 }
 
 /// tanh of the `registers` × `Lanes` entries at `z`, one SIMD register's worth at a time.
-/// Never inlined, so that every entry of every call runs the same machine code.
+/// One machine copy (SBPTT_ONE_COPY), so that every entry of every call runs the same code.
 template <class Scalar, int Lanes>
-[[gnu::noinline]] void tanh_registers(Scalar* z, Index registers) {
+SBPTT_ONE_COPY void tanh_registers(Scalar* z, Index registers) {
   for (Index r = 0; r < registers; ++r) {
     Scalar* entries = z + r * Lanes;
     if constexpr (std::is_same_v<Scalar, double> && Lanes >= 4) {

@@ -29,6 +29,7 @@
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
+#include "sbptt/core/unroll.hpp"
 #include "sbptt/nn/activation.hpp"
 #include "sbptt/nn/layer.hpp"
 #include "sbptt/nn/network_scratch.hpp"
@@ -245,12 +246,11 @@ private:
   }
 
   /// Y = N(X) for the samples first … first + X.cols() − 1 of the workspace's batch.
-  /// Never inlined, like `inputs_packed`: `forward` and `forward_columns` must run the same
-  /// machine code (the activations' contraction into FMA), or a sample's outputs would
-  /// depend on whether the batch was evaluated whole or in parts.
-  [[gnu::noinline]] void forward_range(const Matrix<Scalar>& x, Index first, Matrix<Scalar>& y,
-                                       Workspace& ws,
-                                       const detail::PackedLayers<Scalar>& packed) const {
+  /// One machine copy (SBPTT_ONE_COPY), like `inputs_packed`: `forward` and `forward_columns`
+  /// must give a sample the same outputs, whether the batch is evaluated whole or in parts.
+  SBPTT_ONE_COPY void forward_range(const Matrix<Scalar>& x, Index first, Matrix<Scalar>& y,
+                                    Workspace& ws,
+                                    const detail::PackedLayers<Scalar>& packed) const {
     const Index count = x.cols();
     ws.input_.middleCols(first, count) = x;
     const Scalar* in = ws.input_.data() + first * ws.input_.rows();
@@ -284,13 +284,12 @@ private:
 
   /// Δ_l of every layer into `scratch.deltas` (its buffers grown, never shrunk) and, when `dx`
   /// is set, dX.
-  /// Never inlined, like `params_from`: `backward` and the split halves must run the same
-  /// machine code, or the compiler's contraction of a·b + c into FMA could differ between
-  /// the inlined copies and the engine's results between thread counts.
-  [[gnu::noinline]] void inputs_packed(const Workspace& ws, const Matrix<Scalar>& dy,
-                                       Matrix<Scalar>* dx,
-                                       const detail::PackedLayers<Scalar>& packed,
-                                       detail::NetworkScratch<Scalar>& scratch) const {
+  /// One machine copy (SBPTT_ONE_COPY), like `params_from`: `backward` and the split halves
+  /// must give the same bits, or the engine's results would depend on the thread count.
+  SBPTT_ONE_COPY void inputs_packed(const Workspace& ws, const Matrix<Scalar>& dy,
+                                    Matrix<Scalar>* dx,
+                                    const detail::PackedLayers<Scalar>& packed,
+                                    detail::NetworkScratch<Scalar>& scratch) const {
     ws.require_filled_by(*this);
     detail::require(dy.rows() == output_dim() && dy.cols() == ws.batch_,
                     "Network::backward: dY is ", dy.rows(), " × ", dy.cols(), ", expected ",
@@ -343,11 +342,13 @@ private:
   /// grad += the parameter products of every layer from the recorded Δ_l, or from Δ_l·diag(s)
   /// with `scales` = s (B): the register kernel scales X's block in its registers; elsewhere
   /// Δ_l·diag(s) is formed in `scaled`[l] (grown, never shrunk), which for a conv layer under
-  /// the kernel holds s spread over its im2col columns instead.
-  [[gnu::noinline]] void params_from(const Workspace& ws,
-                                     const std::vector<Vector<Scalar>>& deltas,
-                                     Vector<Scalar>& grad, const Scalar* scales = nullptr,
-                                     std::vector<Vector<Scalar>>* scaled = nullptr) const {
+  /// the kernel holds s spread over its im2col columns instead. One machine copy
+  /// (SBPTT_ONE_COPY): its callers pass constant null scales, for which a cloned copy could
+  /// round differently.
+  SBPTT_ONE_COPY void params_from(const Workspace& ws,
+                                  const std::vector<Vector<Scalar>>& deltas,
+                                  Vector<Scalar>& grad, const Scalar* scales = nullptr,
+                                  std::vector<Vector<Scalar>>* scaled = nullptr) const {
     const Index batch = ws.batch_;
     for (std::size_t l = 0; l < layers_.size(); ++l) {
       Scalar* g = grad.data() + offsets_[l];

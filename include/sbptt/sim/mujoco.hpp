@@ -23,7 +23,8 @@
 /// space (nv position coordinates), so A would not be ∂x'/∂x of the (qpos, qvel) state the
 /// engine stores; mapping the tangent space correctly is not done here. Also refused: models
 /// without an actuator (nothing for a controller to drive), and models with a NaN or ±Inf in
-/// an option or array (named; MuJoCo only prints a warning, and every step from them is NaN).
+/// an option or array (named; MuJoCo only prints a warning, and one in the physics makes every
+/// step NaN; user and display data are scanned too, so that no field needs sorting out).
 ///
 /// Threads: the `mjModel` is read-only after construction; every call leases an `mjData`
 /// from a pool for its whole duration, so no `mjData` is ever used by two threads at once and
@@ -115,7 +116,7 @@ inline bool mujoco_step_failed(const mjData& data) {
 
 /// "name[i] is nan" for the first non-finite real number of the model (its options, then its
 /// arrays, in MuJoCo's own list of them, mjxmacro.h), or empty. MuJoCo loads a NaN with only a
-/// printed warning, and every step from it is NaN.
+/// printed warning.
 inline std::string first_non_finite_field(const mjModel& model) {
   std::string found;
   const auto scan = [&found](const char* name, const auto* values, long count) {

@@ -11,7 +11,9 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <sstream>
 #include <string>
+#include <vector>
 
 namespace sbptt::testing {
 
@@ -55,6 +57,22 @@ inline double printed_loss(const std::string& output) {
   const auto at = output.find("loss=");
   REQUIRE(at != std::string::npos);
   return std::stod(output.substr(at + 5));
+}
+
+/// Column `column` (1 = R) of a --dump-gradients CSV, one entry per parameter.
+inline std::vector<double> gradient_column(const std::filesystem::path& csv, int column) {
+  std::ifstream in(csv);
+  std::string line;
+  std::getline(in, line);
+  REQUIRE(line == "param,R,M,C,S,N");
+  std::vector<double> values;
+  while (std::getline(in, line)) {
+    std::stringstream fields(line);
+    std::string field;
+    for (int i = 0; i <= column; ++i) std::getline(fields, field, ',');
+    values.push_back(std::stod(field));
+  }
+  return values;
 }
 
 }  // namespace sbptt::testing

@@ -1,0 +1,215 @@
+// The mujoco program as a user runs it, on any MJCF scene (examples/models/, tests/models/):
+// --dump-gradients against finite differences, training, --check-derivatives, and the models,
+// targets, flags and checkpoints it refuses.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "programs/program_runner.hpp"
+#include "sbptt/nn/parameters_io.hpp"
+#include "support/address_sanitizer.hpp"
+
+namespace fs = std::filesystem;
+using sbptt::testing::file_text;
+using sbptt::testing::gradient_column;
+using sbptt::testing::printed_loss;
+using sbptt::testing::Result;
+using sbptt::testing::run;
+using sbptt::testing::scratch;
+
+namespace {
+
+std::string model_file(const std::string& relative) {
+  return std::string(SBPTT_SOURCE_DIR) + "/" + relative;
+}
+
+const std::string double_pendulum =
+    "--model " + model_file("examples/models/double_pendulum.xml") + " --target 3.14159,0 ";
+
+}  // namespace
+
+TEST_CASE("mujoco --dump-gradients: R equals central differences of the printed batch loss",
+          "[programs][mujoco]") {
+  // End to end through MuJoCo's finite-difference Jacobians and the hinge loss 1 − cos.
+  const fs::path params = scratch("mujoco.params"), dump = scratch("mujoco_dump.csv");
+  const std::string base = double_pendulum + "--samples 4 --steps 30 --spread 1 ";
+  REQUIRE(run("mujoco", base + "--epochs 3 --save-params " + params.string()).status == 0);
+  const Result at = run("mujoco", base + "--init-params " + params.string() +
+                                      " --dump-gradients " + dump.string());
+  INFO(at.output);
+  REQUIRE(at.status == 0);
+  const std::vector<double> regular = gradient_column(dump, 1);
+  REQUIRE(regular.size() == 10802);  // 4 → 100 → 100 → 2
+  const auto theta =
+      sbptt::load_parameters<double>(params, static_cast<sbptt::Index>(regular.size()));
+  const double h = 1e-6;
+  // A first-layer weight, a last-layer weight and the last bias (the elbow torque's).
+  for (sbptt::Index p : {sbptt::Index{7}, sbptt::Index{10700}, sbptt::Index{10801}}) {
+    double losses[2];
+    for (int side = 0; side < 2; ++side) {
+      auto shifted = theta;
+      shifted(p) += side == 0 ? h : -h;
+      const fs::path file = scratch("mujoco_shifted.params");
+      sbptt::save_parameters(file, shifted);
+      const Result r = run("mujoco", base + "--init-params " + file.string() +
+                                         " --dump-gradients " + scratch("unused.csv").string());
+      REQUIRE(r.status == 0);
+      losses[side] = printed_loss(r.output);
+    }
+    INFO("parameter " << p);
+    CHECK(regular[static_cast<std::size_t>(p)] ==
+          Approx((losses[0] - losses[1]) / (2 * h)).epsilon(1e-5).margin(1e-9));
+  }
+}
+
+TEST_CASE("mujoco trains the double pendulum up, and --threads 2 changes no bit",
+          "[programs][mujoco]") {
+  const std::string arguments =
+      double_pendulum + "--method C --epochs 30 --samples 16 --steps 100 --lr 0.01";
+  const fs::path one = scratch("mujoco_t1.params"), two = scratch("mujoco_t2.params");
+  const fs::path log = scratch("mujoco.csv");
+  const Result r1 = run("mujoco", arguments + " --csv " + log.string() + " --save-params " +
+                                      one.string());
+  const Result r2 = run("mujoco", arguments + " --threads 2 --save-params " + two.string());
+  INFO(r1.output << r2.output);
+  REQUIRE(r1.status == 0);
+  REQUIRE(r2.status == 0);
+  CHECK(file_text(one) == file_text(two));
+  // Hanging (1 − cos π = 2 on the shoulder) to below a tenth of it (measured: 1.9997 to 0.013).
+  const auto initial = r1.output.find("initial test loss ");
+  REQUIRE(initial != std::string::npos);
+  CHECK(std::stod(r1.output.substr(initial + 18)) > 1.9);
+  const auto at = r1.output.find("final test loss ");
+  REQUIRE(at != std::string::npos);
+  CHECK(std::stod(r1.output.substr(at + 16)) < 0.2);
+  std::ifstream in(log);
+  std::string header;
+  std::getline(in, header);
+  CHECK(header == "epoch,batch_loss,train_loss,test_loss,update_norm2,cos_m_r,agree_fraction,seconds");
+}
+
+TEST_CASE("mujoco --check-derivatives prints mjd_transitionFD's agreement with sbptt's own",
+          "[programs][mujoco]") {
+  const Result r = run("mujoco", "--model " + model_file("tests/models/cartpole_physical_2.xml") +
+                                     " --check-derivatives");
+  INFO(r.output);
+  REQUIRE(r.status == 0);
+  const auto at = r.output.find("worst relative error at 5 states: A ");
+  REQUIRE(at != std::string::npos);
+  std::stringstream fields(r.output.substr(at + 36));
+  double a = 1, b = 1, vjp = 1;
+  std::string skip;
+  fields >> a >> skip >> skip >> b >> skip >> skip >> vjp;
+  CHECK(a < 1e-6);
+  CHECK(b < 1e-6);
+  CHECK(vjp < 1e-6);  // against central differences of the step, like A and B
+}
+
+TEST_CASE("mujoco refuses a model or target it cannot use, naming it", "[programs][mujoco]") {
+  const fs::path broken = scratch("broken.xml"), passive = scratch("passive.xml"),
+                 ball = scratch("ball.xml");
+  std::ofstream(broken) << "<mujoco><worldbody><body>";
+  std::ofstream(passive) << "<mujoco><worldbody><body><joint type='hinge'/><geom size='0.1'/>"
+                            "</body></worldbody></mujoco>";
+  std::ofstream(ball) << "<mujoco><worldbody><body><joint name='j' type='ball'/><geom "
+                         "size='0.1'/></body></worldbody><actuator><general joint='j' "
+                         "gear='1 0 0 0 0 0'/></actuator></mujoco>";
+  struct Case {
+    std::string arguments, expected;
+  };
+  const std::string acrobot = "--model " + model_file("examples/models/acrobot.xml");
+  for (const Case& c :
+       {Case{"--model /nonexistent/scene.xml --target 0",
+             "cannot load the model file '/nonexistent/scene.xml': XML parse error"},
+        Case{"--model " + broken.string() + " --target 0", "XML_ERROR_MISMATCHED_ELEMENT"},
+        Case{"--model " + passive.string() + " --target 0", "no actuator (nu = 0)"},
+        Case{"--model " + ball.string() + " --target 0,0,0,0", "quaternion"},
+        Case{acrobot + " --target 1,2,3",
+             "--target '1,2,3' has 3 value(s); expected nq = 2, one per position coordinate"},
+        Case{acrobot + " --target 1,2,3", "shoulder (hinge), elbow (hinge)"},
+        Case{acrobot, "--target is required: 2 comma-separated positions"},
+        Case{acrobot + " --target 1,x", "--target 'x' is not a number"},
+        Case{acrobot + " --target 1,2 --spread -1", "--spread -1 is out of range"},
+        Case{"--target 1", "--model is required"},
+        Case{acrobot + " --target 1,2 --poles 2", "unknown flag '--poles'"}}) {
+    const Result r = run("mujoco", c.arguments);
+    INFO(c.arguments << "\n" << r.output);
+    CHECK(r.status == 2);
+    CHECK(r.output.find(c.expected) != std::string::npos);
+  }
+}
+
+TEST_CASE("mujoco: a checkpoint of another --target or model file is refused, naming it",
+          "[programs][mujoco]") {
+  const std::string original = file_text(model_file("examples/models/double_pendulum.xml"));
+  const fs::path moved = scratch("checkpoint_moved.xml"), damped = scratch("checkpoint_damped.xml");
+  std::ofstream(moved) << original;
+  std::string more_damping = original;
+  more_damping.replace(more_damping.find("damping=\"0.05\""), 14, "damping=\"0.07\"");
+  std::ofstream(damped) << more_damping;
+  const fs::path checkpoint = scratch("mujoco.checkpoint");
+  fs::remove(checkpoint);
+  const std::string common = "--samples 8 --steps 20 --checkpoint " + checkpoint.string() + " ";
+  REQUIRE(run("mujoco", double_pendulum + common + "--epochs 2").status == 0);
+  const Result target = run("mujoco", "--model " + model_file("examples/models/double_pendulum.xml") +
+                                          " --target 0,0 " + common + "--epochs 4");
+  INFO(target.output);
+  CHECK(target.status == 2);
+  CHECK(target.output.find("was made with --target = 3.14159,0; this run has --target = 0,0") !=
+        std::string::npos);
+  const Result model = run("mujoco", "--model " + damped.string() + " --target 3.14159,0 " +
+                                         common + "--epochs 4");
+  INFO(model.output);
+  CHECK(model.status == 2);
+  CHECK(model.output.find("was made with --model = ") != std::string::npos);
+  CHECK(model.output.find("epoch 1 ") == std::string::npos);
+  // The file's content is the model, not its path nor how the target's numbers are spelled.
+  const Result same = run("mujoco", "--model " + moved.string() + " --target 3.14159,0.0 " +
+                                        common + "--epochs 3");
+  INFO(same.output);
+  CHECK(same.status == 0);
+  CHECK(same.output.find("resuming after epoch 2") != std::string::npos);
+}
+
+TEST_CASE("mujoco --check-derivatives refuses the flags it does not use, before any work",
+          "[programs][mujoco]") {
+  const fs::path file = scratch("check_derivatives_output");
+  fs::remove_all(file);
+  const std::string check =
+      "--model " + model_file("examples/models/acrobot.xml") + " --check-derivatives ";
+  for (const std::string& flag : std::vector<std::string>
+       {"--epochs 5", "--csv " + file.string(), "--save-params " + file.string(),
+        "--checkpoint " + file.string(), "--dump-gradients " + file.string(),
+        "--init-params " + file.string(), "--target 1", "--target 1,2", "--samples 4",
+        "--threads 2"}) {
+    const Result r = run("mujoco", check + flag);
+    const std::string name = flag.substr(0, flag.find(' '));
+    INFO(flag << "\n" << r.output);
+    CHECK(r.status == 2);
+    CHECK(r.output.find("so " + name + " would have no effect; expected --check-derivatives "
+                        "without " + name) != std::string::npos);
+    CHECK(r.output.find("worst relative error") == std::string::npos);
+    CHECK_FALSE(fs::exists(file));
+  }
+}
+
+TEST_CASE("mujoco refuses a model with a non-finite number before any work, naming the field",
+          "[programs][mujoco]") {
+  std::string acrobot = file_text(model_file("examples/models/acrobot.xml"));
+  acrobot.replace(acrobot.find("gravity=\"0 0 -9.81\""), 19, "gravity=\"0 0 nan\"");
+  const fs::path file = scratch("acrobot_nan_gravity.xml");
+  std::ofstream(file) << acrobot;
+  for (const char* mode : {" --target 1,2", " --check-derivatives"}) {
+    const Result r = run("mujoco", "--model " + file.string() + mode);
+    INFO(r.output);
+    CHECK(r.status == 2);
+    CHECK(r.output.find("--model '" + file.string() + "': MujocoSimulator: the model's "
+                        "opt.gravity[2] is nan") != std::string::npos);
+    CHECK(r.output.find("initial test loss") == std::string::npos);
+    CHECK(r.output.find("worst relative error") == std::string::npos);
+  }
+}

@@ -312,8 +312,10 @@ private:
   /// The first `count` lanes of `value` to `to`: only a panel's real rows go out. With
   /// AVX-512 by a masked store: through a buffer and a copy, the 12 rows of the last panel
   /// made the quantum CNN's first product (60 × 6 × 128, float) take 1187–1306 ns against
-  /// 694–702 (docs/benchmark-runs.md, seventeenth run).
-  static void store_rows(Scalar* to, Index count, const Packet& value) {
+  /// 694–702 (docs/benchmark-runs.md, seventeenth run). Always inlined: GCC 12 called it from
+  /// the blocks of 3 panels, the accumulator going through memory at each of the 24 calls
+  /// (cart pole 4's R epoch 3–8% slower; docs/benchmark-runs.md, twenty-third run).
+  SBPTT_ALWAYS_INLINE static void store_rows(Scalar* to, Index count, const Packet& value) {
     if (count == kLanes) {
       Eigen::internal::pstoreu(to, value);
       return;

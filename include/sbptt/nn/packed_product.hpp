@@ -135,11 +135,14 @@ public:
         Index p = 0;
         // An odd last panel goes with the two before it where three panels' accumulators,
         // weights and a broadcast leave a register spare: a lone panel keeps only `width`
-        // multiply-adds in flight. (Pairs stop at the last whole panel: pairing a partial one
-        // too made GCC 12's code for 4 columns 10% slower, 443–449 against 396–410 ns for
-        // 100 × 100; docs/benchmark-runs.md, fifteenth run.)
+        // multiply-adds in flight. At 4 columns pairs stop at the last whole panel: pairing a
+        // partial one too made GCC 12's code 10% slower, 443–449 against 396–410 ns for
+        // 100 × 100 (docs/benchmark-runs.md, fifteenth run). At 8 columns a partial panel pairs
+        // too: the quantum CNN's 60 rows (4 panels, the last of 12 rows) went as a pair and two
+        // lone panels, 60 × 180 × 56 in float 8425 ns against 7860 paired (twenty-third run).
         constexpr bool last_three = 3 * width + 4 < EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS;
         const Index paired = last_three && panels >= 3 && panels % 2 == 1 ? panels - 3 : panels;
+        const Index pairs_end = width >= 8 ? panels : full_panels;
         // Four panels a block where their accumulators, weights and a broadcast fit, with no
         // register spare (half blocks with AVX-512): each broadcast of X then feeds twice the
         // multiply-adds (100 × 100 × 4 in float: 354.5–358.5 ns against 379.6–392.6;
@@ -148,7 +151,7 @@ public:
           for (; p + 4 <= full_panels && p + 4 <= paired; p += 4)
             block<4, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
         }
-        for (; p + 2 <= full_panels && p + 2 <= paired; p += 2)
+        for (; p + 2 <= pairs_end && p + 2 <= paired; p += 2)
           block<2, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
         if (last_three && p + 3 == panels) {
           block<3, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);

@@ -422,14 +422,19 @@ TEST_CASE("run: a checkpoint past the epochs asked for is refused before any wor
   settings.epochs = 4;
   settings.checkpoint = checkpoint.string();
   settings.log_csv = log.string();
+  // on_start: the epochs done when the run starts, after every check.
+  std::vector<long> starts;
+  RunCallbacks callbacks;
+  callbacks.on_start = [&](long epoch) { starts.push_back(epoch); };
   Setup<double> first(Method::Regular);
-  REQUIRE(run_training(first.trainer, train, test, settings).end == RunEnd::Finished);
+  REQUIRE(run_training(first.trainer, train, test, settings, callbacks).end ==
+          RunEnd::Finished);
   const std::string checkpoint_text = file_text(checkpoint), log_text = file_text(log);
 
   Setup<double> shorter(Method::Regular);
   settings.epochs = 2;
   settings.save_params = params.string();
-  CHECK_THROWS_WITH(run_training(shorter.trainer, train, test, settings),
+  CHECK_THROWS_WITH(run_training(shorter.trainer, train, test, settings, callbacks),
                     Catch::Contains("past.checkpoint") && Catch::Contains("epoch 4") &&
                         Catch::Contains("epochs = 2") && Catch::Contains("expected epochs >= 4"));
   CHECK(file_text(checkpoint) == checkpoint_text);
@@ -439,7 +444,8 @@ TEST_CASE("run: a checkpoint past the epochs asked for is refused before any wor
   // As many epochs as the checkpoint holds: a finished run, nothing trained.
   Setup<double> same(Method::Regular);
   settings.epochs = 4;
-  const auto result = run_training(same.trainer, train, test, settings);
+  const auto result = run_training(same.trainer, train, test, settings, callbacks);
+  CHECK(starts == std::vector<long>{0, 4});
   CHECK(result.resumed_from == 4);
   CHECK(result.epochs == 4);
   CHECK(same.policy.params() == first.policy.params());

@@ -186,12 +186,6 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                static_cast<long>(data.train.cols()), static_cast<long>(data.test.cols()), o.batch,
                describe(o.task, o.time).c_str(), static_cast<long>(controller.num_params()),
                o.use_float ? "float" : "double", instruction_set());
-  const double initial = static_cast<double>(trainer.engine().evaluate(data.test));
-  std::fprintf(stderr, "%s: initial test loss %.6g\n", name, initial);
-  if (const auto& where = trainer.engine().forward_non_finite())
-    std::fprintf(stderr, "%s: warning: the initial parameters give a %s\n", name,
-                 describe(NonFiniteEvent{0, -1, *where, Phase::TestEvaluation}).c_str());
-
   RunSettings run;
   run.epochs = o.epochs;
   run.evaluate_every = o.evaluate_every;
@@ -209,6 +203,20 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
   callbacks.on_resume = [&](long epoch) {
     std::fprintf(stderr, "%s: resuming after epoch %ld from checkpoint '%s'\n", name, epoch,
                  o.checkpoint.c_str());
+  };
+  // Printed once run_training has checked everything: a refused checkpoint costs no
+  // evaluation.
+  callbacks.on_start = [&](long epoch) {
+    const double loss = static_cast<double>(trainer.engine().evaluate(data.test));
+    if (epoch == 0) {
+      std::fprintf(stderr, "%s: initial test loss %.6g\n", name, loss);
+    } else {
+      std::fprintf(stderr, "%s: test loss after epoch %ld %.6g\n", name, epoch, loss);
+    }
+    if (const auto& where = trainer.engine().forward_non_finite())
+      std::fprintf(stderr, "%s: warning: the %s parameters give a %s\n", name,
+                   epoch == 0 ? "initial" : "resumed",
+                   describe(NonFiniteEvent{epoch, -1, *where, Phase::TestEvaluation}).c_str());
   };
   callbacks.on_non_finite = [&](const NonFiniteEvent& event, bool skipped) {
     if (skipped && ++skips > shown_skips) return;

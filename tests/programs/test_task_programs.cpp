@@ -364,6 +364,41 @@ TEST_CASE("combined update, paper settings: 2-pole cart pole from ~1.9 to below 
   CHECK(c_last < r_last);
 }
 
+TEST_CASE("a checkpoint past --epochs is refused before the initial evaluation; a resumed run "
+          "reports its loss from the checkpoint", "[programs]") {
+  const fs::path file = scratch("past_epochs.checkpoint");
+  fs::remove(file);
+  const std::string arguments = "--poles 2 --samples 4 --steps 5 --checkpoint " + file.string();
+  const Result first = run("cartpole", arguments + " --epochs 2");
+  INFO(first.output);
+  REQUIRE(first.status == 0);
+  CHECK(first.output.find("initial test loss ") != std::string::npos);
+
+  const Result shorter = run("cartpole", arguments + " --epochs 1");
+  INFO(shorter.output);
+  CHECK(shorter.status == 2);
+  CHECK(shorter.output.find("is at epoch 2") != std::string::npos);
+  // The refusal comes before any work: no evaluation was printed.
+  CHECK(shorter.output.find("test loss") == std::string::npos);
+
+  // Resumed, the loss printed at the start is that of the checkpoint's parameters, and it
+  // equals the test loss the first run logged for its last epoch.
+  const Result longer = run("cartpole", arguments + " --epochs 3");
+  INFO(longer.output);
+  REQUIRE(longer.status == 0);
+  CHECK(longer.output.find("initial test loss") == std::string::npos);
+  const std::string at_start = "test loss after epoch 2 ";
+  const auto resumed = longer.output.find(at_start);
+  REQUIRE(resumed != std::string::npos);
+  CHECK(longer.output.find("resuming after epoch 2") < resumed);
+  const auto logged = first.output.find("epoch 2  batch ");
+  REQUIRE(logged != std::string::npos);
+  const auto test_at = first.output.find(" test ", logged);
+  REQUIRE(test_at != std::string::npos);
+  CHECK(std::stod(longer.output.substr(resumed + at_start.size())) ==
+        std::stod(first.output.substr(test_at + 6)));
+}
+
 TEST_CASE("a checkpoint of another cart pole model is refused, naming the flag", "[programs]") {
   // Each pair differs only in the model: resumed, the second run would continue the first
   // one's training on other physics (mujoco's --model and --target: the test above).

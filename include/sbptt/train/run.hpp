@@ -64,6 +64,11 @@ struct RunSettings {
 /// Hooks called during a run (each may be empty).
 struct RunCallbacks {
   std::function<void(long epoch)> on_resume{};  ///< a checkpoint of `epoch` epochs was loaded
+  /// Once every setting, output and checkpoint has been checked (and a checkpoint resumed),
+  /// before the first epoch: `epoch` is the number of epochs already done (0 for a new run).
+  /// Work a program does for the run itself (an evaluation to print) belongs here, so that a
+  /// refusal comes before it.
+  std::function<void(long epoch)> on_start{};
   std::function<void(const EpochRecord&)> on_epoch{};  ///< after the row of each epoch is logged
   /// Each non-finite event; `skipped` says that the batch was skipped and training goes on.
   std::function<void(const NonFiniteEvent&, bool skipped)> on_non_finite{};
@@ -242,6 +247,7 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   } else if (!settings.log_csv.empty()) {
     log = TrainingLogFile::create(settings.log_csv);
   }
+  if (callbacks.on_start) callbacks.on_start(result.epochs);
 
   auto write_checkpoint = [&] {
     Checkpoint<Scalar> c;

@@ -225,15 +225,17 @@ inline void require_float_range(const char* flag, double value) {
     cli.refuse("--T", reason);
   } else {
     cli.value("--dt", "X",
-              "time step; alone it keeps T, which must then be a whole number of steps; a number "
-              "in [1e-12, 1e6]",
+              detail::concat("time step; alone it keeps T, which must then be a whole number of "
+                             "steps; a number in [", shown(limits::min_dt), ", ",
+                             shown(limits::max_dt), "]"),
               task == Task::Mujoco ? "the model's timestep" : shown(paper.dt),
               [&](const std::string& text) {
                 dt = parse_number("--dt", text, limits::min_dt, limits::max_dt);
               });
     cli.value("--T", "X",
               detail::concat("horizon T = steps · dt; alone it keeps dt (a whole number of steps, "
-                             "at most ", many, "); a number in [1e-12, 1e9]"),
+                             "at most ", many, "); a number in [", shown(limits::min_horizon),
+                             ", ", shown(limits::max_horizon), "]"),
               task == Task::Mujoco ? "steps times dt" : shown(paper.horizon()),
               [&](const std::string& text) {
                 horizon = parse_number("--T", text, limits::min_horizon, limits::max_horizon);

@@ -10,12 +10,20 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <sstream>
 #include <string>
 #include <vector>
 
+#include "support/files.hpp"
+
 namespace sbptt::testing {
+
+/// The programs' directory of this build, or SBPTT_EXAMPLES_DIR from the environment: the
+/// tests then run against other builds of the programs (e.g. those from before a fix).
+inline std::string examples_dir() {
+  const char* override_dir = std::getenv("SBPTT_EXAMPLES_DIR");
+  return override_dir != nullptr ? override_dir : SBPTT_EXAMPLES_DIR;
+}
 
 struct Result {
   int status = -1;
@@ -25,11 +33,8 @@ struct Result {
 /// Runs `program` through the shell; `shell_prefix` (e.g. a ulimit) goes before it.
 inline Result run(const std::string& program, const std::string& arguments,
            const std::string& shell_prefix = "") {
-  // SBPTT_EXAMPLES_DIR (environment) runs the tests against other builds of the programs (e.g.
-  // those from before a fix), as in test_program_outputs.cpp.
-  const char* override_dir = std::getenv("SBPTT_EXAMPLES_DIR");
-  const std::string command = shell_prefix + (override_dir ? override_dir : SBPTT_EXAMPLES_DIR) +
-                              "/" + program + " " + arguments + " 2>&1";
+  const std::string command =
+      shell_prefix + examples_dir() + "/" + program + " " + arguments + " 2>&1";
   Result result;
   FILE* pipe = popen(command.c_str(), "r");
   REQUIRE(pipe != nullptr);
@@ -45,11 +50,6 @@ inline std::filesystem::path scratch(const std::string& name) {
       std::filesystem::temp_directory_path() / ("sbptt_programs_" + std::to_string(getpid()));
   std::filesystem::create_directories(dir);
   return dir / name;
-}
-
-inline std::string file_text(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), {}};
 }
 
 /// The value of `loss=<value>` that --dump-gradients prints.

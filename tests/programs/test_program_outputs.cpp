@@ -24,21 +24,18 @@
 #include <thread>
 #include <vector>
 
+#include "programs/program_runner.hpp"
 #include "sbptt/nn/parameters_io.hpp"
 #include "support/address_sanitizer.hpp"
 #include "support/files.hpp"
 
 namespace fs = std::filesystem;
+using sbptt::testing::examples_dir;
 using sbptt::testing::file_text;
 using sbptt::testing::fresh_directory;
 using sbptt::testing::without_seconds;
 
 namespace {
-
-std::string examples_dir() {
-  const char* override_dir = std::getenv("SBPTT_EXAMPLES_DIR");
-  return override_dir != nullptr ? override_dir : SBPTT_EXAMPLES_DIR;
-}
 
 struct Outcome {
   int status = -1;  ///< exit code, or -signal

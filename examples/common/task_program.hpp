@@ -24,6 +24,7 @@
 
 #include <sbptt/sbptt.hpp>
 
+#include "standard_streams.hpp"
 #include "task_options.hpp"
 
 namespace sbptt::examples {
@@ -293,29 +294,32 @@ template <class Body>
 int task_main(Task task, int argc, char** argv, Body&& body) {
   const char* name = to_string(task);
   TaskOptions options;
-  try {
-    if (!parse_task_options(task, argc, argv, options)) return 0;  // --help
-  } catch (const InvalidArgument& e) {
-    std::cerr << name << ": " << e.what() << "\n";
-    return 2;
-  }
-  try {
-    return options.use_float ? body.template operator()<float>(options)
-                             : body.template operator()<double>(options);
-  } catch (const InvalidArgument& e) {
-    std::cerr << name << ": " << e.what() << "\n";
-    return 2;
-  } catch (const std::bad_alloc&) {
-    const std::string nx = task == Task::Quantum ? ", --nx " + std::to_string(options.nx) : "";
-    std::cerr << name << ": out of memory for --samples " << options.samples
-              << " (and as many test samples), --batch " << options.batch << ", --steps "
-              << options.time.steps << nx << ", --threads " << options.threads
-              << "; expected sizes whose data and trajectories fit in memory\n";
-    return 1;
-  } catch (const std::exception& e) {
-    std::cerr << name << ": " << e.what() << "\n";
-    return 1;
-  }
+  const int code = [&] {
+    try {
+      if (!parse_task_options(task, argc, argv, options)) return 0;  // --help
+    } catch (const InvalidArgument& e) {
+      std::cerr << name << ": " << e.what() << "\n";
+      return 2;
+    }
+    try {
+      return options.use_float ? body.template operator()<float>(options)
+                               : body.template operator()<double>(options);
+    } catch (const InvalidArgument& e) {
+      std::cerr << name << ": " << e.what() << "\n";
+      return 2;
+    } catch (const std::bad_alloc&) {
+      const std::string nx = task == Task::Quantum ? ", --nx " + std::to_string(options.nx) : "";
+      std::cerr << name << ": out of memory for --samples " << options.samples
+                << " (and as many test samples), --batch " << options.batch << ", --steps "
+                << options.time.steps << nx << ", --threads " << options.threads
+                << "; expected sizes whose data and trajectories fit in memory\n";
+      return 1;
+    } catch (const std::exception& e) {
+      std::cerr << name << ": " << e.what() << "\n";
+      return 1;
+    }
+  }();
+  return with_streams_checked(name, code);
 }
 
 }  // namespace sbptt::examples

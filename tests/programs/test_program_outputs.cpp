@@ -158,6 +158,19 @@ TEST_CASE("a file beyond a file-size limit is an error naming it, not a silent d
   }
 }
 
+TEST_CASE("output cut short by a file-size limit ends with exit 1, not 0", "[programs]") {
+  // The progress lines of 2000 epochs (about 12 KiB) into a file limited to 4 KiB (8 blocks
+  // of dash's 512 bytes, or of bash's 1024): the run's own log, as `reproduce` keeps it
+  // (runs/<name>.log), ended early with exit 0.
+  const Outcome whole = launch("toy", "--epochs 2000");
+  REQUIRE(whole.status == 0);
+  const Outcome r = launch("toy", "--epochs 2000", "ulimit -f 8; ");
+  INFO(r.output);
+  CHECK(r.output.size() <= 8192);
+  CHECK(r.output.size() < whole.output.size());
+  CHECK(r.status == 1);
+}
+
 TEST_CASE("a name too long for its temporary file fails before training", "[programs]") {
   // 234 bytes is a legal name, but not with the temporary suffix added beside it.
   const fs::path params = scratch(std::string(234, 'p'));

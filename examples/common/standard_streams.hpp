@@ -1,0 +1,23 @@
+#pragma once
+// A program's printed output is part of its work: the log of a run that a full disk or a
+// file-size limit (SIGXFSZ ignored: file_size_limit.hpp) cut short must not end with exit 0,
+// or `reproduce` would keep a truncated runs/<name>.log as a finished run's.
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+
+namespace sbptt::examples {
+
+/// `code`, or 1 in its place if it is 0 and a write to stdout or stderr failed; says so on
+/// stderr, which still reaches the user when only stdout failed.
+inline int with_streams_checked(const char* name, int code) {
+  errno = 0;
+  const bool flushed = std::fflush(stdout) == 0;
+  const int error = errno;
+  if (flushed && !std::ferror(stdout) && !std::ferror(stderr)) return code;
+  std::fprintf(stderr, "%s: standard output or standard error was not written in full%s%s\n",
+               name, error != 0 ? ": " : "", error != 0 ? std::strerror(error) : "");
+  return code == 0 ? 1 : code;
+}
+
+}  // namespace sbptt::examples

@@ -65,7 +65,7 @@ public:
   CLI::Option* number(const std::string& flag, double& target, double low, double high,
                       const std::string& meaning) {
     return value(flag, "X",
-                 detail::concat(meaning, "; a number in [", shown(low), ", ", shown(high), "]"),
+                 detail::concat(meaning, "; a number in ", range_text(low, high)),
                  shown(target), [&target, flag, low, high](const std::string& text) {
                    target = parse_number(flag, text, low, high);
                  });

@@ -20,6 +20,11 @@ namespace sbptt::examples {
   return text;
 }
 
+/// "[low, high]", as the help text and the errors of a number flag state its range.
+[[nodiscard]] inline std::string range_text(double low, double high) {
+  return "[" + shown(low) + ", " + shown(high) + "]";
+}
+
 /// `text` without the one leading '+' that the files accept (core/number_text.hpp) and
 /// from_chars does not; "++1" and "+-1" keep theirs, and are refused.
 [[nodiscard]] inline std::string_view without_plus(std::string_view text) {
@@ -57,13 +62,15 @@ namespace sbptt::examples {
   const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
   const bool whole = !digits.empty() && end == digits.data() + digits.size();
   const auto out_of_range = [&] {
-    return InvalidArgument(detail::concat(flag, " ", text, " is out of range; expected a finite "
-                                                          "number in [", shown(low), ", ", shown(high), "]"));
+    return InvalidArgument(detail::concat(flag, " ", text,
+                                          " is out of range; expected a finite number in ",
+                                          range_text(low, high)));
   };
   if (error == std::errc::result_out_of_range && whole) throw out_of_range();
   if (error != std::errc() || !whole)
-    throw InvalidArgument(detail::concat(flag, " '", text, "' is not a number; expected a number "
-                                                           "in [", shown(low), ", ", shown(high), "]"));
+    throw InvalidArgument(detail::concat(flag, " '", text,
+                                         "' is not a number; expected a number in ",
+                                         range_text(low, high)));
   if (!std::isfinite(value) || value < low || value > high) throw out_of_range();
   return value;
 }

@@ -116,8 +116,8 @@ inline long whole_steps(double horizon, double dt, const std::string& flags) {
 inline double derived(const char* name, double value, double low, double high,
                       const std::string& flags) {
   detail::require(value >= low && value <= high, flags, ": ", name, " = ", shown(value),
-                  " is out of range; expected ", name, " in [", shown(low), ", ", shown(high),
-                  "], as for --", name);
+                  " is out of range; expected ", name, " in ", range_text(low, high), ", as for --",
+                  name);
   return value;
 }
 
@@ -149,8 +149,8 @@ inline void require_float_range(const char* flag, double value) {
   constexpr double low = std::numeric_limits<float>::min();
   constexpr double high = std::numeric_limits<float>::max();
   detail::require(value >= low && value <= high, flag, " ", shown(value),
-                  " does not fit --float; expected a number in [", shown(low), ", ", shown(high),
-                  "] with --float");
+                  " does not fit --float; expected a number in ", range_text(low, high),
+                  " with --float");
 }
 
 }  // namespace detail_task
@@ -226,16 +226,15 @@ inline void require_float_range(const char* flag, double value) {
   } else {
     cli.value("--dt", "X",
               detail::concat("time step; alone it keeps T, which must then be a whole number of "
-                             "steps; a number in [", shown(limits::min_dt), ", ",
-                             shown(limits::max_dt), "]"),
+                             "steps; a number in ", range_text(limits::min_dt, limits::max_dt)),
               task == Task::Mujoco ? "the model's timestep" : shown(paper.dt),
               [&](const std::string& text) {
                 dt = parse_number("--dt", text, limits::min_dt, limits::max_dt);
               });
     cli.value("--T", "X",
               detail::concat("horizon T = steps · dt; alone it keeps dt (a whole number of steps, "
-                             "at most ", many, "); a number in [", shown(limits::min_horizon),
-                             ", ", shown(limits::max_horizon), "]"),
+                             "at most ", many, "); a number in ",
+                             range_text(limits::min_horizon, limits::max_horizon)),
               task == Task::Mujoco ? "steps times dt" : shown(paper.horizon()),
               [&](const std::string& text) {
                 horizon = parse_number("--T", text, limits::min_horizon, limits::max_horizon);

@@ -422,10 +422,14 @@ TEST_CASE("run: a checkpoint past the epochs asked for is refused before any wor
   settings.epochs = 4;
   settings.checkpoint = checkpoint.string();
   settings.log_csv = log.string();
-  // on_start: the epochs done when the run starts, after every check.
-  std::vector<long> starts;
+  // on_start: after every check and the resume, before the first epoch, with the epochs done.
+  std::vector<std::string> calls;
   RunCallbacks callbacks;
-  callbacks.on_start = [&](long epoch) { starts.push_back(epoch); };
+  callbacks.on_resume = [&](long epoch) { calls.push_back("resume " + std::to_string(epoch)); };
+  callbacks.on_start = [&](long epoch) { calls.push_back("start " + std::to_string(epoch)); };
+  callbacks.on_epoch = [&](const EpochRecord& r) {
+    calls.push_back("epoch " + std::to_string(r.epoch));
+  };
   Setup<double> first(Method::Regular);
   REQUIRE(run_training(first.trainer, train, test, settings, callbacks).end ==
           RunEnd::Finished);
@@ -445,7 +449,8 @@ TEST_CASE("run: a checkpoint past the epochs asked for is refused before any wor
   Setup<double> same(Method::Regular);
   settings.epochs = 4;
   const auto result = run_training(same.trainer, train, test, settings, callbacks);
-  CHECK(starts == std::vector<long>{0, 4});
+  CHECK(calls == std::vector<std::string>{"start 0", "epoch 1", "epoch 2", "epoch 3", "epoch 4",
+                                          "resume 4", "start 4"});
   CHECK(result.resumed_from == 4);
   CHECK(result.epochs == 4);
   CHECK(same.policy.params() == first.policy.params());

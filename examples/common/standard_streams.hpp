@@ -11,9 +11,8 @@ namespace sbptt::examples {
 /// `code`, or 1 in its place if it is 0 and a write to stdout or stderr failed; says so on
 /// stderr, which still reaches the user when only stdout failed.
 inline int with_streams_checked(const char* name, int code) {
-  errno = 0;
   const bool flushed = std::fflush(stdout) == 0;
-  const int error = errno;
+  const int error = flushed ? 0 : errno;
   if (flushed && !std::ferror(stdout) && !std::ferror(stderr)) return code;
   std::fprintf(stderr, "%s: standard output or standard error was not written in full%s%s\n",
                name, error != 0 ? ": " : "", error != 0 ? std::strerror(error) : "");

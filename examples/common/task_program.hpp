@@ -4,7 +4,8 @@
 // log, progress line and non-finite handling. Each program only builds its simulator,
 // objective, controller and initial states.
 //
-// Exit codes: 0 success, 1 error (unreadable file, out of memory, ...), 2 bad flags, 3 a
+// Exit codes: 0 success, 1 error (unreadable file, out of memory, stdout or stderr not written
+// in full, ...), 2 bad flags, 3 a
 // non-finite value stopped training (--save-params still saves the parameters the trainer rolled
 // back to: those of the last logged epoch, or the initial ones), 128 + the signal: SIGINT or
 // SIGTERM stopped training after the epoch it came in (its log row, checkpoint and parameters
@@ -206,18 +207,23 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                  o.checkpoint.c_str());
   };
   // Printed once run_training has checked everything: a refused checkpoint costs no
-  // evaluation.
+  // evaluation. The stop handlers come after it, so that Ctrl-C still ends the evaluation at
+  // once, as it ends any work before the first epoch.
   callbacks.on_start = [&](long epoch) {
     const double loss = static_cast<double>(trainer.engine().evaluate(data.test));
     if (epoch == 0) {
       std::fprintf(stderr, "%s: initial test loss %.6g\n", name, loss);
     } else {
-      std::fprintf(stderr, "%s: test loss after epoch %ld %.6g\n", name, epoch, loss);
+      std::fprintf(stderr, "%s: test loss of the resumed parameters %.6g\n", name, loss);
     }
+    // Not as an event of epoch `epoch`: a resumed run's last epoch may not have been evaluated.
     if (const auto& where = trainer.engine().forward_non_finite())
-      std::fprintf(stderr, "%s: warning: the %s parameters give a %s\n", name,
-                   epoch == 0 ? "initial" : "resumed",
-                   describe(NonFiniteEvent{epoch, -1, *where, Phase::TestEvaluation}).c_str());
+      std::fprintf(stderr, "%s: warning: the %s parameters give a non-finite %s (%s) in the test "
+                           "set%s\n",
+                   name, epoch == 0 ? "initial" : "resumed",
+                   std::string(to_string(where->quantity)).c_str(),
+                   detail::concat(where->value).c_str(), describe_where(*where).c_str());
+    for (const int signal : {SIGINT, SIGTERM}) std::signal(signal, detail_task::request_stop);
   };
   callbacks.on_non_finite = [&](const NonFiniteEvent& event, bool skipped) {
     if (skipped && ++skips > shown_skips) return;
@@ -236,7 +242,6 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                    r.seconds);
   };
   callbacks.should_stop = [](const EpochRecord&) { return detail_task::stop_signal != 0; };
-  for (const int signal : {SIGINT, SIGTERM}) std::signal(signal, detail_task::request_stop);
   const RunResult<Scalar> result = run_training(trainer, data.train, data.test, run, callbacks);
   for (const int signal : {SIGINT, SIGTERM}) std::signal(signal, SIG_DFL);
   if (skips > shown_skips)

@@ -3,8 +3,8 @@
 // too long, one file under two names), links and permissions survive, and a run killed with
 // SIGKILL at random moments and rerun with --checkpoint ends bit for bit as an uninterrupted one.
 //
-// SBPTT_EXAMPLES_DIR (environment) overrides the programs' directory, to run these tests
-// against other builds of the programs (e.g. those from before the fixes).
+// SBPTT_EXAMPLES_DIR (environment) runs these tests against other builds of the programs
+// (`examples_dir()`, program_runner.hpp).
 #include <catch2/catch.hpp>
 
 #include <signal.h>
@@ -14,6 +14,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -160,8 +161,8 @@ TEST_CASE("a file beyond a file-size limit is an error naming it, not a silent d
 
 TEST_CASE("output cut short by a file-size limit ends with exit 1, not 0", "[programs]") {
   // The progress lines of 2000 epochs (about 12 KiB) into a file limited to 4 KiB (8 blocks
-  // of dash's 512 bytes, or of bash's 1024): the run's own log, as `reproduce` keeps it
-  // (runs/<name>.log), ended early with exit 0.
+  // of dash's 512 bytes, or of bash's 1024), as `reproduce` keeps a run's log
+  // (runs/<name>.log). Before: the log ended early and the exit code was 0.
   const Outcome whole = launch("toy", "--epochs 2000");
   REQUIRE(whole.status == 0);
   const Outcome r = launch("toy", "--epochs 2000", "ulimit -f 8; ");
@@ -169,6 +170,22 @@ TEST_CASE("output cut short by a file-size limit ends with exit 1, not 0", "[pro
   CHECK(r.output.size() <= 8192);
   CHECK(r.output.size() < whole.output.size());
   CHECK(r.status == 1);
+}
+
+TEST_CASE("stdout that cannot be written: exit 1, and stderr gives the reason", "[programs]") {
+  // stderr into the pipe, stdout into /dev/full (every write fails with ENOSPC).
+  const std::string command = examples_dir() + "/toy --epochs 5 2>&1 >/dev/full";
+  FILE* pipe = popen(command.c_str(), "r");
+  REQUIRE(pipe != nullptr);
+  std::string output;
+  char buffer[4096];
+  while (std::fgets(buffer, sizeof buffer, pipe)) output += buffer;
+  const int status = pclose(pipe);
+  INFO(output);
+  REQUIRE(WIFEXITED(status));
+  CHECK(WEXITSTATUS(status) == 1);
+  CHECK(contains(output, "toy: standard output or standard error was not written in full: "
+                         "No space left on device"));
 }
 
 TEST_CASE("a name too long for its temporary file fails before training", "[programs]") {

@@ -387,7 +387,7 @@ TEST_CASE("a checkpoint past --epochs is refused before the initial evaluation; 
   INFO(longer.output);
   REQUIRE(longer.status == 0);
   CHECK(longer.output.find("initial test loss") == std::string::npos);
-  const std::string at_start = "test loss after epoch 2 ";
+  const std::string at_start = "test loss of the resumed parameters ";
   const auto resumed = longer.output.find(at_start);
   REQUIRE(resumed != std::string::npos);
   CHECK(longer.output.find("resuming after epoch 2") < resumed);

@@ -139,7 +139,8 @@ public:
         // partial one too made GCC 12's code 10% slower, 443–449 against 396–410 ns for
         // 100 × 100 (docs/benchmark-runs.md, fifteenth run). At 8 columns a partial panel pairs
         // too: the quantum CNN's 60 rows (4 panels, the last of 12 rows) went as a pair and two
-        // lone panels, 60 × 180 × 56 in float 8425 ns against 7860 paired (twenty-third run).
+        // lone panels, 60 × 180 × 56 in float 8425 ns against 7860 paired (twenty-third run;
+        // measured with AVX-512 only, the one x86 target with 8-column blocks).
         constexpr bool last_three = 3 * width + 4 < EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS;
         const Index paired = last_three && panels >= 3 && panels % 2 == 1 ? panels - 3 : panels;
         const Index pairs_end = width >= 8 ? panels : full_panels;
@@ -317,7 +318,8 @@ private:
   /// made the quantum CNN's first product (60 × 6 × 128, float) take 1187–1306 ns against
   /// 694–702 (docs/benchmark-runs.md, seventeenth run). Always inlined: GCC 12 called it from
   /// the blocks of 3 panels, the accumulator going through memory at each of the 24 calls
-  /// (cart pole 4's R epoch 3–8% slower; docs/benchmark-runs.md, twenty-third run).
+  /// (cart pole 4's R epoch, best of 40, 34.5–36.3 ms against 31.8–33.0 inlined, alternating
+  /// runs outside the machine's dips; docs/benchmark-runs.md, twenty-third run).
   SBPTT_ALWAYS_INLINE static void store_rows(Scalar* to, Index count, const Packet& value) {
     if (count == kLanes) {
       Eigen::internal::pstoreu(to, value);

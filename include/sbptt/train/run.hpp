@@ -64,16 +64,16 @@ struct RunSettings {
 /// Hooks called during a run (each may be empty).
 struct RunCallbacks {
   std::function<void(long epoch)> on_resume{};  ///< a checkpoint of `epoch` epochs was loaded
-  /// Once every setting, output and checkpoint has been checked (and a checkpoint resumed),
-  /// before the first epoch: `epoch` is the number of epochs already done (0 for a new run).
-  /// Work a program does for the run itself (an evaluation to print) belongs here, so that a
-  /// refusal comes before it.
-  std::function<void(long epoch)> on_start{};
   std::function<void(const EpochRecord&)> on_epoch{};  ///< after the row of each epoch is logged
   /// Each non-finite event; `skipped` says that the batch was skipped and training goes on.
   std::function<void(const NonFiniteEvent&, bool skipped)> on_non_finite{};
   /// Asked after each epoch; true ends the run (`RunEnd::Requested`) after its checkpoint.
   std::function<bool(const EpochRecord&)> should_stop{};
+  /// Once every setting, output and checkpoint has been checked (and a checkpoint resumed),
+  /// before the first epoch: `epoch` is the number of epochs already done (0 for a new run).
+  /// Work a program does for the run itself (an evaluation to print) belongs here, so that a
+  /// refusal comes before it. The log is open by then (a new run's holds its header).
+  std::function<void(long epoch)> on_start{};
 };
 
 /// How a run ended.

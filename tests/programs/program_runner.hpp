@@ -27,14 +27,16 @@ inline std::string examples_dir() {
 
 struct Result {
   int status = -1;
-  std::string output;  // stdout and stderr
+  std::string output;  // what reaches the pipe: stdout and stderr unless redirected
 };
 
-/// Runs `program` through the shell; `shell_prefix` (e.g. a ulimit) goes before it.
+/// Runs `program` through the shell; `shell_prefix` (e.g. a ulimit) goes before it and
+/// `redirections` after it: by default both streams are read.
 inline Result run(const std::string& program, const std::string& arguments,
-           const std::string& shell_prefix = "") {
+                  const std::string& shell_prefix = "",
+                  const std::string& redirections = "2>&1") {
   const std::string command =
-      shell_prefix + examples_dir() + "/" + program + " " + arguments + " 2>&1";
+      shell_prefix + examples_dir() + "/" + program + " " + arguments + " " + redirections;
   Result result;
   FILE* pipe = popen(command.c_str(), "r");
   REQUIRE(pipe != nullptr);

@@ -174,18 +174,11 @@ TEST_CASE("output cut short by a file-size limit ends with exit 1, not 0", "[pro
 
 TEST_CASE("stdout that cannot be written: exit 1, and stderr gives the reason", "[programs]") {
   // stderr into the pipe, stdout into /dev/full (every write fails with ENOSPC).
-  const std::string command = examples_dir() + "/toy --epochs 5 2>&1 >/dev/full";
-  FILE* pipe = popen(command.c_str(), "r");
-  REQUIRE(pipe != nullptr);
-  std::string output;
-  char buffer[4096];
-  while (std::fgets(buffer, sizeof buffer, pipe)) output += buffer;
-  const int status = pclose(pipe);
-  INFO(output);
-  REQUIRE(WIFEXITED(status));
-  CHECK(WEXITSTATUS(status) == 1);
-  CHECK(contains(output, "toy: standard output or standard error was not written in full: "
-                         "No space left on device"));
+  const auto r = sbptt::testing::run("toy", "--epochs 5", "", "2>&1 >/dev/full");
+  INFO(r.output);
+  CHECK(r.status == 1);
+  CHECK(contains(r.output, "toy: standard output or standard error was not written in full: "
+                           "No space left on device"));
 }
 
 TEST_CASE("a name too long for its temporary file fails before training", "[programs]") {

@@ -142,8 +142,9 @@ public:
         // lone panels, 60 × 180 × 56 in float 8425 ns against 7860 paired (twenty-third run;
         // measured with AVX-512 only, the one x86 target with 8-column blocks).
         constexpr bool last_three = 3 * width + 4 < EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS;
-        const Index paired = last_three && panels >= 3 && panels % 2 == 1 ? panels - 3 : panels;
-        const Index pairs_end = width >= 8 ? panels : full_panels;
+        const Index before_three =
+            last_three && panels >= 3 && panels % 2 == 1 ? panels - 3 : panels;
+        const Index paired = width >= 8 ? before_three : std::min(before_three, full_panels);
         // Four panels a block where their accumulators, weights and a broadcast fit, with no
         // register spare (half blocks with AVX-512): each broadcast of X then feeds twice the
         // multiply-adds (100 × 100 × 4 in float: 354.5–358.5 ns against 379.6–392.6;
@@ -152,7 +153,7 @@ public:
           for (; p + 4 <= full_panels && p + 4 <= paired; p += 4)
             block<4, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
         }
-        for (; p + 2 <= pairs_end && p + 2 <= paired; p += 2)
+        for (; p + 2 <= paired; p += 2)
           block<2, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
         if (last_three && p + 3 == panels) {
           block<3, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);

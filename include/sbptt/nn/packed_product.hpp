@@ -139,8 +139,9 @@ public:
         // partial one too made GCC 12's code 10% slower, 443–449 against 396–410 ns for
         // 100 × 100 (docs/benchmark-runs.md, fifteenth run). At 8 columns a partial panel pairs
         // too: the quantum CNN's 60 rows (4 panels, the last of 12 rows) went as a pair and two
-        // lone panels, 60 × 180 × 56 in float 8425 ns against 7860 paired (twenty-third run;
-        // measured with AVX-512 only, the one x86 target with 8-column blocks).
+        // lone panels, 60 × 180 × 56 in float 8425 ns against 7860 paired
+        // (docs/benchmark-runs-intel.md, twenty-third run; measured with AVX-512 only, the one
+        // x86 target with 8-column blocks).
         constexpr bool last_three = 3 * width + 4 < EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS;
         const Index before_three =
             last_three && panels >= 3 && panels % 2 == 1 ? panels - 3 : panels;

@@ -19,12 +19,16 @@
 //   GFLOP/s      GFLOP / time; %peak: that over the peak of this run (an n×n Eigen matrix
 //                product on one core, same scalar, best of several sizes and repeats)
 //   ms Nt, xNt   the same epoch with --threads N threads, and the speed-up over 1 thread
+//                (the 1- and N-thread epochs timed in turn, so that both see the same minute)
 //   rt ns        right after those epochs, the round trip of a cache line between two
 //                threads (bench/rows.hpp): the machine's cost of a hand-off, which varies
 //                (docs/benchmark-runs.md, eleventh run); "-" with one thread. The
 //                two-thread verdicts add how much slower the main thread reads lines the
 //                other core wrote than its own (about 1: the cores share their last-level
-//                cache; CSV other_core_read_ratio)
+//                cache; CSV other_core_read_ratio) and how many times as long two 1-thread
+//                epochs take when run at once, each on its own thread, as one alone (CSV
+//                copies_ratio): what the host gives two busy cores, so that a two-thread
+//                speed-up above 2 / that ratio cannot be had here
 //   sim ns       one simulator step plus one full VJP (Aᵀλ and Bᵀλ) per sample, on the
 //                states of the last training batch (the per-sample work of the engine;
 //                for a BatchSimulator, the batched calls' time over the batch size)

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <barrier>
 #include <chrono>
 #include <cstdio>
 #include <exception>
@@ -44,6 +45,7 @@ struct RowResult {
   double ms_epoch = 0, gflop = 0, ms_threads = 0, sim_ns = 0;
   double round_trip_ns = 0;  ///< `cross_core_round_trip_ns` after the N-thread epochs (0: none)
   double other_core_read_ratio = 0;  ///< `other_core_read_ratio()` after them (0: none)
+  double copies_ratio = 0;  ///< `concurrent_copies_ratio` of the 1-thread epoch (0: none)
   double trajectory_bytes = 0, rss_kib = 0;
   int ok = 0;
   char error[200] = {};
@@ -58,6 +60,14 @@ inline double now_ms() {
   return std::chrono::duration<double, std::milli>(
              std::chrono::steady_clock::now().time_since_epoch())
       .count();
+}
+
+/// Milliseconds that `work()` takes.
+template <class Work>
+double timed_ms(Work&& work) {
+  const double start = now_ms();
+  work();
+  return now_ms() - start;
 }
 
 /// Best GFLOP/s of an n×n product on this thread (Eigen without threads: one core).
@@ -196,7 +206,48 @@ double simulator_ns(const Sim& sim, const Engine& engine) {
   return best * 1e6 / static_cast<double>(tr.steps() * tr.batch());
 }
 
-/// One row: warm-up + timed epochs at 1 and at N threads.
+/// How many times as long the slowest of `copies` threads takes for an epoch when each runs
+/// one of its own at once, as one thread takes alone: best of `repeats` rounds of each, after a
+/// warm-up, the alone and together rounds taken in turn so that both see the machine of the
+/// same minute (its speed drifts: docs/benchmark-runs-intel.md). The copies share nothing, so
+/// this is what the host gives that many busy cores, whatever the engine does: the same epoch
+/// split perfectly over the threads would be at best copies / ratio times faster. `copy(rounds)`
+/// runs on each copy's thread: it builds that copy's work there (its buffers then belong to
+/// that thread, as the engine's do) and hands `rounds` a callable that runs one epoch. The
+/// threads wait for a round in a `std::barrier`, asleep, so that the copy that runs alone has
+/// its core and no other thread spinning beside it.
+template <class Copy>
+double concurrent_copies_ratio(Index copies, int repeats, Copy&& copy) {
+  const auto rounds = static_cast<std::size_t>(repeats);
+  std::vector<double> alone(rounds);
+  std::vector<std::vector<double>> together(static_cast<std::size_t>(copies),
+                                            std::vector<double>(rounds));
+  std::barrier round_start(static_cast<std::ptrdiff_t>(copies));
+  const auto run_copy = [&](Index c) {
+    copy([&](auto&& epoch) {
+      epoch();  // warm-up: buffers sized, pages touched
+      for (std::size_t round = 0; round < rounds; ++round) {
+        round_start.arrive_and_wait();
+        if (c == 0) alone[round] = timed_ms(epoch);
+        round_start.arrive_and_wait();
+        together[static_cast<std::size_t>(c)][round] = timed_ms(epoch);
+      }
+    });
+  };
+  std::vector<std::thread> others;
+  for (Index c = 1; c < copies; ++c) others.emplace_back(run_copy, c);
+  run_copy(0);
+  for (auto& thread : others) thread.join();
+  double best_together = 1e300;
+  for (std::size_t round = 0; round < rounds; ++round) {
+    double slowest = 0;
+    for (const auto& times : together) slowest = std::max(slowest, times[round]);
+    best_together = std::min(best_together, slowest);
+  }
+  return best_together / *std::min_element(alone.begin(), alone.end());
+}
+
+/// One row: warm-up + timed epochs at 1 and at N threads, then the host's measures of threads.
 template <class Sim, class Objective>
 RowResult measure(const Settings& settings, const Sim& sim,
                   const Network<typename Sim::Scalar>& initial, const Objective& objective,
@@ -204,7 +255,8 @@ RowResult measure(const Settings& settings, const Sim& sim,
                   const Matrix<typename Sim::Scalar>& test, Method method) {
   using S = typename Sim::Scalar;
   RowResult r;
-  for (const Index threads : {Index{1}, settings.threads}) {
+  // A trainer of the row on `threads` threads, with its own copy of the network, for `use`.
+  const auto with_trainer = [&](Index threads, auto&& use) {
     Network<S> net = initial;
     CountingNetwork<S> counted(net);
     sbptt::TrainerOptions options;
@@ -213,32 +265,45 @@ RowResult measure(const Settings& settings, const Sim& sim,
     options.threads = threads;
     sbptt::Trainer trainer(sim, counted, objective, steps,
                            sbptt::Adam<S>(sbptt::AdamOptions<S>{S(1e-3)}), options);
-    trainer.train_epoch(train, test);  // warm-up: buffers sized, pages touched
-    counted.reset();
-    double best = 1e300;
-    for (int repeat = 0; repeat < settings.repeats; ++repeat) {
-      const double start = now_ms();
-      trainer.train_epoch(train, test);
-      best = std::min(best, now_ms() - start);
-    }
-    if (threads == 1) {
-      r.ms_epoch = best;
+    use(trainer, counted);
+  };
+  // The 1-thread and the N-thread epochs in turn, so that both see the machine of the same
+  // minute: its speed drifts (docs/benchmark-runs-intel.md), and timed one after the other the
+  // speed-up of a row whose 1-thread epochs fell in a slow minute came out above 2.
+  with_trainer(1, [&](auto& alone, CountingNetwork<S>& counted) {
+    alone.train_epoch(train, test);  // warm-up: buffers sized, pages touched
+    // The row's memory is one trainer's, not both's: read before the second is built, after
+    // the warm-up has sized the buffers (the engine allocates nothing after its first batch:
+    // tests/test_bptt_no_malloc.cpp).
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    r.rss_kib = static_cast<double>(usage.ru_maxrss);
+    with_trainer(settings.threads, [&](auto& threaded, CountingNetwork<S>&) {
+      const bool both = settings.threads > 1;
+      if (both) threaded.train_epoch(train, test);
+      counted.reset();
+      r.ms_epoch = r.ms_threads = 1e300;
+      for (int repeat = 0; repeat < settings.repeats; ++repeat) {
+        r.ms_epoch = std::min(r.ms_epoch, timed_ms([&] { alone.train_epoch(train, test); }));
+        if (both)
+          r.ms_threads =
+              std::min(r.ms_threads, timed_ms([&] { threaded.train_epoch(train, test); }));
+      }
+      if (!both) r.ms_threads = r.ms_epoch;
       r.gflop = 2.0 * static_cast<double>(counted.macs()) / settings.repeats / 1e9;
-      r.sim_ns = simulator_ns(sim, trainer.engine());
-      r.trajectory_bytes = static_cast<double>(trainer.engine().trajectory().bytes());
-    } else {
-      r.ms_threads = best;
-    }
-    if (settings.threads == 1) r.ms_threads = r.ms_epoch;
-    if (settings.threads == 1) break;
-  }
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  r.rss_kib = static_cast<double>(usage.ru_maxrss);
-  // After the RSS, whose peak would otherwise include the 4 MiB of the reads.
+      r.sim_ns = simulator_ns(sim, alone.engine());
+      r.trajectory_bytes = static_cast<double>(alone.engine().trajectory().bytes());
+    });
+  });
   if (settings.threads > 1) {
     r.round_trip_ns = cross_core_round_trip_ns();
     r.other_core_read_ratio = other_core_read_ratio();
+    r.copies_ratio = concurrent_copies_ratio(
+        settings.threads, settings.repeats, [&](auto&& rounds) {
+          with_trainer(1, [&](auto& trainer, CountingNetwork<S>&) {
+            rounds([&] { trainer.train_epoch(train, test); });
+          });
+        });
   }
   r.ok = 1;
   return r;

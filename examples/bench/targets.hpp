@@ -74,9 +74,11 @@ inline void summarize(const std::vector<Row>& rows, const double peak[2], Index 
         const double speedup = r->result.ms_epoch / r->result.ms_threads;
         std::printf("  %-9s float %s: 2 threads %.3fx faster than 1 (target >= %.2f): %s "
                     "(cross-core round trip %.0f ns; the other core's lines read %.1fx as "
-                    "slowly as this one's)\n",
+                    "slowly as this one's; two 1-thread epochs at once took %.2fx as long as "
+                    "one alone, so at most %.2fx)\n",
                     task, method, speedup, target, verdict(speedup >= target),
-                    r->result.round_trip_ns, r->result.other_core_read_ratio);
+                    r->result.round_trip_ns, r->result.other_core_read_ratio,
+                    r->result.copies_ratio, 2 / r->result.copies_ratio);
       }
     }
   } else {
@@ -98,7 +100,7 @@ inline void write_csv(const Settings& settings, const std::vector<Row>& rows,
   std::string text =
       "task,scalar,method,nx,steps,params,ms_epoch,gflop_epoch,gflops,peak_gflops,"
       "fraction_of_peak,threads,ms_epoch_threads,speedup_threads,round_trip_ns,"
-      "other_core_read_ratio,sim_ns_per_sample_step,"
+      "other_core_read_ratio,copies_ratio,sim_ns_per_sample_step,"
       "trajectory_bytes_per_batch,peak_rss_kib\n";
   char line[512];
   for (const auto& row : rows) {
@@ -108,12 +110,12 @@ inline void write_csv(const Settings& settings, const std::vector<Row>& rows,
     const double gflops = r.gflop / (r.ms_epoch / 1e3);
     std::snprintf(line, sizeof line,
                   "%s,%s,%s,%lld,%lld,%lld,%.3f,%.6f,%.3f,%.3f,%.4f,%lld,%.3f,%.3f,%.0f,%.2f,"
-                  "%.1f,%.0f,%.0f\n",
+                  "%.3f,%.1f,%.0f,%.0f\n",
                   row.task.c_str(), row.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
                   r.params, r.ms_epoch, r.gflop, gflops, p, gflops / p,
                   static_cast<long long>(settings.threads), r.ms_threads,
-                  r.ms_epoch / r.ms_threads, r.round_trip_ns, r.other_core_read_ratio, r.sim_ns,
-                  r.trajectory_bytes, r.rss_kib);
+                  r.ms_epoch / r.ms_threads, r.round_trip_ns, r.other_core_read_ratio,
+                  r.copies_ratio, r.sim_ns, r.trajectory_bytes, r.rss_kib);
     text += line;
   }
   sbptt::write_file_atomically(settings.csv, text);

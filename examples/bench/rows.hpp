@@ -278,22 +278,28 @@ RowResult measure(const Settings& settings, const Sim& sim,
     rusage usage{};
     getrusage(RUSAGE_SELF, &usage);
     r.rss_kib = static_cast<double>(usage.ru_maxrss);
-    with_trainer(settings.threads, [&](auto& threaded, CountingNetwork<S>&) {
-      const bool both = settings.threads > 1;
-      if (both) threaded.train_epoch(train, test);
+    // `threaded`: the N-thread trainer, or null with one thread.
+    const auto time_epochs = [&](auto* threaded) {
+      if (threaded != nullptr) threaded->train_epoch(train, test);  // its warm-up
       counted.reset();
       r.ms_epoch = r.ms_threads = 1e300;
       for (int repeat = 0; repeat < settings.repeats; ++repeat) {
         r.ms_epoch = std::min(r.ms_epoch, timed_ms([&] { alone.train_epoch(train, test); }));
-        if (both)
+        if (threaded != nullptr)
           r.ms_threads =
-              std::min(r.ms_threads, timed_ms([&] { threaded.train_epoch(train, test); }));
+              std::min(r.ms_threads, timed_ms([&] { threaded->train_epoch(train, test); }));
       }
-      if (!both) r.ms_threads = r.ms_epoch;
+      if (threaded == nullptr) r.ms_threads = r.ms_epoch;
       r.gflop = 2.0 * static_cast<double>(counted.macs()) / settings.repeats / 1e9;
       r.sim_ns = simulator_ns(sim, alone.engine());
       r.trajectory_bytes = static_cast<double>(alone.engine().trajectory().bytes());
-    });
+    };
+    if (settings.threads > 1) {
+      with_trainer(settings.threads,
+                   [&](auto& threaded, CountingNetwork<S>&) { time_epochs(&threaded); });
+    } else {
+      time_epochs(static_cast<decltype(&alone)>(nullptr));
+    }
   });
   if (settings.threads > 1) {
     r.round_trip_ns = cross_core_round_trip_ns();

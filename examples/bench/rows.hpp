@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <exception>
 #include <functional>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -255,60 +256,55 @@ RowResult measure(const Settings& settings, const Sim& sim,
                   const Matrix<typename Sim::Scalar>& test, Method method) {
   using S = typename Sim::Scalar;
   RowResult r;
-  // A trainer of the row on `threads` threads, with its own copy of the network, for `use`.
-  const auto with_trainer = [&](Index threads, auto&& use) {
-    Network<S> net = initial;
-    CountingNetwork<S> counted(net);
+  const auto options_for = [&](Index threads) {
     sbptt::TrainerOptions options;
     options.method = method;
     options.batch = 8;
     options.threads = threads;
-    sbptt::Trainer trainer(sim, counted, objective, steps,
-                           sbptt::Adam<S>(sbptt::AdamOptions<S>{S(1e-3)}), options);
-    use(trainer, counted);
+    return options;
   };
+  const sbptt::Adam<S> adam(sbptt::AdamOptions<S>{S(1e-3)});  // each trainer copies it
+  // Every trainer trains a copy of the network of its own, through a counter of its own.
+  Network<S> net = initial, threaded_net = initial;
+  CountingNetwork<S> counted(net), threaded_counted(threaded_net);
+  sbptt::Trainer alone(sim, counted, objective, steps, adam, options_for(1));
+  alone.train_epoch(train, test);  // warm-up: buffers sized, pages touched
+  // The row's memory is one trainer's, not both's: read before the second is built, after the
+  // warm-up has sized the buffers (the engine allocates nothing after its first batch:
+  // tests/test_bptt_no_malloc.cpp).
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  r.rss_kib = static_cast<double>(usage.ru_maxrss);
+  std::optional<decltype(alone)> threaded;  // none with one thread
+  if (settings.threads > 1) {
+    threaded.emplace(sim, threaded_counted, objective, steps, adam,
+                     options_for(settings.threads));
+    threaded->train_epoch(train, test);  // its warm-up
+  }
   // The 1-thread and the N-thread epochs in turn, so that both see the machine of the same
   // minute: its speed drifts (docs/benchmark-runs-intel.md), and timed one after the other the
   // speed-up of a row whose 1-thread epochs fell in a slow minute came out above 2.
-  with_trainer(1, [&](auto& alone, CountingNetwork<S>& counted) {
-    alone.train_epoch(train, test);  // warm-up: buffers sized, pages touched
-    // The row's memory is one trainer's, not both's: read before the second is built, after
-    // the warm-up has sized the buffers (the engine allocates nothing after its first batch:
-    // tests/test_bptt_no_malloc.cpp).
-    rusage usage{};
-    getrusage(RUSAGE_SELF, &usage);
-    r.rss_kib = static_cast<double>(usage.ru_maxrss);
-    // `threaded`: the N-thread trainer, or null with one thread.
-    const auto time_epochs = [&](auto* threaded) {
-      if (threaded != nullptr) threaded->train_epoch(train, test);  // its warm-up
-      counted.reset();
-      r.ms_epoch = r.ms_threads = 1e300;
-      for (int repeat = 0; repeat < settings.repeats; ++repeat) {
-        r.ms_epoch = std::min(r.ms_epoch, timed_ms([&] { alone.train_epoch(train, test); }));
-        if (threaded != nullptr)
-          r.ms_threads =
-              std::min(r.ms_threads, timed_ms([&] { threaded->train_epoch(train, test); }));
-      }
-      if (threaded == nullptr) r.ms_threads = r.ms_epoch;
-      r.gflop = 2.0 * static_cast<double>(counted.macs()) / settings.repeats / 1e9;
-      r.sim_ns = simulator_ns(sim, alone.engine());
-      r.trajectory_bytes = static_cast<double>(alone.engine().trajectory().bytes());
-    };
-    if (settings.threads > 1) {
-      with_trainer(settings.threads,
-                   [&](auto& threaded, CountingNetwork<S>&) { time_epochs(&threaded); });
-    } else {
-      time_epochs(static_cast<decltype(&alone)>(nullptr));
-    }
-  });
-  if (settings.threads > 1) {
+  counted.reset();
+  r.ms_epoch = r.ms_threads = 1e300;
+  for (int repeat = 0; repeat < settings.repeats; ++repeat) {
+    r.ms_epoch = std::min(r.ms_epoch, timed_ms([&] { alone.train_epoch(train, test); }));
+    if (threaded)
+      r.ms_threads =
+          std::min(r.ms_threads, timed_ms([&] { threaded->train_epoch(train, test); }));
+  }
+  if (!threaded) r.ms_threads = r.ms_epoch;
+  r.gflop = 2.0 * static_cast<double>(counted.macs()) / settings.repeats / 1e9;
+  r.sim_ns = simulator_ns(sim, alone.engine());
+  r.trajectory_bytes = static_cast<double>(alone.engine().trajectory().bytes());
+  if (threaded) {
     r.round_trip_ns = cross_core_round_trip_ns();
     r.other_core_read_ratio = other_core_read_ratio();
-    r.copies_ratio = concurrent_copies_ratio(
-        settings.threads, settings.repeats, [&](auto&& rounds) {
-          with_trainer(1, [&](auto& trainer, CountingNetwork<S>&) {
-            rounds([&] { trainer.train_epoch(train, test); });
-          });
+    r.copies_ratio =
+        concurrent_copies_ratio(settings.threads, settings.repeats, [&](auto&& rounds) {
+          Network<S> copy_net = initial;
+          CountingNetwork<S> copy_counted(copy_net);
+          sbptt::Trainer trainer(sim, copy_counted, objective, steps, adam, options_for(1));
+          rounds([&] { trainer.train_epoch(train, test); });
         });
   }
   r.ok = 1;

@@ -12,12 +12,16 @@
 // automatic derivatives against the hand-written ones.
 //
 // Columns:
-//   ms/epoch     best of --repeats timed epochs (after one warm-up epoch), 1 thread
+//   ms/epoch     best of --repeats timed epochs (after one warm-up epoch), 1 thread; a C row
+//                also times the R epoch in turn with its own (CSV ms_epoch_regular_in_turn),
+//                and the C/R verdict is the ratio of those two
 //   GFLOP        network work of the epoch: the dense/conv multiply-adds of every forward,
 //                parameter-VJP and input-VJP call the engine made (counted at the call, 2 flops
 //                per multiply-add)
-//   GFLOP/s      GFLOP / time; %peak: that over the peak of this run (an n×n Eigen matrix
-//                product on one core, same scalar, best of several sizes and repeats)
+//   GFLOP/s      GFLOP / time
+//   peak, %peak  the row's peak GFLOP/s (an n×n Eigen matrix product on one core, same
+//                scalar, best of several sizes, timed in turn with the row's epochs so that
+//                both see the same minute), and GFLOP/s over it
 //   ms Nt, xNt   the same epoch with --threads N threads, and the speed-up over 1 thread
 //                (the 1- and N-thread epochs timed in turn, so that both see the same minute)
 //   rt ns        right after those epochs, the round trip of a cache line between two
@@ -168,10 +172,7 @@ int main(int argc, char** argv) {
       r.rss_kib = static_cast<double>(usage.ru_maxrss);
       return r;
     }).rss_kib;
-    double peak[2] = {measure_peak<float>(), measure_peak<double>()};
-    std::printf("peak (one core, Eigen n×n product): float %.1f GFLOP/s, double %.1f GFLOP/s; "
-                "RSS of an idle child %.1f MiB\n\n",
-                peak[0], peak[1], empty_rss / 1024);
+    std::printf("RSS of an idle child %.1f MiB\n\n", empty_rss / 1024);
 
     struct Job {
       std::string task, scalar;
@@ -218,9 +219,9 @@ int main(int argc, char** argv) {
                       [once] { return quantum_row<float, 256>(once, Method::Regular); }});
     }
 
-    std::printf("%-14s %-6s %-1s %4s %5s %6s %9s %7s %7s %6s %9s %5s %6s %8s %8s %7s\n",
+    std::printf("%-14s %-6s %-1s %4s %5s %6s %9s %7s %7s %6s %6s %9s %5s %6s %8s %8s %7s\n",
                 "task", "scalar", "m", "Nx", "steps", "params", "ms/epoch", "GFLOP", "GFLOP/s",
-                "%peak", ("ms " + std::to_string(settings.threads) + "t").c_str(),
+                "peak", "%peak", ("ms " + std::to_string(settings.threads) + "t").c_str(),
                 ("x" + std::to_string(settings.threads) + "t").c_str(), "rt ns", "sim ns",
                 "trajKiB", "RSS MiB");
     std::vector<Row> rows;
@@ -233,21 +234,21 @@ int main(int argc, char** argv) {
         rows.push_back(row);
         continue;
       }
-      const double p = peak[job.scalar == "float" ? 0 : 1];
       const double gflops = r.gflop / (r.ms_epoch / 1e3);
       const std::string round_trip =
           r.round_trip_ns > 0 ? std::to_string(std::lround(r.round_trip_ns)) : "-";
-      std::printf("%-14s %-6s %-1s %4lld %5lld %6lld %9.1f %7.3f %7.2f %5.1f%% %9.1f %5.2f %6s "
-                  "%8.0f %8.0f %7.1f\n",
+      std::printf("%-14s %-6s %-1s %4lld %5lld %6lld %9.1f %7.3f %7.2f %6.1f %5.1f%% %9.1f "
+                  "%5.2f %6s %8.0f %8.0f %7.1f\n",
                   job.task.c_str(), job.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
-                  r.params, r.ms_epoch, r.gflop, gflops, 100 * gflops / p, r.ms_threads,
+                  r.params, r.ms_epoch, r.gflop, gflops, r.peak_gflops,
+                  100 * gflops / r.peak_gflops, r.ms_threads,
                   r.ms_epoch / r.ms_threads, round_trip.c_str(), r.sim_ns,
                   r.trajectory_bytes / 1024, r.rss_kib / 1024);
       std::fflush(stdout);
       rows.push_back(row);
     }
-    summarize(rows, peak, settings.threads);
-    if (!settings.csv.empty()) write_csv(settings, rows, peak);
+    summarize(rows, settings.threads);
+    if (!settings.csv.empty()) write_csv(settings, rows);
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench: %s\n", e.what());

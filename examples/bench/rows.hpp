@@ -44,6 +44,8 @@ struct Settings {
 struct RowResult {
   long long nx = 0, steps = 0, params = 0;  ///< state size (Nx for quantum), horizon, θ size
   double ms_epoch = 0, gflop = 0, ms_threads = 0, sim_ns = 0;
+  double peak_gflops = 0;  ///< `measure_peak` of the row's scalar, in turn with its epochs
+  double ms_regular = 0;   ///< a C row's R epochs, in turn with its own (0: not a C row)
   double round_trip_ns = 0;  ///< `cross_core_round_trip_ns` after the N-thread epochs (0: none)
   double other_core_read_ratio = 0;  ///< `other_core_read_ratio()` after them (0: none)
   double copies_ratio = 0;  ///< `concurrent_copies_ratio` of the 1-thread epoch (0: none)
@@ -249,6 +251,13 @@ double concurrent_copies_ratio(Index copies, int repeats, Copy&& copy) {
 }
 
 /// One row: warm-up + timed epochs at 1 and at N threads, then the host's measures of threads.
+/// Everything the row's ratios compare is timed in turn, one of each per repeat, so that both
+/// sides of a ratio see the machine of the same minute: the 1- and the N-thread epochs, the
+/// peak, and for a C row the R epochs of a trainer of its own. The host's speed drifts
+/// (docs/benchmark-runs-intel.md): timed one after the other, a row whose 1-thread epochs fell
+/// in a slow minute showed 2.43× on two threads, and a peak measured at the start of a run
+/// was 131 GFLOP/s in a run whose epochs were slower than those of the next run, whose peak was
+/// 90 (twenty-sixth run).
 template <class Sim, class Objective>
 RowResult measure(const Settings& settings, const Sim& sim,
                   const Network<typename Sim::Scalar>& initial, const Objective& objective,
@@ -256,20 +265,20 @@ RowResult measure(const Settings& settings, const Sim& sim,
                   const Matrix<typename Sim::Scalar>& test, Method method) {
   using S = typename Sim::Scalar;
   RowResult r;
-  const auto options_for = [&](Index threads) {
+  const auto options_for = [&](Index threads, Method of) {
     sbptt::TrainerOptions options;
-    options.method = method;
+    options.method = of;
     options.batch = 8;
     options.threads = threads;
     return options;
   };
   const sbptt::Adam<S> adam(sbptt::AdamOptions<S>{S(1e-3)});  // each trainer copies it
   // Every trainer trains a copy of the network of its own, through a counter of its own.
-  Network<S> net = initial, threaded_net = initial;
-  CountingNetwork<S> counted(net), threaded_counted(threaded_net);
-  sbptt::Trainer alone(sim, counted, objective, steps, adam, options_for(1));
+  Network<S> net = initial, threaded_net = initial, regular_net = initial;
+  CountingNetwork<S> counted(net), threaded_counted(threaded_net), regular_counted(regular_net);
+  sbptt::Trainer alone(sim, counted, objective, steps, adam, options_for(1, method));
   alone.train_epoch(train, test);  // warm-up: buffers sized, pages touched
-  // The row's memory is one trainer's, not both's: read before the second is built, after the
+  // The row's memory is one trainer's, not all of theirs: read before the others are built, after the
   // warm-up has sized the buffers (the engine allocates nothing after its first batch:
   // tests/test_bptt_no_malloc.cpp).
   rusage usage{};
@@ -278,21 +287,28 @@ RowResult measure(const Settings& settings, const Sim& sim,
   std::optional<decltype(alone)> threaded;  // none with one thread
   if (settings.threads > 1) {
     threaded.emplace(sim, threaded_counted, objective, steps, adam,
-                     options_for(settings.threads));
+                     options_for(settings.threads, method));
     threaded->train_epoch(train, test);  // its warm-up
   }
-  // The 1-thread and the N-thread epochs in turn, so that both see the machine of the same
-  // minute: its speed drifts (docs/benchmark-runs-intel.md), and timed one after the other the
-  // speed-up of a row whose 1-thread epochs fell in a slow minute came out above 2.
+  std::optional<decltype(alone)> regular;  // a C row's R trainer
+  if (method == Method::Combined) {
+    regular.emplace(sim, regular_counted, objective, steps, adam,
+                    options_for(1, Method::Regular));
+    regular->train_epoch(train, test);  // its warm-up
+  }
   counted.reset();
-  r.ms_epoch = r.ms_threads = 1e300;
+  r.ms_epoch = r.ms_threads = r.ms_regular = 1e300;
+  const auto keep_best = [&](double& best, auto& trainer) {
+    best = std::min(best, timed_ms([&] { trainer.train_epoch(train, test); }));
+  };
   for (int repeat = 0; repeat < settings.repeats; ++repeat) {
-    r.ms_epoch = std::min(r.ms_epoch, timed_ms([&] { alone.train_epoch(train, test); }));
-    if (threaded)
-      r.ms_threads =
-          std::min(r.ms_threads, timed_ms([&] { threaded->train_epoch(train, test); }));
+    keep_best(r.ms_epoch, alone);
+    if (regular) keep_best(r.ms_regular, *regular);  // right after the C epoch it is set against
+    if (threaded) keep_best(r.ms_threads, *threaded);
+    r.peak_gflops = std::max(r.peak_gflops, measure_peak<S>());
   }
   if (!threaded) r.ms_threads = r.ms_epoch;
+  if (!regular) r.ms_regular = 0;
   r.gflop = 2.0 * static_cast<double>(counted.macs()) / settings.repeats / 1e9;
   r.sim_ns = simulator_ns(sim, alone.engine());
   r.trajectory_bytes = static_cast<double>(alone.engine().trajectory().bytes());
@@ -303,7 +319,8 @@ RowResult measure(const Settings& settings, const Sim& sim,
         concurrent_copies_ratio(settings.threads, settings.repeats, [&](auto&& rounds) {
           Network<S> copy_net = initial;
           CountingNetwork<S> copy_counted(copy_net);
-          sbptt::Trainer trainer(sim, copy_counted, objective, steps, adam, options_for(1));
+          sbptt::Trainer trainer(sim, copy_counted, objective, steps, adam,
+                                 options_for(1, method));
           rounds([&] { trainer.train_epoch(train, test); });
         });
   }

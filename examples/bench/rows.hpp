@@ -278,9 +278,9 @@ RowResult measure(const Settings& settings, const Sim& sim,
   CountingNetwork<S> counted(net), threaded_counted(threaded_net), regular_counted(regular_net);
   sbptt::Trainer alone(sim, counted, objective, steps, adam, options_for(1, method));
   alone.train_epoch(train, test);  // warm-up: buffers sized, pages touched
-  // The row's memory is one trainer's, not all of theirs: read before the others are built, after the
-  // warm-up has sized the buffers (the engine allocates nothing after its first batch:
-  // tests/test_bptt_no_malloc.cpp).
+  // The row's memory is one trainer's, not all of theirs: read before the others are built,
+  // after the warm-up has sized the buffers (the engine allocates nothing after its first
+  // batch: tests/test_bptt_no_malloc.cpp).
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
   r.rss_kib = static_cast<double>(usage.ru_maxrss);

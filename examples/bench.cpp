@@ -234,14 +234,13 @@ int main(int argc, char** argv) {
         rows.push_back(row);
         continue;
       }
-      const double gflops = r.gflop / (r.ms_epoch / 1e3);
       const std::string round_trip =
           r.round_trip_ns > 0 ? std::to_string(std::lround(r.round_trip_ns)) : "-";
       std::printf("%-14s %-6s %-1s %4lld %5lld %6lld %9.1f %7.3f %7.2f %6.1f %5.1f%% %9.1f "
                   "%5.2f %6s %8.0f %8.0f %7.1f\n",
                   job.task.c_str(), job.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
-                  r.params, r.ms_epoch, r.gflop, gflops, r.peak_gflops,
-                  100 * gflops / r.peak_gflops, r.ms_threads,
+                  r.params, r.ms_epoch, r.gflop, r.gflops(), r.peak_gflops,
+                  100 * r.fraction_of_peak(), r.ms_threads,
                   r.ms_epoch / r.ms_threads, round_trip.c_str(), r.sim_ns,
                   r.trajectory_bytes / 1024, r.rss_kib / 1024);
       std::fflush(stdout);

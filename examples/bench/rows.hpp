@@ -52,6 +52,9 @@ struct RowResult {
   double trajectory_bytes = 0, rss_kib = 0;
   int ok = 0;
   char error[200] = {};
+
+  [[nodiscard]] double gflops() const { return gflop / (ms_epoch / 1e3); }  ///< 1 thread
+  [[nodiscard]] double fraction_of_peak() const { return gflops() / peak_gflops; }
 };
 
 struct Row {
@@ -250,6 +253,34 @@ double concurrent_copies_ratio(Index copies, int repeats, Copy&& copy) {
   return best_together / *std::min_element(alone.begin(), alone.end());
 }
 
+/// A trainer of a row with a copy of the row's network of its own, counted by a
+/// `CountingNetwork` of its own (Adam, lr 1e-3, batch 8). The trainer keeps references to both,
+/// so they live beside it, and the object is built in place and never moved.
+template <class Sim, class Loss>
+struct CountedTrainer {
+  using S = typename Sim::Scalar;
+  Network<S> net;
+  CountingNetwork<S> counted{net};
+  sbptt::Trainer<Sim, CountingNetwork<S>, Loss, sbptt::Adam<S>> trainer;
+
+  CountedTrainer(const Sim& sim, const Network<S>& initial, const sbptt::Objective<Loss>& objective,
+                 Index steps, Method method, Index threads)
+      : net(initial),
+        trainer(sim, counted, objective, steps, sbptt::Adam<S>(sbptt::AdamOptions<S>{S(1e-3)}),
+                options(method, threads)) {}
+  CountedTrainer(const CountedTrainer&) = delete;
+  CountedTrainer& operator=(const CountedTrainer&) = delete;
+
+private:
+  static sbptt::TrainerOptions options(Method method, Index threads) {
+    sbptt::TrainerOptions options;
+    options.method = method;
+    options.batch = 8;
+    options.threads = threads;
+    return options;
+  }
+};
+
 /// One row: warm-up + timed epochs at 1 and at N threads, then the host's measures of threads.
 /// Everything the row's ratios compare is timed in turn, one of each per repeat, so that both
 /// sides of a ratio see the machine of the same minute: the 1- and the N-thread epochs, the
@@ -258,70 +289,56 @@ double concurrent_copies_ratio(Index copies, int repeats, Copy&& copy) {
 /// in a slow minute showed 2.43× on two threads, and a peak measured at the start of a run
 /// was 131 GFLOP/s in a run whose epochs were slower than those of the next run, whose peak was
 /// 90 (twenty-sixth run).
-template <class Sim, class Objective>
+template <class Sim, class Loss>
 RowResult measure(const Settings& settings, const Sim& sim,
-                  const Network<typename Sim::Scalar>& initial, const Objective& objective,
-                  Index steps, const Matrix<typename Sim::Scalar>& train,
+                  const Network<typename Sim::Scalar>& initial,
+                  const sbptt::Objective<Loss>& objective, Index steps,
+                  const Matrix<typename Sim::Scalar>& train,
                   const Matrix<typename Sim::Scalar>& test, Method method) {
-  using S = typename Sim::Scalar;
+  using Counted = CountedTrainer<Sim, Loss>;
   RowResult r;
-  const auto options_for = [&](Index threads, Method of) {
-    sbptt::TrainerOptions options;
-    options.method = of;
-    options.batch = 8;
-    options.threads = threads;
-    return options;
-  };
-  const sbptt::Adam<S> adam(sbptt::AdamOptions<S>{S(1e-3)});  // each trainer copies it
-  // Every trainer trains a copy of the network of its own, through a counter of its own.
-  Network<S> net = initial, threaded_net = initial, regular_net = initial;
-  CountingNetwork<S> counted(net), threaded_counted(threaded_net), regular_counted(regular_net);
-  sbptt::Trainer alone(sim, counted, objective, steps, adam, options_for(1, method));
-  alone.train_epoch(train, test);  // warm-up: buffers sized, pages touched
+  const auto epoch = [&](Counted& row_trainer) { row_trainer.trainer.train_epoch(train, test); };
+  Counted alone(sim, initial, objective, steps, method, 1);
+  epoch(alone);  // warm-up: buffers sized, pages touched
   // The row's memory is one trainer's, not all of theirs: read before the others are built,
   // after the warm-up has sized the buffers (the engine allocates nothing after its first
   // batch: tests/test_bptt_no_malloc.cpp).
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
   r.rss_kib = static_cast<double>(usage.ru_maxrss);
-  std::optional<decltype(alone)> threaded;  // none with one thread
+  std::optional<Counted> threaded;  // none with one thread
   if (settings.threads > 1) {
-    threaded.emplace(sim, threaded_counted, objective, steps, adam,
-                     options_for(settings.threads, method));
-    threaded->train_epoch(train, test);  // its warm-up
+    threaded.emplace(sim, initial, objective, steps, method, settings.threads);
+    epoch(*threaded);  // its warm-up
   }
-  std::optional<decltype(alone)> regular;  // a C row's R trainer
+  std::optional<Counted> regular;  // a C row's R trainer
   if (method == Method::Combined) {
-    regular.emplace(sim, regular_counted, objective, steps, adam,
-                    options_for(1, Method::Regular));
-    regular->train_epoch(train, test);  // its warm-up
+    regular.emplace(sim, initial, objective, steps, Method::Regular, 1);
+    epoch(*regular);  // its warm-up
   }
-  counted.reset();
+  alone.counted.reset();
   r.ms_epoch = r.ms_threads = r.ms_regular = 1e300;
-  const auto keep_best = [&](double& best, auto& trainer) {
-    best = std::min(best, timed_ms([&] { trainer.train_epoch(train, test); }));
+  const auto keep_best = [&](double& best, Counted& row_trainer) {
+    best = std::min(best, timed_ms([&] { epoch(row_trainer); }));
   };
   for (int repeat = 0; repeat < settings.repeats; ++repeat) {
     keep_best(r.ms_epoch, alone);
     if (regular) keep_best(r.ms_regular, *regular);  // right after the C epoch it is set against
     if (threaded) keep_best(r.ms_threads, *threaded);
-    r.peak_gflops = std::max(r.peak_gflops, measure_peak<S>());
+    r.peak_gflops = std::max(r.peak_gflops, measure_peak<typename Sim::Scalar>());
   }
   if (!threaded) r.ms_threads = r.ms_epoch;
   if (!regular) r.ms_regular = 0;
-  r.gflop = 2.0 * static_cast<double>(counted.macs()) / settings.repeats / 1e9;
-  r.sim_ns = simulator_ns(sim, alone.engine());
-  r.trajectory_bytes = static_cast<double>(alone.engine().trajectory().bytes());
+  r.gflop = 2.0 * static_cast<double>(alone.counted.macs()) / settings.repeats / 1e9;
+  r.sim_ns = simulator_ns(sim, alone.trainer.engine());
+  r.trajectory_bytes = static_cast<double>(alone.trainer.engine().trajectory().bytes());
   if (threaded) {
     r.round_trip_ns = cross_core_round_trip_ns();
     r.other_core_read_ratio = other_core_read_ratio();
     r.copies_ratio =
         concurrent_copies_ratio(settings.threads, settings.repeats, [&](auto&& rounds) {
-          Network<S> copy_net = initial;
-          CountingNetwork<S> copy_counted(copy_net);
-          sbptt::Trainer trainer(sim, copy_counted, objective, steps, adam,
-                                 options_for(1, method));
-          rounds([&] { trainer.train_epoch(train, test); });
+          Counted copy(sim, initial, objective, steps, method, 1);
+          rounds([&] { epoch(copy); });
         });
   }
   r.ok = 1;

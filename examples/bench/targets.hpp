@@ -37,7 +37,7 @@ inline void summarize(const std::vector<Row>& rows, Index threads) {
         std::tuple{"quantum", "quantum Nx 32", 0.55}}) {
     const Row* r = row_of(task, "float", "R");
     if (r == nullptr) continue;
-    const double fraction = r->result.gflop / (r->result.ms_epoch / 1e3) / r->result.peak_gflops;
+    const double fraction = r->result.fraction_of_peak();
     std::printf("  %-13s float R epoch: %5.1f%% of the float peak %.1f GFLOP/s timed in turn "
                 "(target >= %.0f%%): %s\n",
                 label, 100 * fraction, r->result.peak_gflops, 100 * target,
@@ -105,12 +105,11 @@ inline void write_csv(const Settings& settings, const std::vector<Row>& rows) {
   for (const auto& row : rows) {
     const RowResult& r = row.result;
     if (r.ok == 0) continue;
-    const double gflops = r.gflop / (r.ms_epoch / 1e3);
     std::snprintf(line, sizeof line,
                   "%s,%s,%s,%lld,%lld,%lld,%.3f,%.6f,%.3f,%.3f,%.4f,%.3f,%lld,%.3f,%.3f,%.0f,"
                   "%.2f,%.3f,%.1f,%.0f,%.0f\n",
                   row.task.c_str(), row.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
-                  r.params, r.ms_epoch, r.gflop, gflops, r.peak_gflops, gflops / r.peak_gflops,
+                  r.params, r.ms_epoch, r.gflop, r.gflops(), r.peak_gflops, r.fraction_of_peak(),
                   r.ms_regular, static_cast<long long>(settings.threads), r.ms_threads,
                   r.ms_epoch / r.ms_threads, r.round_trip_ns, r.other_core_read_ratio,
                   r.copies_ratio, r.sim_ns, r.trajectory_bytes, r.rss_kib);

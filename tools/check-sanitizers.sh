@@ -12,9 +12,8 @@
 # (-fno-sanitize-recover=all) and at run time (halt_on_error=1). Warnings are not errors here
 # (tools/test.sh builds with -Werror already; GCC's -Wmaybe-uninitialized is unreliable on
 # instrumented code, e.g. a false positive on std::visit over nn::Layer).
-# Tests: one program per layer (SBPTT_GROUPED_TESTS, docs/testing.md): this build took 1674 s
-# instead of about 2390 s on the Intel host; tools/test.sh keeps one program per file, so every
-# test file still compiles on its own there.
+# Tests: one program per layer (SBPTT_GROUPED_TESTS; docs/testing.md gives the time it saves);
+# tools/test.sh keeps one program per file, so every test file still compiles on its own there.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build=${SBPTT_BUILD_DIR:-build-asan}

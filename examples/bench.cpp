@@ -32,7 +32,10 @@
 //                cache; CSV other_core_read_ratio) and how many times as long two 1-thread
 //                epochs take when run at once, each on its own thread, as one alone (CSV
 //                copies_ratio): what the host gives two busy cores, so that a two-thread
-//                speed-up above 2 / that ratio cannot be had here
+//                speed-up above 2 / that ratio cannot be had here; and the speed-ups of
+//                the epoch's two parts, the evaluation of the two sets (timed alone, in
+//                turn: CSV ms_evaluation, ms_evaluation_threads) and its training batches
+//                (the rest of the epoch)
 //   sim ns       one simulator step plus one full VJP (Aᵀλ and Bᵀλ) per sample, on the
 //                states of the last training batch (the per-sample work of the engine;
 //                for a BatchSimulator, the batched calls' time over the batch size)

@@ -49,6 +49,9 @@ struct RowResult {
   double round_trip_ns = 0;  ///< `cross_core_round_trip_ns` after the N-thread epochs (0: none)
   double other_core_read_ratio = 0;  ///< `other_core_read_ratio()` after them (0: none)
   double copies_ratio = 0;  ///< `concurrent_copies_ratio` of the 1-thread epoch (0: none)
+  /// The epoch's evaluation of the two sets (`Engine::evaluate`), at 1 and at N threads, in
+  /// turn with the epochs (0: one thread): the rest of an epoch is its training batches.
+  double ms_evaluation = 0, ms_evaluation_threads = 0;
   double trajectory_bytes = 0, rss_kib = 0;
   int ok = 0;
   char error[200] = {};
@@ -298,6 +301,10 @@ RowResult measure(const Settings& settings, const Sim& sim,
   using Counted = CountedTrainer<Sim, Loss>;
   RowResult r;
   const auto epoch = [&](Counted& row_trainer) { row_trainer.trainer.train_epoch(train, test); };
+  const auto evaluation = [&](Counted& row_trainer) {
+    row_trainer.trainer.engine().evaluate(train);
+    row_trainer.trainer.engine().evaluate(test);
+  };
   Counted alone(sim, initial, objective, steps, method, 1);
   epoch(alone);  // warm-up: buffers sized, pages touched
   // The row's memory is one trainer's, not all of theirs: read before the others are built,
@@ -321,15 +328,28 @@ RowResult measure(const Settings& settings, const Sim& sim,
   const auto keep_best = [&](double& best, Counted& row_trainer) {
     best = std::min(best, timed_ms([&] { epoch(row_trainer); }));
   };
+  long long evaluation_macs = 0;  // not the epochs' work: kept out of the GFLOP count
+  r.ms_evaluation = r.ms_evaluation_threads = 1e300;
   for (int repeat = 0; repeat < settings.repeats; ++repeat) {
     keep_best(r.ms_epoch, alone);
     if (regular) keep_best(r.ms_regular, *regular);  // right after the C epoch it is set against
-    if (threaded) keep_best(r.ms_threads, *threaded);
+    if (threaded) {
+      keep_best(r.ms_threads, *threaded);
+      const long long before = alone.counted.macs();
+      r.ms_evaluation = std::min(r.ms_evaluation, timed_ms([&] { evaluation(alone); }));
+      evaluation_macs += alone.counted.macs() - before;
+      r.ms_evaluation_threads =
+          std::min(r.ms_evaluation_threads, timed_ms([&] { evaluation(*threaded); }));
+    }
     r.peak_gflops = std::max(r.peak_gflops, measure_peak<typename Sim::Scalar>());
   }
-  if (!threaded) r.ms_threads = r.ms_epoch;
+  if (!threaded) {
+    r.ms_threads = r.ms_epoch;
+    r.ms_evaluation = r.ms_evaluation_threads = 0;
+  }
   if (!regular) r.ms_regular = 0;
-  r.gflop = 2.0 * static_cast<double>(alone.counted.macs()) / settings.repeats / 1e9;
+  r.gflop = 2.0 * static_cast<double>(alone.counted.macs() - evaluation_macs) /
+            settings.repeats / 1e9;
   r.sim_ns = simulator_ns(sim, alone.trainer.engine());
   r.trajectory_bytes = static_cast<double>(alone.trainer.engine().trajectory().bytes());
   if (threaded) {

@@ -71,8 +71,8 @@ inline void summarize(const std::vector<Row>& rows, Index threads) {
       for (const auto& [method, target] : {std::pair{"C", 1.7}, std::pair{"R", 1.35}}) {
         const Row* r = row_of(task, "float", method);
         if (r == nullptr) continue;
-        const double speedup = r->result.ms_epoch / r->result.ms_threads;
         const RowResult& t = r->result;
+        const double speedup = t.ms_epoch / t.ms_threads;
         std::printf("  %-9s float %s: 2 threads %.3fx faster than 1 (target >= %.2f): %s "
                     "(the evaluation of the two sets %.2fx, %.1f of %.1f ms on 1 thread, the "
                     "training batches %.2fx; cross-core round trip %.0f ns; the other core's "

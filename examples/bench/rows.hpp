@@ -324,22 +324,23 @@ RowResult measure(const Settings& settings, const Sim& sim,
     epoch(*regular);  // its warm-up
   }
   alone.counted.reset();
-  r.ms_epoch = r.ms_threads = r.ms_regular = 1e300;
+  r.ms_epoch = r.ms_threads = r.ms_regular = r.ms_evaluation = r.ms_evaluation_threads = 1e300;
+  const auto keep_fastest = [](double& best, auto&& work) {
+    best = std::min(best, timed_ms(work));
+  };
   const auto keep_best = [&](double& best, Counted& row_trainer) {
-    best = std::min(best, timed_ms([&] { epoch(row_trainer); }));
+    keep_fastest(best, [&] { epoch(row_trainer); });
   };
   long long evaluation_macs = 0;  // not the epochs' work: kept out of the GFLOP count
-  r.ms_evaluation = r.ms_evaluation_threads = 1e300;
   for (int repeat = 0; repeat < settings.repeats; ++repeat) {
     keep_best(r.ms_epoch, alone);
     if (regular) keep_best(r.ms_regular, *regular);  // right after the C epoch it is set against
     if (threaded) {
       keep_best(r.ms_threads, *threaded);
       const long long before = alone.counted.macs();
-      r.ms_evaluation = std::min(r.ms_evaluation, timed_ms([&] { evaluation(alone); }));
+      keep_fastest(r.ms_evaluation, [&] { evaluation(alone); });
       evaluation_macs += alone.counted.macs() - before;
-      r.ms_evaluation_threads =
-          std::min(r.ms_evaluation_threads, timed_ms([&] { evaluation(*threaded); }));
+      keep_fastest(r.ms_evaluation_threads, [&] { evaluation(*threaded); });
     }
     r.peak_gflops = std::max(r.peak_gflops, measure_peak<typename Sim::Scalar>());
   }

@@ -13,9 +13,10 @@
 /// It needs 32 vector registers and masked loads and stores for the rows' last panel, so it is
 /// compiled for AVX-512 only, and used for rows of 2 or more entries (float, 8 samples: 100 ×
 /// 10 in 141–145 ns against Eigen's 404, 100 × 6 in 149 against 422, 100 × 2 in 148 against
-/// 276). Rows of one entry (100 × 1: 303 against 46 ns) and other builds use Eigen's product
-/// (with AVX2's 16 registers the same scheme, holding 8 × 1 panels, measured slower than
-/// Eigen).
+/// 276). Rows of one entry (100 × 1: 303 against 46 ns) use Eigen's product. With AVX2's 16
+/// registers the same scheme, holding 8 × 1 panels, measured slower than Eigen; AVX2 builds
+/// with FMA keep a block of dW in the registers instead (outer_product_avx2.hpp), and other
+/// builds use Eigen's product.
 ///
 /// In the kernel every entry is ((dW_ij + d_i0 x'_j0) + d_i1 x'_j1) + … in sample order with
 /// fused multiply-adds, x' = s·x rounded (x itself without a scale), whatever the shapes;
@@ -28,6 +29,7 @@
 #include "sbptt/core/types.hpp"
 #include "sbptt/core/unroll.hpp"
 #include "sbptt/core/first_lanes.hpp"
+#include "sbptt/nn/outer_product_avx2.hpp"
 #include "sbptt/nn/quarter_strip.hpp"
 
 namespace sbptt {
@@ -264,13 +266,17 @@ private:
 
 }  // namespace detail
 
-/// Whether `add_outer_products` runs the register kernel for rows of `cols` entries (AVX-512,
-/// float or double, 2 or more entries); only then does it take a scale.
+/// Whether `add_outer_products` runs a register kernel for rows of `cols` entries (AVX-512:
+/// float or double, 2 or more entries; AVX2 with FMA: float or double); only then does it take
+/// a scale.
 template <class Scalar>
 [[nodiscard]] constexpr bool outer_product_kernel_applies([[maybe_unused]] Index cols) {
 #if defined(EIGEN_VECTORIZE_AVX512)
   if constexpr (FloatOrDouble<Scalar>)
     return cols >= 2;
+#elif defined(SBPTT_OUTER_PRODUCT_AVX2)
+  if constexpr (FloatOrDouble<Scalar>)
+    return true;
 #endif
   return false;
 }
@@ -288,6 +294,11 @@ void add_outer_products(Scalar* dw, Index rows, Index cols, const Scalar* d, con
       return;
     }
   }
+#elif defined(SBPTT_OUTER_PRODUCT_AVX2)
+  if constexpr (FloatOrDouble<Scalar>) {
+    detail::OuterProductAvx2<Scalar>::run(dw, rows, cols, d, x, n, scale);
+    return;
+  }
 #endif
   detail::require(scale == nullptr, "add_outer_products: a scale for rows of ", cols,
                   " entries; expected one only where the register kernel runs");
@@ -299,8 +310,8 @@ void add_outer_products(Scalar* dw, Index rows, Index cols, const Scalar* d, con
 namespace detail {
 
 /// db += D s, each entry summed in sample order, ((b_i + d_i0 s_0) + d_i1 s_1) + … (fused
-/// multiply-adds with a scale, which only AVX-512 builds take), whatever the rows and the
-/// alignment. Eigen's `rowwise().sum()` grouped the samples in its own way, and differently for
+/// multiply-adds on AVX-512 builds; elsewhere as the compiler contracts d·s + b), whatever the
+/// rows and the alignment. A scale is taken where `outer_product_kernel_applies`. Eigen's `rowwise().sum()` grouped the samples in its own way, and differently for
 /// the rows it reached by registers and those before and after them (where they fell depended
 /// on db's address), and took longer (docs/benchmark-runs.md, twenty-first run).
 template <class Scalar>
@@ -311,10 +322,18 @@ void add_sample_sums(Scalar* b, Index rows, const Scalar* d, Index n, const Scal
     return;
   }
 #endif
-  require(scale == nullptr, "add_weight_and_bias_products: a scale where the register kernels "
-          "do not run; expected none");
+  require(scale == nullptr || outer_product_kernel_applies<Scalar>(1),
+          "add_weight_and_bias_products: a scale where the register kernels do not run; "
+          "expected none");
   Eigen::Map<Vector<Scalar>> bias(b, rows);
-  for (Index k = 0; k < n; ++k) bias += Eigen::Map<const Vector<Scalar>>(d + k * rows, rows);
+  for (Index k = 0; k < n; ++k) {
+    const Eigen::Map<const Vector<Scalar>> column(d + k * rows, rows);
+    if (scale == nullptr) {
+      bias += column;
+    } else {
+      bias += scale[k] * column;
+    }
+  }
 }
 
 }  // namespace detail

@@ -1,6 +1,8 @@
 // dW += D Xᵀ, the layers' parameter product: against a long-double product with the standard
 // floating-point error bound, over shapes that reach every branch of the AVX-512 kernel (full
-// and masked column panels, row and sample remainders), and nothing written outside dW.
+// and masked column panels, row and sample remainders) and of the AVX2 one (2-panel blocks,
+// single and half panels, single columns, rows left after blocks of 6, chunks of 64 samples),
+// and nothing written outside dW.
 #include <catch2/catch.hpp>
 
 #include <cmath>
@@ -76,7 +78,7 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel's scale within the rounding 
   int kernel_cases = 0;
   for (const auto& [rows, cols] : {std::pair<Index, Index>{100, 10}, {100, 100}, {1, 100},
                                    {60, 180}, {17, 53}, {19, 5}, {19, 3}, {40, 1}}) {
-    for (const Index n : {1, 7, 8, 16, 21}) {
+    for (const Index n : {1, 7, 8, 16, 21, 70}) {
       const Matrix<S> d = random_matrix<S>(rows, n, ++seed, 1.0);
       const Matrix<S> x = random_matrix<S>(cols, n, ++seed, 1.0);
       const Matrix<S> scale = random_matrix<S>(n, 1, ++seed, 3.0);
@@ -123,7 +125,7 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel sums each entry in sample or
   // an odd 97, 2 and 3 entries); a partial panel in one block with 1 or 2 whole panels,
   // starting the row or after blocks of 3; alone after them (100 × 100); the convolution's
   // 60 × 180; a quarter of a register's columns, alone or after whole panels, 4 rows a
-  // register (quarter_strip.hpp).
+  // register (quarter_strip.hpp). 70 samples: the AVX2 kernel scales X in chunks of 64.
   using S = TestType;
   constexpr Index kLanes = sizeof(S) == 4 ? 16 : 8;
   std::uint64_t seed = 900;
@@ -144,7 +146,7 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel sums each entry in sample or
   }
   for (const auto& [rows, cols] : shapes) {
     if (!sbptt::outer_product_kernel_applies<S>(cols)) continue;
-    for (const Index n : {1, 8, 9, 21}) {
+    for (const Index n : {1, 8, 9, 21, 70}) {
       for (const bool scaled : {false, true}) {
         ++kernel_cases;
         const Matrix<S> d = random_matrix<S>(rows, n, ++seed, 1.0);

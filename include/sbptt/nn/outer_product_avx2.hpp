@@ -8,11 +8,11 @@
 /// (X's columns are contiguous in j). A row's columns go in 2-panel blocks, then single
 /// panels, then a half register, then one at a time, so no load or store reaches past dW's row.
 /// Measured on an AMD EPYC (Zen 3, AVX2 + FMA), float, 8 samples, against Eigen's product:
-/// 100 × 100 in 2.40 µs against 3.38 (67 against 47 GFLOP/s), 100 × 24 in 0.58 against 0.90,
-/// 100 × 10 in 0.63 against 0.75, 60 × 180 × 56 in 13.0 against 19.9 (docs/benchmark-runs.md,
-/// twenty-eighth run). With 4 × 2 accumulators the 100 × 100 product gained 1.13× over Eigen,
-/// with 3 × 3 1.04×, with 5 × 2 1.33×, with 6 × 2 1.41–1.47×. A row of one entry is slower
-/// than Eigen's (1 × 100: 62 against 37 ns) but kept, so that every entry has the order below.
+/// 100 × 100 in 2.40 µs against 3.38 (67 against 47 GFLOP/s), 100 × 24 in 0.57–0.59 against
+/// 0.90, 100 × 10 in 0.63–0.66 against 0.75, 60 × 180 × 56 in 13.0–13.2 against 19.9–20.1
+/// (docs/benchmark-runs-avx2.md). 6 × 2 accumulators ran the 100 × 100 product 1.41–1.46 times
+/// as fast as Eigen, 5 × 2 1.34, 4 × 2 1.13, 3 × 3 1.04. A row of one entry is slower than
+/// Eigen's (1 × 100: 62 against 37 ns) but kept, so that every entry has the order below.
 /// A scale s multiplies a block of X once for all rows, into a buffer on the stack, in chunks of
 /// kChunk samples (the entries of dW are stored between chunks and reloaded: same bits).
 ///

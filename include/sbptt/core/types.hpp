@@ -23,7 +23,8 @@ using Matrix = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
 template <class Scalar>
 using RowMajorMatrix = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
-/// The IEEE scalars that the register kernels (AVX-512) and the tests on bits are written for.
+/// The IEEE scalars that the register kernels (AVX-512, AVX2) and the tests on bits are
+/// written for.
 template <class Scalar>
 concept FloatOrDouble = std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>;
 

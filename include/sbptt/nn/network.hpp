@@ -340,7 +340,7 @@ private:
   }
 
   /// grad += the parameter products of every layer from the recorded Δ_l, or from Δ_l·diag(s)
-  /// with `scales` = s (B): the register kernel scales X's block in its registers; elsewhere
+  /// with `scales` = s (B): a register kernel scales a block of X once for all rows; elsewhere
   /// Δ_l·diag(s) is formed in `scaled`[l] (grown, never shrunk), which for a conv layer under
   /// the kernel holds s spread over its im2col columns instead. One machine copy
   /// (SBPTT_ONE_COPY): its callers pass constant null scales, for which a cloned copy could

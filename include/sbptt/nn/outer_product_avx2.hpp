@@ -10,20 +10,22 @@
 /// Measured on an AMD EPYC (Zen 3, AVX2 + FMA), float, 8 samples, against Eigen's product:
 /// 100 × 100 in 2.40 µs against 3.38 (67 against 47 GFLOP/s), 100 × 24 in 0.57–0.59 against
 /// 0.90, 100 × 10 in 0.63–0.66 against 0.75, 60 × 180 × 56 in 13.0–13.2 against 19.9–20.1
-/// (docs/benchmark-runs-avx2.md). 6 × 2 accumulators ran the 100 × 100 product 1.41–1.46 times
-/// as fast as Eigen, 5 × 2 1.34, 4 × 2 1.13, 3 × 3 1.04. A row of one entry is slower than
-/// Eigen's (1 × 100: 62 against 37 ns) but kept, so that every entry has the order below.
+/// (docs/benchmark-runs-avx2.md). 6 × 2 accumulators ran the 100 × 100 product 1.41–1.42 times
+/// as fast as Eigen, 5 × 2 1.34 (4 × 2 1.13 and 3 × 3 1.04 in a first version that copied X).
+/// A single row, an output layer's, is slower than Eigen's product (1 × 100: 62–92 against 37–38
+/// ns, 1 × 420: 372 against 124) but kept, so that every entry has the order below; a few tenths
+/// of a percent of the cart pole's and quantum control's epochs.
 /// A scale s multiplies a block of X once for all rows, into a buffer on the stack, in chunks of
 /// kChunk samples (the entries of dW are stored between chunks and reloaded: same bits).
 ///
 /// Every entry is ((dW_ij + d_i0 x'_j0) + d_i1 x'_j1) + … in sample order with fused
 /// multiply-adds, x' = s·x rounded (x itself without a scale), as in the AVX-512 kernel.
 #include <algorithm>
-#include <cmath>
 #include <type_traits>
 
 #include <Eigen/Core>
 
+#include "sbptt/core/fused_multiply_add.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/core/unroll.hpp"
 
@@ -58,6 +60,8 @@ private:
   static constexpr Index kHalfLanes = lanes_of<HalfPacket>;
   static constexpr int kPanels = 2;
   static constexpr int kRows = 6;
+  // Samples of X scaled at a time: the buffer on the stack stays at 4 KiB (float, 2 panels);
+  // the paper's batches (8, and 8 × 56 im2col columns) take 1 and 7 chunks.
   static constexpr Index kChunk = 64;
 
   /// Columns first … first + Panels·(P's lanes) − 1 of every row.
@@ -72,7 +76,8 @@ private:
       Index ldx = cols;
       if (scale != nullptr) {
         for (Index k = 0; k < samples; ++k)
-          for (Index c = 0; c < width; ++c) scaled[k * width + c] = scale[k0 + k] * xk[k * cols + c];
+          for (Index c = 0; c < width; ++c)
+            scaled[k * width + c] = scale[k0 + k] * xk[k * cols + c];
         xk = scaled;
         ldx = width;
       }
@@ -90,7 +95,7 @@ private:
   template <class P>
   EIGEN_ALWAYS_INLINE static P fused_madd(const P& a, const P& b, const P& c) {
     if constexpr (std::is_same_v<P, Scalar>) {
-      return std::fma(a, b, c);
+      return fused_multiply_add(a, b, c);
     } else {
       return Eigen::internal::pmadd(a, b, c);
     }

@@ -32,25 +32,10 @@
 #include "sbptt/core/types.hpp"
 #include "sbptt/core/unroll.hpp"
 #include "sbptt/core/first_lanes.hpp"
+#include "sbptt/core/fused_multiply_add.hpp"
 #include "sbptt/core/transpose_tile.hpp"
 
 namespace sbptt {
-namespace detail {
-
-/// a·b + c rounded once where the target has a hardware FMA (x86 with FMA, ARM, POWER), as
-/// the packed product's register code computes it; rounded twice elsewhere, where the
-/// compiler cannot contract either and std::fma would be a slow library call.
-template <class Scalar>
-Scalar fused_multiply_add(Scalar a, Scalar b, Scalar c) {
-#if defined(EIGEN_VECTORIZE_FMA) || defined(__FP_FAST_FMA) || defined(__FP_FAST_FMAF) || \
-    defined(__ARM_FEATURE_FMA)
-  return std::fma(a, b, c);
-#else
-  return a * b + c;
-#endif
-}
-
-}  // namespace detail
 
 /// A matrix in the panel layout of the file comment, with an optional bias.
 template <class Scalar>

@@ -265,6 +265,17 @@ private:
 };
 #endif
 
+// The register kernel of the build's instruction set, where it has one.
+#if defined(EIGEN_VECTORIZE_AVX512)
+#define SBPTT_OUTER_PRODUCT_KERNEL 1
+template <class Scalar>
+using RegisterOuterProduct = OuterProductKernel<Scalar>;
+#elif defined(SBPTT_OUTER_PRODUCT_AVX2)
+#define SBPTT_OUTER_PRODUCT_KERNEL 1
+template <class Scalar>
+using RegisterOuterProduct = OuterProductAvx2<Scalar>;
+#endif
+
 }  // namespace detail
 
 /// Whether `add_outer_products` runs a register kernel for rows of `cols` entries (AVX-512,
@@ -273,7 +284,7 @@ private:
 /// 68–69 against 210 with AVX2).
 template <class Scalar>
 [[nodiscard]] constexpr bool outer_product_kernel_applies([[maybe_unused]] Index cols) {
-#if defined(EIGEN_VECTORIZE_AVX512) || defined(SBPTT_OUTER_PRODUCT_AVX2)
+#if defined(SBPTT_OUTER_PRODUCT_KERNEL)
   if constexpr (FloatOrDouble<Scalar>)
     return cols >= 2;
 #endif
@@ -286,17 +297,10 @@ template <class Scalar>
 template <class Scalar>
 void add_outer_products(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
                         Index n, const Scalar* scale = nullptr) {
-#if defined(EIGEN_VECTORIZE_AVX512)
+#if defined(SBPTT_OUTER_PRODUCT_KERNEL)
   if constexpr (FloatOrDouble<Scalar>) {
     if (outer_product_kernel_applies<Scalar>(cols)) {
-      detail::OuterProductKernel<Scalar>::run(dw, rows, cols, d, x, n, scale);
-      return;
-    }
-  }
-#elif defined(SBPTT_OUTER_PRODUCT_AVX2)
-  if constexpr (FloatOrDouble<Scalar>) {
-    if (outer_product_kernel_applies<Scalar>(cols)) {
-      detail::OuterProductAvx2<Scalar>::run(dw, rows, cols, d, x, n, scale);
+      detail::RegisterOuterProduct<Scalar>::run(dw, rows, cols, d, x, n, scale);
       return;
     }
   }

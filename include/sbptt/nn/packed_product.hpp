@@ -113,6 +113,16 @@ public:
     }
     const Index panels = (rows_ + kLanes - 1) / kLanes;
     const Index full_panels = rows_ / kLanes;
+    // With 4-column blocks, the panels left after the pairs (an odd count, or a partial last
+    // panel) go 8 columns at a time first: alone at 4 columns they keep only 4 multiply-adds
+    // in flight, so the last panel of a 100-row matrix cost as much as a pair.
+    const Index unpaired_from = kColumnBlock == 4 ? full_panels - full_panels % 2 : panels;
+    Index unpaired_done = 0;  // columns of the unpaired panels done 8 at a time
+    if constexpr (kColumnBlock == 4) {
+      for (; unpaired_done + 8 <= n; unpaired_done += 8)
+        for (Index p = unpaired_from; p < panels; ++p)
+          block<1, 8>(p, x + unpaired_done * ldx, ldx, y + unpaired_done * ldy, ldy);
+    }
     Index j = 0;
     auto blocks_of = [&](auto columns) {
       constexpr int width = decltype(columns)::value;
@@ -145,6 +155,7 @@ public:
           block<3, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
           p += 3;
         }
+        if (j + width <= unpaired_done) continue;
         for (; p < panels; ++p) block<1, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
       }
     };

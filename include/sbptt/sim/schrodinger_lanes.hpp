@@ -69,17 +69,15 @@ public:
     Rows rows;
     LaneRows<Scalar>::load_rows(x, first, count, rows.data());
     for (int j = 0; j < Nx; ++j) {
-      const auto real_row = static_cast<std::size_t>(2 * j);
-      std::copy_n(rows[real_row].data(), kLanes, f.re[j + 1]);
-      std::copy_n(rows[real_row + 1].data(), kLanes, f.im[j + 1]);
+      std::copy_n(rows[2 * j].data(), kLanes, f.re[j + 1]);
+      std::copy_n(rows[2 * j + 1].data(), kLanes, f.im[j + 1]);
     }
   }
   static void store(const Field& f, Index first, int count, Matrix<Scalar>& x) {
     Rows rows;
     for (int j = 0; j < Nx; ++j) {
-      const auto real_row = static_cast<std::size_t>(2 * j);
-      std::copy_n(f.re[j + 1], kLanes, rows[real_row].data());
-      std::copy_n(f.im[j + 1], kLanes, rows[real_row + 1].data());
+      std::copy_n(f.re[j + 1], kLanes, rows[2 * j].data());
+      std::copy_n(f.im[j + 1], kLanes, rows[2 * j + 1].data());
     }
     LaneRows<Scalar>::store_rows(rows.data(), first, count, x);
   }

@@ -6,11 +6,14 @@ cmake_minimum_required(VERSION 3.21)
 # never read: its files are not the repository's, and tests running beside this one create and
 # delete files in it (CMake's try-compile scratch folders), so reading it races with them.
 function(_collect_repository_files folder)
-  file(GLOB _entries LIST_DIRECTORIES true "${folder}/*" "${folder}/.clang-tidy")
+  file(GLOB _entries LIST_DIRECTORIES true "${folder}/*")  # dot files too
   foreach(_entry IN LISTS _entries)
     get_filename_component(_name "${_entry}" NAME)
     if(IS_DIRECTORY "${_entry}")
-      if(NOT _name STREQUAL ".git" AND NOT EXISTS "${_entry}/CMakeCache.txt")
+      # Symbolic links are not followed, as GLOB_RECURSE does not: a link to a parent would
+      # never end.
+      if(NOT _name STREQUAL ".git" AND NOT IS_SYMLINK "${_entry}"
+         AND NOT EXISTS "${_entry}/CMakeCache.txt")
         _collect_repository_files("${_entry}")
       endif()
     elseif(_name MATCHES "\\.(hpp|cpp|md|cmake|txt|py|sh)$" OR _name STREQUAL ".clang-tidy")
@@ -21,7 +24,6 @@ function(_collect_repository_files folder)
 endfunction()
 _collect_repository_files("${SOURCE_DIR}")
 get_property(_files GLOBAL PROPERTY _repository_files)
-list(REMOVE_DUPLICATES _files)
 # Spelled in pieces so that this file does not match itself.
 set(_outside "DESI" "GN.md|DESI" "GN §|reference/pa" "per.md|\\.\\./sha" "red/")
 string(CONCAT _outside_regex ${_outside})

@@ -116,9 +116,9 @@ public:
     // With 4-column blocks, the panels left after the pairs (an odd count, or a partial last
     // panel) go 8 columns at a time first: alone at 4 columns they keep only 4 multiply-adds
     // in flight, so the last panel of a 100-row matrix cost as much as a pair.
-    const Index unpaired_from = kColumnBlock == 4 ? full_panels - full_panels % 2 : panels;
     Index unpaired_done = 0;  // columns of the unpaired panels done 8 at a time
     if constexpr (kColumnBlock == 4) {
+      const Index unpaired_from = full_panels - full_panels % 2;  // where the pairs stop
       for (; unpaired_done + 8 <= n; unpaired_done += 8)
         for (Index p = unpaired_from; p < panels; ++p)
           block<1, 8>(p, x + unpaired_done * ldx, ldx, y + unpaired_done * ldy, ldy);

@@ -55,28 +55,21 @@ void check_several_steps(const Network<S>& net, std::uint64_t seed) {
 
 }  // namespace
 
-TEMPLATE_TEST_CASE("several steps: an MLP's parameter products, step after step", "[nn]", float,
-                   double) {
-  auto net = Network<TestType>::mlp(24, {100, 100}, 4);  // guidance's shapes
+TEMPLATE_TEST_CASE("several steps: the parameter products of an MLP and of the quantum CNN, "
+                   "step after step", "[nn]", float, double) {
+  auto mlp = Network<TestType>::mlp(24, {100, 100}, 4);  // guidance's shapes
+  auto cnn = testing::quantum_cnn<TestType>(16, 6);
   Rng rng(31);
-  glorot_uniform(net, rng);
-  check_several_steps(net, 32);
-}
-
-TEMPLATE_TEST_CASE("several steps: the quantum CNN's parameter products, step after step",
-                   "[nn]", float, double) {
-  auto net = testing::quantum_cnn<TestType>(16, 6);
-  Rng rng(33);
-  glorot_uniform(net, rng);
-  check_several_steps(net, 34);
+  for (Network<TestType>* net : {&mlp, &cnn}) {
+    glorot_uniform(*net, rng);
+    check_several_steps(*net, rng.bits());
+  }
 }
 
 TEST_CASE("several steps: too many steps and a record of another batch are refused", "[nn]") {
-  auto net = Network<double>::mlp(3, {4}, 1);
-  Rng rng(35);
-  glorot_uniform(net, rng);
-  Network<double>::PackedWeights packed;
-  net.pack(packed);
+  const testing::SmallPackedMlp mlp(35);
+  const Network<double>& net = mlp.net;
+  const Network<double>::PackedWeights& packed = mlp.packed;
   Network<double>::Workspace ws, small;
   Matrix<double> y;
   net.forward(Matrix<double>::Ones(3, 4), y, ws, packed);

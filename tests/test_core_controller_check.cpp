@@ -4,7 +4,6 @@
 // its own field at about its relative size.
 #include <cmath>
 #include <limits>
-#include <span>
 
 #include <catch2/catch.hpp>
 
@@ -73,7 +72,6 @@ public:
     SplitInput,
     SplitInputUnwritten,
     ScaledParams,
-    MultiStepParams,
     ColumnOutputs,
     ColumnPlace,
     ColumnUnwritten
@@ -140,19 +138,13 @@ public:
     net_.add_param_gradient(ws, adjoints, scales, scaled, own);
     grad += (where_ == Where::ScaledParams ? 1 + size_ : 1.0) * own;
   }
-  using RecordedStep = Network<double>::RecordedStep;
-  void add_param_gradient(std::span<const RecordedStep> steps, Vector<double>& grad) const {
-    Vector<double> own = Vector<double>::Zero(grad.size());
-    net_.add_param_gradient(steps, own);
-    grad += (where_ == Where::MultiStepParams ? 1 + size_ : 1.0) * own;
-  }
 
 private:
   Network<double> net_;
   Where where_;
   double size_;
 };
-static_assert(MultiStepController<PlantedNetwork> && ColumnSplitController<PlantedNetwork>);
+static_assert(SeedScalingController<PlantedNetwork> && ColumnSplitController<PlantedNetwork>);
 
 Network<double> small_network() {
   auto net = Network<double>::mlp(3, {5, 4}, 1);
@@ -219,13 +211,13 @@ TEST_CASE("check_controller checks the engine's optional paths of a network, eac
   using Where = PlantedNetwork::Where;
   const double size = 1e-4;
   for (Where where : {Where::Nowhere, Where::SplitParams, Where::SplitInput,
-                      Where::SplitInputUnwritten, Where::ScaledParams, Where::MultiStepParams,
-                      Where::ColumnOutputs, Where::ColumnPlace, Where::ColumnUnwritten}) {
+                      Where::SplitInputUnwritten, Where::ScaledParams, Where::ColumnOutputs,
+                      Where::ColumnPlace, Where::ColumnUnwritten}) {
     INFO("planted in " << static_cast<int>(where));
     PlantedNetwork net(small_network(), where, size);
     const auto check = check_controller(net, small_batch());
     CHECK((check.has_packed && check.has_split_backward && check.has_seed_scaling &&
-           check.has_multi_step && check.has_column_split));
+           check.has_column_split));
     // The plain and packed paths are the network's own in every case.
     CHECK(worst_error({check.param_vjp_error, check.input_vjp_error, check.packed_forward_error,
                        check.packed_param_vjp_error, check.packed_input_vjp_error}) < 1e-8);
@@ -237,7 +229,6 @@ TEST_CASE("check_controller checks the engine's optional paths of a network, eac
     if (where == Where::SplitInputUnwritten) CHECK(std::isinf(check.split_input_vjp_error));
     else expect(Where::SplitInput, check.split_input_vjp_error);
     expect(Where::ScaledParams, check.scaled_param_vjp_error);
-    expect(Where::MultiStepParams, check.multi_step_param_vjp_error);
     if (where == Where::ColumnOutputs) {
       // size · |y_b| / max |y| over the columns past the cut: at most size
       CHECK(check.column_split_forward_error > 0.1 * size);

@@ -7,7 +7,6 @@
 
 #include <cmath>
 #include <limits>
-#include <span>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -209,68 +208,6 @@ TEMPLATE_TEST_CASE("db += D s: each bias entry summed in sample order, bit for b
             expected = scaled ? std::fma(d(i, k), scale(k), expected) : expected + d(i, k);
           INFO("bias entry " << i);
           CHECK(grad(rows * cols + i) == expected);
-        }
-      }
-    }
-  }
-}
-
-TEMPLATE_TEST_CASE("dW += Σ_t D_t diag(s_t) X_t^T over several terms: each entry summed term "
-                   "after term in sample order, bit for bit, nothing written outside dW",
-                   "[nn][outer]", float, double) {
-  // The several-step call of outer_product.hpp (the engine's sweeps add two steps at a time):
-  // where a register kernel runs, every entry is the fused chain over the terms' samples in
-  // order (x' = s·x rounded in a scaled term), however the AVX2 kernel cuts the terms into
-  // passes (at most 4 pieces and 64 samples a pass: 5 terms, terms of 70 samples, scaled and
-  // unscaled terms mixed); everywhere, the same bits as one call per term.
-  using S = TestType;
-  constexpr Index kGuard = 32;
-  constexpr S kSentinel = S(-7.5);
-  std::uint64_t seed = 2500;
-  for (const auto& [rows, cols] : {std::pair<Index, Index>{100, 100}, {4, 100}, {100, 24},
-                                   {60, 180}, {7, 5}, {13, 3}, {30, 1}}) {
-    for (const std::vector<Index>& samples :
-         {std::vector<Index>{8, 8}, {8, 70}, {70, 70, 3}, {1, 8, 9, 21, 8}}) {
-      for (const bool scaled : {false, true}) {
-        const bool kernel = sbptt::outer_product_kernel_applies<S>(cols);
-        if (scaled && !kernel) continue;
-        std::vector<Matrix<S>> d, x, scale;
-        std::vector<sbptt::OuterProductTerm<S>> terms;
-        for (std::size_t t = 0; t < samples.size(); ++t) {
-          const Index n = samples[t];
-          d.push_back(random_matrix<S>(rows, n, ++seed, 1.0));
-          x.push_back(random_matrix<S>(cols, n, ++seed, 1.0));
-          scale.push_back(random_matrix<S>(n, 1, ++seed, 3.0));
-        }
-        for (std::size_t t = 0; t < samples.size(); ++t)  // every other term scaled
-          terms.push_back({d[t].data(), x[t].data(), samples[t],
-                           scaled && t % 2 == 0 ? scale[t].data() : nullptr});
-        const sbptt::Vector<S> start = random_matrix<S>(rows * cols, 1, ++seed, 1.0);
-        sbptt::Vector<S> buffer = sbptt::Vector<S>::Constant(rows * cols + 2 * kGuard, kSentinel);
-        buffer.segment(kGuard, rows * cols) = start;
-        sbptt::add_outer_products(buffer.data() + kGuard, rows, cols,
-                                  std::span<const sbptt::OuterProductTerm<S>>(terms));
-        sbptt::Vector<S> one_by_one = start;
-        for (const auto& term : terms)
-          sbptt::add_outer_products(one_by_one.data(), rows, cols, term.d, term.x, term.n,
-                                    term.scale);
-        INFO("rows " << rows << " cols " << cols << " terms " << terms.size() << " scaled "
-                     << scaled);
-        REQUIRE((buffer.head(kGuard).array() == kSentinel).all());
-        REQUIRE((buffer.tail(kGuard).array() == kSentinel).all());
-        REQUIRE(buffer.segment(kGuard, rows * cols) == one_by_one);
-        if (!kernel) continue;
-        for (Index i = 0; i < rows; ++i) {
-          for (Index j = 0; j < cols; ++j) {
-            S expected = start(i * cols + j);
-            for (std::size_t t = 0; t < terms.size(); ++t)
-              for (Index k = 0; k < samples[t]; ++k) {
-                const S xs = terms[t].scale != nullptr ? S(x[t](j, k) * scale[t](k)) : x[t](j, k);
-                expected = std::fma(xs, d[t](i, k), expected);
-              }
-            INFO("entry (" << i << ", " << j << ")");
-            REQUIRE(buffer(kGuard + i * cols + j) == expected);
-          }
         }
       }
     }

@@ -71,9 +71,11 @@ TEMPLATE_TEST_CASE("scaled seeds: the quantum CNN's parameter products of dY·di
 }
 
 TEST_CASE("scaled seeds: badly shaped scales and a shared record are refused", "[nn]") {
-  const testing::SmallPackedMlp mlp(26);
-  const Network<double>& net = mlp.net;
-  const Network<double>::PackedWeights& packed = mlp.packed;
+  auto net = Network<double>::mlp(3, {4}, 1);
+  Rng rng(26);
+  glorot_uniform(net, rng);
+  Network<double>::PackedWeights packed;
+  net.pack(packed);
   Network<double>::Workspace ws;
   Matrix<double> y;
   net.forward(Matrix<double>::Ones(3, 4), y, ws, packed);

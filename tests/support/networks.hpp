@@ -1,11 +1,7 @@
 #pragma once
-// Networks of the tests. The quantum-control CNN of the paper at any grid and width: (Nx
-// positions × 2 channels) → conv `channels` k3 s2 tanh → conv `channels` k3 s2 tanh → flatten
-// → dense 1. At Nx = 32 and 60 channels (the defaults) it is the paper's: 32 → 15 → 7
-// positions, 420 → 1.
-#include <cstdint>
-
-#include "sbptt/nn/init.hpp"
+// The quantum-control CNN of the paper at any grid and width: (Nx positions × 2 channels) →
+// conv `channels` k3 s2 tanh → conv `channels` k3 s2 tanh → flatten → dense 1. At Nx = 32 and
+// 60 channels (the defaults) it is the paper's: 32 → 15 → 7 positions, 420 → 1.
 #include "sbptt/nn/network.hpp"
 
 namespace sbptt::testing {
@@ -17,17 +13,5 @@ Network<Scalar> quantum_cnn(Index nx = 32, Index channels = 60) {
   return Network<Scalar>(
       {first, second, Dense{second.output_length() * channels, 1, Activation::Identity}});
 }
-
-/// A small MLP, 3 → 4 → 1, with Glorot-uniform weights drawn from `seed`, and its packed
-/// weights: the network of the tests that a call is refused.
-struct SmallPackedMlp {
-  Network<double> net = Network<double>::mlp(3, {4}, 1);
-  Network<double>::PackedWeights packed;
-  explicit SmallPackedMlp(std::uint64_t seed) {
-    Rng rng(seed);
-    glorot_uniform(net, rng);
-    net.pack(packed);
-  }
-};
 
 }  // namespace sbptt::testing

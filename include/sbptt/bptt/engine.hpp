@@ -233,8 +233,8 @@ public:
                                    : fork_[1].probing() || fork_[1].fork();
       if (handoff_ && !split_loops) {
         Handoff& h = *handoff_;
-        auto add = [&](Index first, Index count, int) {
-          detail::ReverseSweeps::add_params(*this, h, first, count, gradient);
+        auto add = [&](std::size_t slot, int) {
+          detail::ReverseSweeps::add_params(*this, h, slot, gradient);
         };
         h.run(*pool_, steps_, add, [&] {
           detail::ReverseSweeps::lone(*this, sweeps_[0], schedule, gradient, truncation, false,
@@ -367,7 +367,7 @@ private:
   detail::ForkDecision fork_[3];  ///< per-sample loops: simulator step, VJPs, batch loss
   Sweep sweeps_[2];
   /// Each sweep's layer adjoints when it adds its own parameter products (no hand-off).
-  detail::HeldAdjoints<typename detail::LayerAdjointsOf<Ctrl>::Type> sweep_adjoints_[2];
+  typename detail::LayerAdjointsOf<Ctrl>::Type sweep_adjoints_[2];
   detail::PairedColumns<Scalar> paired_columns_;  ///< both sweeps' VJPs in one batch call
   std::vector<EvalChunk> chunks_;
   Vector<Scalar> eval_losses_;

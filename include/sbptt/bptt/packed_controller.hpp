@@ -4,10 +4,6 @@
 /// batch when it is a `ColumnSplitController`, and with its backward split into an input half
 /// and a parameter half when it is a `SplitBackwardController`. Implementation detail of
 /// `sbptt::Engine`.
-#include <array>
-#include <cstddef>
-#include <span>
-
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/types.hpp"
 
@@ -35,51 +31,6 @@ template <class C>
 struct LayerAdjointsOf<C, true> {
   using Type = typename C::LayerAdjoints;
 };
-
-/// A sweep's layer adjoints: those of the step whose parameter products wait (`step`, −1 when
-/// none does) to be added with the next step's in one call (`MultiStepController`), and the
-/// next step's.
-template <class Adjoints>
-struct HeldAdjoints {
-  Adjoints adjoints[2];
-  Index step = -1;
-};
-
-/// One step's parameter products for `add_step_products`: the step's workspace and recorded
-/// layer adjoints and, for a seed scaled per sample (shared_seed_sweeps.hpp), the scales and
-/// the buffers to scale in (null for the recorded seed itself).
-template <class Ctrl>
-struct StepProducts {
-  const typename Ctrl::Workspace* workspace;
-  const typename Ctrl::LayerAdjoints* adjoints;
-  const Matrix<typename Ctrl::Scalar>* scales = nullptr;
-  typename Ctrl::LayerAdjoints* scaled = nullptr;
-};
-
-/// grad += the parameter products of `steps` (at most 2), in their order: in one call for a
-/// `MultiStepController`, else one call per step. The same bits either way.
-template <class Ctrl>
-void add_step_products(const Ctrl& controller, std::span<const StepProducts<Ctrl>> steps,
-                       Vector<typename Ctrl::Scalar>& grad) {
-  if constexpr (MultiStepController<Ctrl>) {
-    using Step = typename Ctrl::RecordedStep;
-    std::array<Step, 2> recorded;
-    for (std::size_t k = 0; k < steps.size(); ++k)
-      recorded[k] = Step{steps[k].workspace, steps[k].adjoints, steps[k].scales, steps[k].scaled};
-    controller.add_param_gradient(std::span<const Step>(recorded.data(), steps.size()), grad);
-  } else {
-    for (const StepProducts<Ctrl>& step : steps) {
-      if constexpr (SeedScalingController<Ctrl>) {
-        if (step.scales != nullptr) {
-          controller.add_param_gradient(*step.workspace, *step.adjoints, *step.scales,
-                                        *step.scaled, grad);
-          continue;
-        }
-      }
-      controller.add_param_gradient(*step.workspace, *step.adjoints, grad);
-    }
-  }
-}
 
 /// `Ctrl` with its packed weights: `pack` before a rollout, then the calls of the rollout and
 /// of the sweeps over it use that packing.

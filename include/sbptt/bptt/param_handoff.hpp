@@ -24,16 +24,13 @@ namespace sbptt::detail {
 /// while it keeps up, the sweeping thread when it must wait for a slot (then only up to that
 /// slot, so that it soon goes back to sweeping) and at the end. So each gradient is summed in
 /// one fixed order, the same as on one thread, and with two chains both threads can add at
-/// once. The other thread adds two recordings a call (`kStepsPerAdd`, as the sweeps on one
-/// thread do: `MultiStepController`), one only for the last or when the sweeping thread
-/// waits. The sweep never waits for a thread that may not have started (the adder runs beside
+/// once. The sweep never waits for a thread that may not have started (the adder runs beside
 /// it, `ThreadPool::run_beside`, and stops once every slot is added or the sweep has thrown).
 /// Nobody sleeps on a lock (`try_lock`, then `pause`, and `yield` once a wait has lasted 2048
 /// turns): a step takes a few microseconds, less than waking a sleeping thread.
 template <class Adjoints, int Chains = 1>
 struct ParamHandoff {
   static constexpr Index ring_size = 16;
-  static constexpr Index kStepsPerAdd = 2;
   struct Chain {
     std::atomic<Index> added{0};
     std::mutex lock;
@@ -59,27 +56,19 @@ struct ParamHandoff {
   }
 
   /// Adds chain `c` of the recordings before number `until` not yet added, if its lock is
-  /// free: `add(k, count, c)` adds `count` recordings from number k on (slots k % ring_size,
-  /// …), two at a time, and with `pairs_only` leaves a last single one. False if another
-  /// thread held the lock.
+  /// free; `add(slot, c)` adds one. False if another thread held the lock.
   template <class Add>
-  bool try_adding(Add& add, int c, Index until, bool pairs_only = false) {
+  bool try_adding(Add& add, int c, Index until) {
     Chain& chain = chains[static_cast<std::size_t>(c)];
     const std::unique_lock<std::mutex> guard(chain.lock, std::try_to_lock);
     if (!guard.owns_lock()) return false;
     const Index last = std::min(until, recorded.load(std::memory_order_acquire));
-    for (Index k = chain.added.load(std::memory_order_relaxed); k < last;) {
-      const Index count = std::min(kStepsPerAdd, last - k);
-      if (pairs_only && count < kStepsPerAdd) break;
-      add(k, count, c);
-      k += count;
-      chain.added.store(k, std::memory_order_release);
+    for (Index k = chain.added.load(std::memory_order_relaxed); k < last; ++k) {
+      add(static_cast<std::size_t>(k % ring_size), c);
+      chain.added.store(k + 1, std::memory_order_release);
     }
     return true;
   }
-
-  /// Slot of recording number `k`.
-  [[nodiscard]] static std::size_t slot(Index k) { return static_cast<std::size_t>(k % ring_size); }
 
   /// One turn of a wait: `pause` at first, then yield the core, because on a machine with
   /// fewer free cores than threads the thread waited for may have been preempted.
@@ -108,7 +97,7 @@ struct ParamHandoff {
   template <class Add>
   [[nodiscard]] std::size_t slot_for(Index k, Add& add) {
     wait_added(k - ring_size + 1, add);
-    return slot(k);
+    return static_cast<std::size_t>(k % ring_size);
   }
 
   /// Runs `sweep` on this thread while a second thread of `pool` adds the `total` slots it
@@ -136,13 +125,9 @@ struct ParamHandoff {
       if (added() == total) return;
       const Index available = recorded.load(std::memory_order_acquire);
       bool progressed = false;
-      for (int c = 0; c < Chains; ++c) {
-        std::atomic<Index>& chain_added = chains[static_cast<std::size_t>(c)].added;
-        const Index before = chain_added.load(std::memory_order_acquire);
-        if (available <= before) continue;
-        try_adding(add, c, available, available < total);
-        progressed = progressed || chain_added.load(std::memory_order_acquire) > before;
-      }
+      for (int c = 0; c < Chains; ++c)
+        if (available > chains[static_cast<std::size_t>(c)].added.load(std::memory_order_acquire))
+          progressed = try_adding(add, c, available) || progressed;
       if (progressed) {
         turns = 0;
       } else {

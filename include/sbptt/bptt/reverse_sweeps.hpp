@@ -8,12 +8,10 @@
 /// Each sweep runs the recursion of engine.hpp's file comment from λ_m back to λ_0: the control
 /// adjoint μ_n, the parameter products (∂N/∂θ)_nᵀ μ_n, then λ_n, with the propagated terms
 /// dropped where the truncation window cuts (flow_mode.hpp).
-#include <array>
 #include <atomic>
 #include <cstddef>
 #include <cstring>
 #include <initializer_list>
-#include <span>
 
 #include "sbptt/bptt/batch_physics.hpp"
 #include "sbptt/bptt/flow_mode.hpp"
@@ -35,9 +33,7 @@ struct ReverseSweeps {
                    Vector<typename Engine::Scalar>& gradient, Index truncation, bool parallel,
                    typename Engine::Handoff* handoff) {
     begin(e, s, gradient, handoff != nullptr);
-    auto add = [&](Index first, Index count, int) {
-      add_params(e, *handoff, first, count, gradient);
-    };
+    auto add = [&](std::size_t slot, int) { add_params(e, *handoff, slot, gradient); };
     for (Index n = e.steps_ - 1; n >= 0; --n) {
       const auto i = static_cast<std::size_t>(n);
       const FlowMode mode = schedule.at(n);
@@ -62,7 +58,6 @@ struct ReverseSweeps {
     if constexpr (SplitBackwardController<typename Engine::Controller>) {
       if (handoff != nullptr) handoff->wait_added(e.steps_, add);
     }
-    add_held(e, s, gradient);
     s.end(gradient);
   }
 
@@ -82,7 +77,6 @@ struct ReverseSweeps {
       // At the last step both sweeps start from λ_m = the loss seed, so their μ are the same
       // numbers, and so are the parameter products both gradients start with (from 0).
       if (n == e.steps_ - 1 && same_bits(physics_only.mu, full.mu)) {
-        add_held(e, full, result.regular);
         result.modified = result.regular;
       } else {
         network_backward(e, physics_only, n, result.modified, nullptr);
@@ -90,8 +84,6 @@ struct ReverseSweeps {
       advance(full, flows, flows);
       advance(physics_only, flows, false);
     }
-    add_held(e, full, result.regular);
-    add_held(e, physics_only, result.modified);
     full.end(result.regular);
     physics_only.end(result.modified);
   }
@@ -132,30 +124,20 @@ struct ReverseSweeps {
   /// λ = 0 and `gradient` = 0 (num_params) for a sweep over the stored trajectory;
   /// `overlapped`: its parameter products are added on another thread.
   template <class Engine, class Sweep>
-  static void begin(Engine& e, Sweep& s, Vector<typename Engine::Scalar>& gradient,
+  static void begin(const Engine& e, Sweep& s, Vector<typename Engine::Scalar>& gradient,
                     bool overlapped) {
     gradient.setZero(e.controller_.num_params());
-    held_of(e, s).step = -1;
     s.begin(e.sim_.state_dim(), e.sim_.control_dim(), e.trajectory_.batch(), e.steps_,
             overlapped);
   }
 
-  /// Adds the parameter products of `count` recordings of the hand-off from number `first` on
-  /// to `gradient`.
+  /// Adds the parameter products recorded in `slot` of the hand-off to `gradient`.
   template <class Engine, class Handoff>
-  static void add_params(const Engine& e, Handoff& h, Index first, Index count,
+  static void add_params(const Engine& e, Handoff& h, std::size_t slot,
                          Vector<typename Engine::Scalar>& gradient) {
-    using Controller = typename Engine::Controller;
-    if constexpr (SplitBackwardController<Controller>) {
-      std::array<StepProducts<Controller>, Handoff::kStepsPerAdd> steps;
-      for (Index j = 0; j < count; ++j) {
-        const std::size_t slot = Handoff::slot(first + j);
-        steps[static_cast<std::size_t>(j)] = {
-            &e.trajectory_.workspaces[static_cast<std::size_t>(h.steps[slot])], &h.ring[slot]};
-      }
-      add_step_products(e.controller_, std::span<const StepProducts<Controller>>(
-                                           steps.data(), static_cast<std::size_t>(count)),
-                        gradient);
+    if constexpr (SplitBackwardController<typename Engine::Controller>) {
+      const auto step = static_cast<std::size_t>(h.steps[slot]);
+      e.controller_.add_param_gradient(e.trajectory_.workspaces[step], h.ring[slot], gradient);
     }
   }
 
@@ -164,52 +146,19 @@ private:
   /// `SplitBackwardController` through its two halves and the sweep's own `LayerAdjoints` (the
   /// same numbers as `backward`), so that nothing of the controller's grows per thread: the
   /// pair's sweeps run on whichever thread claims them, and a thread-local buffer would
-  /// allocate the first time a sweep lands on a new thread. The parameter products go two
-  /// steps at a time (`add_step_products`): step n's wait for step n − 1's, and `add_held` adds
-  /// a last one alone; the same sum in the same order.
+  /// allocate the first time a sweep lands on a new thread.
   template <class Engine, class Sweep>
   static void network_backward(Engine& e, Sweep& s, Index n,
                                Vector<typename Engine::Scalar>& gradient,
                                Matrix<typename Engine::Scalar>* dx) {
-    using Controller = typename Engine::Controller;
     const auto& workspace = e.trajectory_.workspaces[static_cast<std::size_t>(n)];
-    if constexpr (SplitBackwardController<Controller>) {
-      auto& held = held_of(e, s);
-      const bool waiting = held.step >= 0;
-      e.packed_controller_.backward_inputs(workspace, s.mu, dx, held.adjoints[waiting ? 1 : 0]);
-      if (!waiting) {
-        held.step = n;
-        return;
-      }
-      const std::array<StepProducts<Controller>, 2> steps{
-          StepProducts<Controller>{&e.trajectory_.workspaces[static_cast<std::size_t>(held.step)],
-                                   &held.adjoints[0]},
-          StepProducts<Controller>{&workspace, &held.adjoints[1]}};
-      add_step_products(e.controller_, std::span<const StepProducts<Controller>>(steps),
-                        gradient);
-      held.step = -1;
+    if constexpr (SplitBackwardController<typename Engine::Controller>) {
+      auto& adjoints = e.sweep_adjoints_[&s == &e.sweeps_[0] ? 0 : 1];
+      e.packed_controller_.backward_inputs(workspace, s.mu, dx, adjoints);
+      e.controller_.add_param_gradient(workspace, adjoints, gradient);
     } else {
       e.packed_controller_.backward(workspace, s.mu, gradient, dx);
     }
-  }
-
-  /// Adds the parameter products of sweep `s`'s step that waits for the next, if one does.
-  template <class Engine, class Sweep>
-  static void add_held(Engine& e, Sweep& s, Vector<typename Engine::Scalar>& gradient) {
-    if constexpr (SplitBackwardController<typename Engine::Controller>) {
-      auto& held = held_of(e, s);
-      if (held.step < 0) return;
-      e.controller_.add_param_gradient(
-          e.trajectory_.workspaces[static_cast<std::size_t>(held.step)], held.adjoints[0],
-          gradient);
-      held.step = -1;
-    }
-  }
-
-  /// Sweep `s`'s layer adjoints (engine.hpp, `sweep_adjoints_`).
-  template <class Engine, class Sweep>
-  static auto& held_of(Engine& e, const Sweep& s) {
-    return e.sweep_adjoints_[&s == &e.sweeps_[0] ? 0 : 1];
   }
 
   /// Whether `a` and `b` hold the same bits (−0 and +0 differ, equal NaNs do not).

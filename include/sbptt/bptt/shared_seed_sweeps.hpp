@@ -20,12 +20,9 @@
 /// for quantum control (2 × 8 VJPs of about 0.76 µs per step) splitting them instead of
 /// handing off the products made the two-thread C epoch 301.8 ms, against 248–263 ms
 /// (docs/benchmark-runs.md, fifth run).
-#include <array>
 #include <atomic>
 #include <cstddef>
 #include <memory>
-#include <span>
-#include <utility>
 
 #include "sbptt/bptt/flow_mode.hpp"
 #include "sbptt/bptt/packed_controller.hpp"
@@ -63,14 +60,8 @@ public:
   template <class Engine, class Pair>
   void run(Engine& engine, Pair& result, Index truncation) {
     Handoff* h = handoff_.get();
-    auto add = [&](Index first, Index count, int sweep_index) {
-      std::array<std::pair<Step*, Index>, Handoff::kStepsPerAdd> steps;
-      for (Index j = 0; j < count; ++j) {
-        const std::size_t slot = Handoff::slot(first + j);
-        steps[static_cast<std::size_t>(j)] = {&h->ring[slot], h->steps[slot]};
-      }
-      add_steps(engine, std::span(steps.data(), static_cast<std::size_t>(count)), sweep_index,
-                result);
+    auto add = [&](std::size_t slot, int sweep_index) {
+      add_step(engine, h->ring[slot], h->steps[slot], sweep_index, result);
     };
     if (h == nullptr) {
       sweep(engine, result, truncation, nullptr, add);
@@ -101,7 +92,7 @@ private:
       ReverseSweeps::adjoint_products(e, {&full, &physics}, n, !cut, false);
       const Index k = e.steps_ - 1 - n;  // steps recorded so far
       const std::size_t slot = handoff != nullptr ? handoff->slot_for(k, add) : 0;
-      Step& step = handoff != nullptr ? handoff->ring[slot] : held_[k % 2];
+      Step& step = handoff != nullptr ? handoff->ring[slot] : single_;
       step.mu[0] = full.mu;
       step.mu[1] = physics.mu;
       e.packed_controller_.backward_inputs(e.trajectory_.workspaces[i], unit_seed_,
@@ -109,8 +100,9 @@ private:
       if (handoff != nullptr) {
         handoff->steps[slot] = n;
         handoff->recorded.store(k + 1, std::memory_order_release);
-      } else if (k % 2 == 1) {  // two steps held: n + 1's in held_[0], n's in held_[1]
-        add_held(e, 2, n, result);
+      } else {
+        add_step(e, step, n, 0, result);
+        add_step(e, step, n, 1, result);
       }
       if (cut) {
         full.lambda.setZero();
@@ -121,46 +113,23 @@ private:
         physics.lambda.swap(physics.propagated);
       }
     }
-    if (handoff != nullptr) {
-      handoff->wait_added(e.steps_, add);
-    } else if (e.steps_ % 2 == 1) {  // the last step (n = 0) alone
-      add_held(e, 1, 0, result);
-    }
+    if (handoff != nullptr) handoff->wait_added(e.steps_, add);
     full.end(result.regular);
     physics.end(result.modified);
   }
 
-  /// Adds the parameter products of `steps` (each a recording and its time step), in their
-  /// order, of one sweep (0: Full into g_R, 1: PhysicsOnly into g_M).
+  /// Adds the parameter products of step `n`, recorded in `step`, of one sweep (0: Full into
+  /// g_R, 1: PhysicsOnly into g_M).
   template <class Engine, class Pair>
-  static void add_steps(const Engine& e, std::span<const std::pair<Step*, Index>> steps,
-                        int sweep_index, Pair& result) {
-    using Controller = typename Engine::Controller;
+  static void add_step(const Engine& e, Step& step, Index n, int sweep_index, Pair& result) {
+    const auto& workspace = e.trajectory_.workspaces[static_cast<std::size_t>(n)];
     const auto i = static_cast<std::size_t>(sweep_index);
-    std::array<StepProducts<Controller>, 2> products;
-    for (std::size_t k = 0; k < steps.size(); ++k) {
-      Step& step = *steps[k].first;
-      products[k] = {&e.trajectory_.workspaces[static_cast<std::size_t>(steps[k].second)],
-                     &step.adjoints, &step.mu[i], &step.scaled[i]};
-    }
-    add_step_products(e.controller_,
-                      std::span<const StepProducts<Controller>>(products.data(), steps.size()),
-                      sweep_index == 0 ? result.regular : result.modified);
-  }
-
-  /// Without threads: adds both sweeps' products of the `count` steps held, the last of them
-  /// step `n` (held_[0] holds step n + count − 1).
-  template <class Engine, class Pair>
-  void add_held(const Engine& e, Index count, Index n, Pair& result) {
-    const std::array<std::pair<Step*, Index>, 2> steps{std::pair{&held_[0], n + count - 1},
-                                                       std::pair{&held_[1], n}};
-    for (int sweep_index : {0, 1})
-      add_steps(e, std::span(steps.data(), static_cast<std::size_t>(count)), sweep_index,
-                result);
+    e.controller_.add_param_gradient(workspace, step.adjoints, step.mu[i], step.scaled[i],
+                                     sweep_index == 0 ? result.regular : result.modified);
   }
 
   std::unique_ptr<Handoff> handoff_;  ///< with threads
-  Step held_[2];  ///< without threads: recordings 2j and 2j + 1, added together
+  Step single_;  ///< the one step in use without threads
   Matrix<Scalar> unit_seed_;  ///< 1 × B ones
 };
 

@@ -5,7 +5,6 @@
 /// of its own, and `static_assert_simulator<T>()` / `static_assert_controller<T>()` report the
 /// first missing member in plain words. The engine calls them on its template arguments.
 #include <concepts>
-#include <span>
 
 #include "sbptt/core/types.hpp"
 
@@ -215,19 +214,6 @@ concept SeedScalingController =
              typename C::LayerAdjoints& scaled, Vector<typename C::Scalar>& grad) {
       c.add_param_gradient(ws, recorded, scales, scaled, grad);
     };
-
-/// A `SeedScalingController` that adds the parameter products of several steps in one call:
-/// `using RecordedStep`, an aggregate of a workspace, the adjoints recorded for it, and for a
-/// scaled seed the scales and the adjoints to scale in (pointers, the last two null for the
-/// recorded seed), and `void add_param_gradient(std::span<const RecordedStep> steps, grad)
-/// const`, which adds what one call per step would (at least 2 steps), in the order given,
-/// bit for bit. The engine's sweeps add two steps at a time (`Network`: one load and store of
-/// each gradient block for both).
-template <class C>
-concept MultiStepController =
-    SeedScalingController<C> &&
-    requires(const C& c, std::span<const typename C::RecordedStep> steps,
-             Vector<typename C::Scalar>& grad) { c.add_param_gradient(steps, grad); };
 
 /// Compile-time check with a readable message per missing member; returns true.
 template <class S>

@@ -6,19 +6,16 @@
 /// sample b with a seeded random output adjoint dY, in θ and in X (finite_difference.hpp for
 /// the step and the error measure). Per sample, so that one set of differences serves every
 /// seed the engine uses: Σ_b ∂s_b/∂θ for dY, Σ_b σ_b ∂s_b/∂θ for the column-scaled seed
-/// dY·diag(σ) of a `SeedScalingController`, and both summed for a `MultiStepController`.
+/// dY·diag(σ) of a `SeedScalingController`.
 ///
 /// The engine runs a controller's optional overloads, not its plain `backward`: the packed
 /// ones (`PackingController`), the two halves (`SplitBackwardController`), the scaled
-/// parameter products (`SeedScalingController`), those of two steps in one call
-/// (`MultiStepController`) and the forward pass in ranges of columns
+/// parameter products (`SeedScalingController`) and the forward pass in ranges of columns
 /// (`ColumnSplitController`). A user's optional path that disagrees with the plain one would
 /// train on a wrong gradient that every check of the plain path passes, so each is checked
 /// here against the same differences.
-#include <array>
 #include <cstdint>
 #include <initializer_list>
-#include <span>
 #include <utility>
 
 #include "sbptt/core/concepts.hpp"
@@ -44,9 +41,6 @@ struct ControllerCheck {
   Scalar split_input_vjp_error = 0;   ///< backward_inputs' input product against FD
   bool has_seed_scaling = false;      ///< `SeedScalingController`: the field below
   Scalar scaled_param_vjp_error = 0;  ///< the scaled parameter product (seed dY·diag(σ)) vs FD
-  bool has_multi_step = false;        ///< `MultiStepController`: the field below
-  /// The parameter products of two steps in one call (seeds dY and dY·diag(σ)) against FD.
-  Scalar multi_step_param_vjp_error = 0;
   /// `ColumnSplitController` and a batch of at least 2 (a cut to check): the fields below
   bool has_column_split = false;
   /// Outputs of the batch rolled forward in two ranges of columns, every cut, against the
@@ -60,8 +54,7 @@ struct ControllerCheck {
     return worst_error(
         {param_vjp_error, input_vjp_error, packed_forward_error, packed_param_vjp_error,
          packed_input_vjp_error, split_param_vjp_error, split_input_vjp_error,
-         scaled_param_vjp_error, multi_step_param_vjp_error, column_split_forward_error,
-         column_split_backward_error});
+         scaled_param_vjp_error, column_split_forward_error, column_split_backward_error});
   }
 };
 
@@ -151,20 +144,6 @@ template <Controller Ctrl>
         ctrl.add_param_gradient(packed_ws, recorded, scales, scaled, scaled_grad);
         const Matrix<Scalar> fd_scaled = (scales * fd_per_sample).transpose();
         result.scaled_param_vjp_error = relative_error<Scalar>(scaled_grad, fd_scaled);
-
-        if constexpr (MultiStepController<Ctrl>) {
-          // Two steps in one call, the seed dY and then dY·diag(σ), as the engine's sweeps add
-          // them: their sum.
-          result.has_multi_step = true;
-          using Step = typename Ctrl::RecordedStep;
-          typename Ctrl::LayerAdjoints scaled_second;
-          const std::array<Step, 2> steps{Step{&packed_ws, &recorded, nullptr, nullptr},
-                                          Step{&packed_ws, &recorded, &scales, &scaled_second}};
-          Vector<Scalar> both = Vector<Scalar>::Zero(ctrl.num_params());
-          ctrl.add_param_gradient(std::span<const Step>(steps), both);
-          result.multi_step_param_vjp_error =
-              relative_error<Scalar>(both, Matrix<Scalar>(fd_params + fd_scaled));
-        }
       }
     }
 

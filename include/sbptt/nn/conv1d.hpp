@@ -15,7 +15,6 @@
 /// The implementation gathers every window into a (C_in·K) × (P·B) matrix (im2col) so that the
 /// layer is ONE matrix product per batch; per-element loops would be an order of magnitude
 /// slower at the quantum-control sizes (60 channels).
-#include <span>
 #include <string>
 #include <type_traits>
 
@@ -128,14 +127,18 @@ struct Conv1d {
     activate_in_place(activation, y, output_dim() * batch);
   }
 
-  /// Adds the parameter VJPs of `terms` to `grad` (this layer's slice, num_params() entries),
-  /// in their order: a batch each, D the adjoint of the pre-activation, (P·C_out) × B
-  /// position-major, equivalently C_out × (P·B) column-major, and X the im2col matrix of the
-  /// forward pass, (C_in·K) × (P·B); a factor per im2col column (P·B: sample b's at b·P … b·P
-  /// + P − 1) on D only where the register kernel runs.
+  /// Adds the parameter VJP of a batch to `grad`.
+  /// \param columns  the im2col matrix of the forward pass, (C_in·K) × (P·B)
+  /// \param delta    adjoint of the pre-activation, (P·C_out) × B position-major, equivalently
+  ///                 C_out × (P·B) column-major
+  /// \param grad     this layer's slice of the gradient, num_params() entries; accumulated
+  /// \param scale    null, or a factor per im2col column (P·B: sample b's at b·P … b·P + P − 1)
+  ///                 on its delta, where the register kernel runs
   template <class Scalar>
-  void param_vjp(std::span<const OuterProductTerm<Scalar>> terms, Scalar* grad) const {
-    add_weight_and_bias_products(grad, out_channels, window_size(), terms);
+  void param_vjp(const Matrix<Scalar>& columns, const Scalar* delta, Scalar* grad,
+                 const Scalar* scale = nullptr) const {
+    add_weight_and_bias_products(grad, out_channels, window_size(), delta, columns.data(),
+                                 columns.cols(), scale);
   }
 
   /// Writes the input VJP ∂L/∂x, (L·C_in) × B position-major, into `dx`.

@@ -5,7 +5,6 @@
 /// (outputs × inputs) row-major, then the bias b (outputs). The layer reads and writes its slice
 /// through `Eigen::Map`s; the products with W and Wᵀ use copies packed once per parameter
 /// update (packed_product.hpp), the product for dW a register-blocked kernel (outer_product.hpp).
-#include <span>
 #include <string>
 
 #include "sbptt/core/error.hpp"
@@ -55,14 +54,17 @@ struct Dense {
     activate_in_place(activation, y, outputs * batch);
   }
 
-  /// Adds the parameter VJPs of `terms` to `grad` (this layer's slice, num_params() entries),
-  /// in their order: a batch each, D the adjoint of the pre-activation ∂L/∂(W x + b), n_out ×
-  /// B, and X the inputs the forward pass saw, n_in × B (both column-major); a factor per
-  /// sample on D only where the register kernel runs (`outer_product_kernel_applies(inputs)`).
+  /// Adds the parameter VJP of a batch to `grad`.
+  /// \param x      the inputs the forward pass saw, n_in × B
+  /// \param delta  adjoint of the pre-activation ∂L/∂(W x + b), n_out × B (column-major)
+  /// \param grad   this layer's slice of the gradient, num_params() entries; accumulated
+  /// \param scale  null, or a factor per sample (B) on its delta, where the register kernel
+  ///               runs (`outer_product_kernel_applies(inputs)`)
   template <class Scalar>
-  void param_vjp(std::span<const OuterProductTerm<Scalar>> terms, Scalar* grad) const {
+  void param_vjp(const Matrix<Scalar>& x, const Scalar* delta, Scalar* grad,
+                 const Scalar* scale = nullptr) const {
     // The batch sum is the inner dimension of these products (outer_product.hpp).
-    add_weight_and_bias_products(grad, outputs, inputs, terms);
+    add_weight_and_bias_products(grad, outputs, inputs, delta, x.data(), x.cols(), scale);
   }
 
   /// Writes the input VJP ∂L/∂x = Wᵀ Δ, n_in × B (column-major), into `dx`.

@@ -18,10 +18,8 @@
 /// after the first call on a thread, repeated calls at the same sizes allocate nothing, and
 /// several threads may run `backward` on the same workspace at once (e.g. the two sweeps of
 /// the combined update).
-#include <array>
 #include <cstddef>
 #include <initializer_list>
-#include <span>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -211,8 +209,8 @@ public:
   /// for the forward pass in `ws`.
   void add_param_gradient(const Workspace& ws, const LayerAdjoints& adjoints,
                           Vector<Scalar>& grad) const {
-    const RecordedStep step{&ws, &adjoints};
-    add_param_gradient(std::span<const RecordedStep>(&step, 1), grad);
+    check_recorded(ws, adjoints, grad);
+    params_from(ws, adjoints.record_.deltas, grad);
   }
 
   /// The same for the seed dY·diag(s), `scales` = s (1 × B), from adjoints recorded with dY:
@@ -222,45 +220,16 @@ public:
   void add_param_gradient(const Workspace& ws, const LayerAdjoints& adjoints,
                           const Matrix<Scalar>& scales, LayerAdjoints& scaled,
                           Vector<Scalar>& grad) const {
-    const RecordedStep step{&ws, &adjoints, &scales, &scaled};
-    add_param_gradient(std::span<const RecordedStep>(&step, 1), grad);
-  }
-
-  /// One step's records for the `add_param_gradient` of several steps: the workspace, the
-  /// adjoints `backward_inputs` recorded for it and, for the seed dY·diag(s), `scales` and
-  /// `scaled` as above (null for dY itself).
-  struct RecordedStep {
-    const Workspace* workspace;
-    const LayerAdjoints* adjoints;
-    const Matrix<Scalar>* scales = nullptr;
-    LayerAdjoints* scaled = nullptr;
-  };
-  /// Steps the `add_param_gradient` of several steps takes at once.
-  static constexpr std::size_t kMaxSteps = 4;
-
-  /// `add_param_gradient` of each of `steps` (at most kMaxSteps) in their order, bit for bit.
-  /// A register kernel that holds a block of a layer's gradient in registers (AVX2, FMA) adds
-  /// the steps' products to it in one pass (outer_product_avx2.hpp): the engine's sweeps add
-  /// two steps at a time. Every step is checked before any work.
-  void add_param_gradient(std::span<const RecordedStep> steps, Vector<Scalar>& grad) const {
-    detail::require(steps.size() <= kMaxSteps, "Network::add_param_gradient: ", steps.size(),
-                    " steps; expected at most ", kMaxSteps);
-    std::array<StepProducts, kMaxSteps> products;
-    for (std::size_t k = 0; k < steps.size(); ++k) {
-      const RecordedStep& step = steps[k];
-      check_step(step, grad);
-      for (std::size_t j = 0; j < k; ++j)  // a step's scaled Δ would overwrite another's
-        detail::require(step.scales == nullptr || steps[j].scaled != step.scaled,
-                        "Network::add_param_gradient: steps ", j, " and ", k,
-                        " share their scaled adjoints; expected one LayerAdjoints each");
-      products[k] = {step.workspace, &step.adjoints->record_.deltas};
-      if (step.scales == nullptr) continue;
-      auto& scaled_deltas = step.scaled->record_.deltas;
-      if (scaled_deltas.size() < layers_.size()) scaled_deltas.resize(layers_.size());
-      products[k].scales = step.scales->data();
-      products[k].scaled = &scaled_deltas;
-    }
-    params_from(std::span<const StepProducts>(products.data(), steps.size()), grad);
+    check_recorded(ws, adjoints, grad);
+    detail::require(scales.rows() == 1 && scales.cols() == ws.batch_,
+                    "Network::add_param_gradient: scales is ", scales.rows(), " × ",
+                    scales.cols(), ", expected 1 × ", ws.batch_, " (one per sample)");
+    detail::require(&scaled != &adjoints,
+                    "Network::add_param_gradient: scaled is the recorded adjoints; expected "
+                    "another LayerAdjoints");
+    auto& scaled_deltas = scaled.record_.deltas;
+    if (scaled_deltas.size() < layers_.size()) scaled_deltas.resize(layers_.size());
+    params_from(ws, adjoints.record_.deltas, grad, scales.data(), &scaled_deltas);
   }
 
 private:
@@ -310,8 +279,7 @@ private:
     check_grad_size(grad);
     auto& scratch = detail::network_scratch<Scalar>();
     inputs_packed(ws, dy, dx, packed, scratch);
-    const StepProducts step{&ws, &scratch.deltas};
-    params_from(std::span<const StepProducts>(&step, 1), grad);
+    params_from(ws, scratch.deltas, grad);
   }
 
   /// Δ_l of every layer into `scratch.deltas` (its buffers grown, never shrunk) and, when `dx`
@@ -371,77 +339,49 @@ private:
     }
   }
 
-  /// What `params_from` reads of a step: its workspace, its Δ_l and, for the seed dY·diag(s),
-  /// s (B entries) and the buffers `scaled` (null for dY itself).
-  struct StepProducts {
-    const Workspace* ws;
-    const std::vector<Vector<Scalar>>* deltas;
-    const Scalar* scales = nullptr;
-    std::vector<Vector<Scalar>>* scaled = nullptr;
-  };
-
-  /// grad += the parameter products of every layer from the recorded Δ_l of each step in
-  /// order, or from Δ_l·diag(s) with s = the step's `scales`: a register kernel scales a
-  /// block of X once for all rows; elsewhere Δ_l·diag(s) is formed in `scaled`[l] (grown,
-  /// never shrunk), which for a conv layer under the kernel holds s spread over its im2col
-  /// columns instead. A layer's products of all steps go in one call (`OuterProductTerm`s).
-  /// One machine copy (SBPTT_ONE_COPY): its callers pass constant null scales, for which a
-  /// cloned copy could round differently.
-  SBPTT_ONE_COPY void params_from(std::span<const StepProducts> steps,
-                                  Vector<Scalar>& grad) const {
-    std::array<OuterProductTerm<Scalar>, kMaxSteps> terms;
+  /// grad += the parameter products of every layer from the recorded Δ_l, or from Δ_l·diag(s)
+  /// with `scales` = s (B): a register kernel scales a block of X once for all rows; elsewhere
+  /// Δ_l·diag(s) is formed in `scaled`[l] (grown, never shrunk), which for a conv layer under
+  /// the kernel holds s spread over its im2col columns instead. One machine copy
+  /// (SBPTT_ONE_COPY): its callers pass constant null scales, for which a cloned copy could
+  /// round differently.
+  SBPTT_ONE_COPY void params_from(const Workspace& ws,
+                                  const std::vector<Vector<Scalar>>& deltas,
+                                  Vector<Scalar>& grad, const Scalar* scales = nullptr,
+                                  std::vector<Vector<Scalar>>* scaled = nullptr) const {
+    const Index batch = ws.batch_;
     for (std::size_t l = 0; l < layers_.size(); ++l) {
-      for (std::size_t k = 0; k < steps.size(); ++k) terms[k] = term_of(steps[k], l);
+      Scalar* g = grad.data() + offsets_[l];
+      const Scalar* delta = deltas[l].data();
       std::visit(
           [&](const auto& spec) {
-            spec.param_vjp(std::span<const OuterProductTerm<Scalar>>(terms.data(), steps.size()),
-                           grad.data() + offsets_[l]);
+            constexpr bool conv = std::is_same_v<std::decay_t<decltype(spec)>, Conv1d>;
+            const Matrix<Scalar>& x = conv ? ws.columns_[l]
+                                           : (l == 0 ? ws.input_ : ws.outputs_[l - 1]);
+            if (scales == nullptr) return spec.param_vjp(x, delta, g);
+            Vector<Scalar>& buffer = (*scaled)[l];
+            if (outer_product_kernel_applies<Scalar>(x.rows())) {
+              const Index per_sample = x.cols() / batch;  // a conv layer's positions P
+              if (per_sample == 1) return spec.param_vjp(x, delta, g, scales);
+              auto spread = detail::grow_map(buffer, per_sample, batch);
+              spread = Eigen::Map<const Matrix<Scalar>>(scales, 1, batch).replicate(per_sample, 1);
+              return spec.param_vjp(x, delta, g, buffer.data());
+            }
+            const Index rows = layer_output_dim(layers_[l]);
+            detail::grow_map(buffer, rows, batch).noalias() =
+                detail::ConstMatrixMap<Scalar>(delta, rows, batch) *
+                Eigen::Map<const Vector<Scalar>>(scales, batch).asDiagonal();
+            spec.param_vjp(x, buffer.data(), g);
           },
           layers_[l]);
     }
   }
 
-  /// Layer l's term of a step's parameter products (see `params_from`).
-  OuterProductTerm<Scalar> term_of(const StepProducts& step, std::size_t l) const {
-    const Matrix<Scalar>& x = layer_input_record(*step.ws, l);
-    const Scalar* delta = (*step.deltas)[l].data();
-    if (step.scales == nullptr) return {delta, x.data(), x.cols()};
-    const Index batch = step.ws->batch_;
-    Vector<Scalar>& buffer = (*step.scaled)[l];
-    if (outer_product_kernel_applies<Scalar>(x.rows())) {
-      const Index per_sample = x.cols() / batch;  // a conv layer's positions P
-      if (per_sample == 1) return {delta, x.data(), x.cols(), step.scales};
-      auto spread = detail::grow_map(buffer, per_sample, batch);
-      spread = Eigen::Map<const Matrix<Scalar>>(step.scales, 1, batch).replicate(per_sample, 1);
-      return {delta, x.data(), x.cols(), buffer.data()};
-    }
-    const Index rows = layer_output_dim(layers_[l]);
-    detail::grow_map(buffer, rows, batch).noalias() =
-        detail::ConstMatrixMap<Scalar>(delta, rows, batch) *
-        Eigen::Map<const Vector<Scalar>>(step.scales, batch).asDiagonal();
-    return {buffer.data(), x.data(), x.cols()};
-  }
-
-  /// X of layer l's parameter product in `ws`: its input, or a conv layer's im2col matrix.
-  const Matrix<Scalar>& layer_input_record(const Workspace& ws, std::size_t l) const {
-    if (std::holds_alternative<Conv1d>(layers_[l])) return ws.columns_[l];
-    return l == 0 ? ws.input_ : ws.outputs_[l - 1];
-  }
-
-  /// Refuses a step that `add_param_gradient` cannot add to `grad`, before any work.
-  void check_step(const RecordedStep& step, const Vector<Scalar>& grad) const {
-    const Workspace& ws = *step.workspace;
+  void check_recorded(const Workspace& ws, const LayerAdjoints& adjoints,
+                      const Vector<Scalar>& grad) const {
     ws.require_filled_by(*this);
     check_grad_size(grad);
-    step.adjoints->require_recorded_for(layers_, ws.batch_);
-    if (step.scales == nullptr) return;
-    const Matrix<Scalar>& scales = *step.scales;
-    detail::require(scales.rows() == 1 && scales.cols() == ws.batch_,
-                    "Network::add_param_gradient: scales is ", scales.rows(), " × ",
-                    scales.cols(), ", expected 1 × ", ws.batch_, " (one per sample)");
-    detail::require(step.scaled != nullptr && step.scaled != step.adjoints,
-                    "Network::add_param_gradient: scaled is the recorded adjoints; expected "
-                    "another LayerAdjoints");
+    adjoints.require_recorded_for(layers_, ws.batch_);
   }
 
   void check_grad_size(const Vector<Scalar>& grad) const {

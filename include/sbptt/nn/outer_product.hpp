@@ -22,8 +22,6 @@
 /// fused multiply-adds, x' = s·x rounded (x itself without a scale), whatever the shapes;
 /// Eigen's product has an order of its own. Either way the order depends only on the shapes,
 /// so results do not depend on the thread count.
-#include <span>
-
 #include <Eigen/Core>
 
 #include "sbptt/core/count_dispatch.hpp"
@@ -33,7 +31,6 @@
 #include "sbptt/core/unroll.hpp"
 #include "sbptt/core/first_lanes.hpp"
 #include "sbptt/nn/outer_product_avx2.hpp"
-#include "sbptt/nn/outer_product_term.hpp"
 #include "sbptt/nn/quarter_strip.hpp"
 
 namespace sbptt {
@@ -294,45 +291,25 @@ template <class Scalar>
   return false;
 }
 
-/// dW += Σ_t D_t diag(s_t) X_tᵀ, the terms in their order: the same bits as one call per term.
-/// The AVX2 kernel loads and stores dW once for several terms (outer_product_avx2.hpp).
-template <class Scalar>
-void add_outer_products(Scalar* dw, Index rows, Index cols,
-                        std::span<const OuterProductTerm<Scalar>> terms) {
-#if defined(SBPTT_OUTER_PRODUCT_AVX2)
-  if constexpr (FloatOrDouble<Scalar>) {
-    if (outer_product_kernel_applies<Scalar>(cols)) {
-      detail::OuterProductAvx2<Scalar>::run(dw, rows, cols, terms);
-      return;
-    }
-  }
-#elif defined(SBPTT_OUTER_PRODUCT_KERNEL)
-  if constexpr (FloatOrDouble<Scalar>) {
-    if (outer_product_kernel_applies<Scalar>(cols)) {
-      for (const OuterProductTerm<Scalar>& term : terms)
-        detail::RegisterOuterProduct<Scalar>::run(dw, rows, cols, term.d, term.x, term.n,
-                                                  term.scale);
-      return;
-    }
-  }
-#endif
-  for (const OuterProductTerm<Scalar>& term : terms)
-    detail::require(term.scale == nullptr, "add_outer_products: a scale for rows of ", cols,
-                    " entries; expected one only where the register kernel runs");
-  for (const OuterProductTerm<Scalar>& term : terms)
-    Eigen::Map<RowMajorMatrix<Scalar>>(dw, rows, cols).noalias() +=
-        Eigen::Map<const Matrix<Scalar>>(term.d, rows, term.n) *
-        Eigen::Map<const Matrix<Scalar>>(term.x, cols, term.n).transpose();
-}
-
 /// dW += D diag(s) Xᵀ. \param dw  rows × cols, row-major (a weight gradient), accumulated
 /// \param d  rows × n, column-major \param x  cols × n, column-major; n is the batch sum
 /// \param scale  s, n entries, or null for s = 1; only where `outer_product_kernel_applies`.
 template <class Scalar>
 void add_outer_products(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
                         Index n, const Scalar* scale = nullptr) {
-  const OuterProductTerm<Scalar> term{d, x, n, scale};
-  add_outer_products(dw, rows, cols, std::span<const OuterProductTerm<Scalar>>(&term, 1));
+#if defined(SBPTT_OUTER_PRODUCT_KERNEL)
+  if constexpr (FloatOrDouble<Scalar>) {
+    if (outer_product_kernel_applies<Scalar>(cols)) {
+      detail::RegisterOuterProduct<Scalar>::run(dw, rows, cols, d, x, n, scale);
+      return;
+    }
+  }
+#endif
+  detail::require(scale == nullptr, "add_outer_products: a scale for rows of ", cols,
+                  " entries; expected one only where the register kernel runs");
+  Eigen::Map<RowMajorMatrix<Scalar>>(dw, rows, cols).noalias() +=
+      Eigen::Map<const Matrix<Scalar>>(d, rows, n) *
+      Eigen::Map<const Matrix<Scalar>>(x, cols, n).transpose();
 }
 
 namespace detail {
@@ -369,21 +346,12 @@ void add_sample_sums(Scalar* b, Index rows, const Scalar* d, Index n, const Scal
 
 /// The parameter VJP of a layer whose gradient slice is W (rows × cols, row-major) followed by
 /// its bias b (rows), as both Dense and Conv1d lay it out: dW += D diag(s) Xᵀ, db += D s (s = 1
-/// without a scale; see `add_outer_products`), for each of `terms` in their order.
-template <class Scalar>
-void add_weight_and_bias_products(Scalar* grad, Index rows, Index cols,
-                                  std::span<const OuterProductTerm<Scalar>> terms) {
-  add_outer_products(grad, rows, cols, terms);
-  for (const OuterProductTerm<Scalar>& term : terms)
-    detail::add_sample_sums(grad + rows * cols, rows, term.d, term.n, term.scale);
-}
-
-/// The same for one term.
+/// without a scale; see `add_outer_products`).
 template <class Scalar>
 void add_weight_and_bias_products(Scalar* grad, Index rows, Index cols, const Scalar* d,
                                   const Scalar* x, Index n, const Scalar* scale = nullptr) {
-  const OuterProductTerm<Scalar> term{d, x, n, scale};
-  add_weight_and_bias_products(grad, rows, cols, std::span<const OuterProductTerm<Scalar>>(&term, 1));
+  add_outer_products(grad, rows, cols, d, x, n, scale);
+  detail::add_sample_sums(grad + rows * cols, rows, d, n, scale);
 }
 
 }  // namespace sbptt

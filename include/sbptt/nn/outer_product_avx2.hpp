@@ -15,15 +15,12 @@
 /// A single row, an output layer's, is slower than Eigen's product (1 × 100: 62–92 against 37–38
 /// ns, 1 × 420: 372 against 124) but kept, so that every entry has the order below; a few tenths
 /// of a percent of the cart pole's and quantum control's epochs.
-/// A pass over the rows of a column block adds up to kChunk samples, from up to kMaxPieces
-/// pieces (terms, the steps of a sweep, or parts of a longer term); dW's entries are stored
-/// between passes and reloaded: same bits. A scale s multiplies a piece's block of X once for
-/// all rows, into a buffer on the stack.
+/// A scale s multiplies a block of X once for all rows, into a buffer on the stack, in chunks of
+/// kChunk samples (the entries of dW are stored between chunks and reloaded: same bits).
 ///
 /// Every entry is ((dW_ij + d_i0 x'_j0) + d_i1 x'_j1) + … in sample order with fused
 /// multiply-adds, x' = s·x rounded (x itself without a scale), as in the AVX-512 kernel.
 #include <algorithm>
-#include <span>
 #include <type_traits>
 
 #include <Eigen/Core>
@@ -31,7 +28,6 @@
 #include "sbptt/core/fused_multiply_add.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/core/unroll.hpp"
-#include "sbptt/nn/outer_product_term.hpp"
 
 #if defined(EIGEN_VECTORIZE_AVX2) && defined(EIGEN_VECTORIZE_FMA) && \
     !defined(EIGEN_VECTORIZE_AVX512)
@@ -42,17 +38,17 @@ namespace sbptt::detail {
 template <class Scalar>
 class OuterProductAvx2 {
 public:
-  /// dW (rows × cols, row-major) += Σ_t D_t diag(s_t) X_tᵀ over `terms` in their order
-  /// (outer_product.hpp, `OuterProductTerm`).
-  static void run(Scalar* dw, Index rows, Index cols,
-                  std::span<const OuterProductTerm<Scalar>> terms) {
+  /// dW (rows × cols, row-major) += D (rows × n, column-major) diag(s) Xᵀ (X: cols × n,
+  /// column-major; s: n entries, or none for s = 1).
+  static void run(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x, Index n,
+                  const Scalar* scale) {
     Index j = 0;
     for (; j + kPanels * kLanes <= cols; j += kPanels * kLanes)
-      columns<Packet, kPanels>(dw, rows, cols, terms, j);
-    for (; j + kLanes <= cols; j += kLanes) columns<Packet, 1>(dw, rows, cols, terms, j);
+      columns<Packet, kPanels>(dw, rows, cols, d, x, n, scale, j);
+    for (; j + kLanes <= cols; j += kLanes) columns<Packet, 1>(dw, rows, cols, d, x, n, scale, j);
     for (; j + kHalfLanes <= cols; j += kHalfLanes)
-      columns<HalfPacket, 1>(dw, rows, cols, terms, j);
-    for (; j < cols; ++j) columns<Scalar, 1>(dw, rows, cols, terms, j);
+      columns<HalfPacket, 1>(dw, rows, cols, d, x, n, scale, j);
+    for (; j < cols; ++j) columns<Scalar, 1>(dw, rows, cols, d, x, n, scale, j);
   }
 
 private:
@@ -64,64 +60,34 @@ private:
   static constexpr Index kHalfLanes = lanes_of<HalfPacket>;
   static constexpr int kPanels = 2;
   static constexpr int kRows = 6;
-  // Samples a pass takes: the scaled buffer on the stack stays at 4 KiB (float, 2 panels), and
-  // the block of X the rows share stays in L1 (60 × 180 × 448, unscaled, float: 142 µs in one
-  // pass against 114 in passes of 64). The paper's batches (8, and 8 × 56 im2col columns)
-  // take 1 and 7 passes a step.
+  // Samples of X scaled at a time: the buffer on the stack stays at 4 KiB (float, 2 panels);
+  // the paper's batches (8, and 8 × 56 im2col columns) take 1 and 7 chunks.
   static constexpr Index kChunk = 64;
 
-  /// Samples of one term that a pass over dW's rows adds: D's columns from `d` (leading
-  /// dimension: dW's rows), X's from `x` (leading dimension `ldx`).
-  struct Piece {
-    const Scalar* d;
-    const Scalar* x;
-    Index ldx;
-    Index samples;
-  };
-  // Pieces a pass takes: a pass loads and stores dW's block once for all of them, which is
-  // what the terms of several steps gain (100 × 100 × 8 a step, float: 2514 ns a step alone,
-  // 2093–2159 two steps a call; docs/benchmark-runs-avx2.md).
-  static constexpr int kMaxPieces = 4;
-
-  /// Columns first … first + Panels·(P's lanes) − 1 of every row, in passes of up to
-  /// kMaxPieces pieces and kChunk scaled samples.
+  /// Columns first … first + Panels·(P's lanes) − 1 of every row.
   template <class P, int Panels>
-  static void columns(Scalar* dw, Index rows, Index cols,
-                      std::span<const OuterProductTerm<Scalar>> terms, Index first) {
+  static void columns(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
+                      Index n, const Scalar* scale, Index first) {
     constexpr Index width = Panels * lanes_of<P>;
     alignas(64) Scalar scaled[width * kChunk];
-    Piece pieces[kMaxPieces];
-    int count = 0;
-    Index taken = 0;  // samples in the pass
-    auto pass = [&] {
-      if (count == 1) {
-        rows_of<P, Panels>(dw + first, rows, cols, &pieces[0], 1, std::true_type{});
-      } else {
-        rows_of<P, Panels>(dw + first, rows, cols, pieces, count, std::false_type{});
+    for (Index k0 = 0; k0 < n; k0 += kChunk) {
+      const Index samples = std::min(kChunk, n - k0);
+      const Scalar* xk = x + k0 * cols + first;
+      Index ldx = cols;
+      if (scale != nullptr) {
+        for (Index k = 0; k < samples; ++k)
+          for (Index c = 0; c < width; ++c)
+            scaled[k * width + c] = scale[k0 + k] * xk[k * cols + c];
+        xk = scaled;
+        ldx = width;
       }
-      count = 0;
-      taken = 0;
-    };
-    for (const OuterProductTerm<Scalar>& term : terms) {
-      for (Index k0 = 0; k0 < term.n;) {
-        if (count == kMaxPieces || taken == kChunk) pass();
-        const Index samples = std::min(term.n - k0, kChunk - taken);
-        const Scalar* xk = term.x + k0 * cols + first;
-        Index ldx = cols;
-        if (term.scale != nullptr) {
-          Scalar* to = scaled + taken * width;
-          for (Index k = 0; k < samples; ++k)
-            for (Index c = 0; c < width; ++c)
-              to[k * width + c] = term.scale[k0 + k] * xk[k * cols + c];
-          xk = to;
-          ldx = width;
-        }
-        pieces[count++] = Piece{term.d + k0 * rows, xk, ldx, samples};
-        taken += samples;
-        k0 += samples;
-      }
+      const Scalar* dk = d + k0 * rows;
+      Index i = 0;
+      for (; i + kRows <= rows; i += kRows)
+        update_rows<P, Panels, kRows>(dw + i * cols + first, cols, dk + i, rows, xk, ldx, samples);
+      for (; i < rows; ++i)
+        update_rows<P, Panels, 1>(dw + i * cols + first, cols, dk + i, rows, xk, ldx, samples);
     }
-    if (count > 0) pass();
   }
 
   /// a·b + c rounded once, also for the last columns' scalars (Eigen's scalar `pmadd` is a
@@ -135,44 +101,9 @@ private:
     }
   }
 
-  /// Every row of dW's block at `dw` (leading dimension cols) through `pieces`; `single`
-  /// (one piece) lets the compiler keep the piece in registers across the rows: through the
-  /// general loop, 4 × 100 × 8 took 347 ns against 171 before pieces.
-  template <class P, int Panels, class Single>
-  static void rows_of(Scalar* dw, Index rows, Index cols, const Piece* pieces, int count,
-                      Single single) {
-    Index i = 0;
-    for (; i + kRows <= rows; i += kRows)
-      update_rows<P, Panels, kRows>(dw + i * cols, cols, i, rows, pieces, count, single);
-    for (; i < rows; ++i)
-      update_rows<P, Panels, 1>(dw + i * cols, cols, i, rows, pieces, count, single);
-  }
-
-  /// acc += the samples of `piece` for rows `row` … `row` + Rows − 1.
   template <class P, int Panels, int Rows>
-  EIGEN_ALWAYS_INLINE static void add_piece(P (&acc)[Rows][Panels], Piece piece,
-                                            Index row, Index ldd) {
-    constexpr Index lanes = lanes_of<P>;
-    const Scalar* d = piece.d + row;
-    for (Index k = 0; k < piece.samples; ++k) {
-      P xs[Panels];
-      SBPTT_UNROLL
-      for (int p = 0; p < Panels; ++p)
-        xs[p] = Eigen::internal::ploadu<P>(piece.x + k * piece.ldx + p * lanes);
-      SBPTT_UNROLL
-      for (int r = 0; r < Rows; ++r) {
-        const P dr = Eigen::internal::pset1<P>(d[r + k * ldd]);
-        SBPTT_UNROLL
-        for (int p = 0; p < Panels; ++p) acc[r][p] = fused_madd(xs[p], dr, acc[r][p]);
-      }
-    }
-  }
-
-  /// Rows `row` … `row` + Rows − 1 of the block at `dw` (leading dimension ldw), D's leading
-  /// dimension ldd: every piece's samples in order.
-  template <class P, int Panels, int Rows, class Single>
-  EIGEN_ALWAYS_INLINE static void update_rows(Scalar* dw, Index ldw, Index row, Index ldd,
-                                              const Piece* pieces, int count, Single) {
+  EIGEN_ALWAYS_INLINE static void update_rows(Scalar* dw, Index ldw, const Scalar* d, Index ldd,
+                                              const Scalar* x, Index ldx, Index samples) {
     using Eigen::internal::ploadu;
     constexpr Index lanes = lanes_of<P>;
     P acc[Rows][Panels];
@@ -181,10 +112,16 @@ private:
       SBPTT_UNROLL
       for (int p = 0; p < Panels; ++p) acc[r][p] = ploadu<P>(dw + r * ldw + p * lanes);
     }
-    if constexpr (Single::value) {
-      add_piece<P, Panels, Rows>(acc, pieces[0], row, ldd);
-    } else {
-      for (int q = 0; q < count; ++q) add_piece<P, Panels, Rows>(acc, pieces[q], row, ldd);
+    for (Index k = 0; k < samples; ++k) {
+      P xs[Panels];
+      SBPTT_UNROLL
+      for (int p = 0; p < Panels; ++p) xs[p] = ploadu<P>(x + k * ldx + p * lanes);
+      SBPTT_UNROLL
+      for (int r = 0; r < Rows; ++r) {
+        const P dr = Eigen::internal::pset1<P>(d[r + k * ldd]);
+        SBPTT_UNROLL
+        for (int p = 0; p < Panels; ++p) acc[r][p] = fused_madd(xs[p], dr, acc[r][p]);
+      }
     }
     SBPTT_UNROLL
     for (int r = 0; r < Rows; ++r) {

@@ -12,11 +12,17 @@
 /// 0.90, 100 × 10 in 0.63–0.66 against 0.75, 60 × 180 × 56 in 13.0–13.2 against 19.9–20.1
 /// (docs/benchmark-runs-avx2.md). 6 × 2 accumulators ran the 100 × 100 product 1.41–1.42 times
 /// as fast as Eigen, 5 × 2 1.34 (4 × 2 1.13 and 3 × 3 1.04 in a first version that copied X).
-/// A single row, an output layer's, is slower than Eigen's product (1 × 100: 62–92 against 37–38
-/// ns, 1 × 420: 372 against 124) but kept, so that every entry has the order below; a few tenths
-/// of a percent of the cart pole's and quantum control's epochs.
-/// A scale s multiplies a block of X once for all rows, into a buffer on the stack, in chunks of
-/// kChunk samples (the entries of dW are stored between chunks and reloaded: same bits).
+/// Blocks go row by row (a block of rows through all its columns, then the next) when X, times
+/// its scale, fits a buffer on the stack, so that dW, which in the engine is not in L1 (a
+/// 100 × 100 float gradient is 40 KiB, L1 32 KiB), is read as 6 sequential streams. With 12
+/// dW in turn (as from L2), 8 samples, float, 100 × 100 took
+/// 2540–2571 ns against 2764–2854 for the blocks column by column, 4 × 100 158–160 against
+/// 216–223, 1 × 100 41–42 against 97–99 (Eigen's product: 37–38), 100 × 24 583–597 against
+/// 569–575; in double 100 × 100 5314 against 6336 (docs/benchmark-runs-avx2.md, thirty-first
+/// run).
+/// Longer sums (a convolution's im2col columns) go column block by column block, a block of X
+/// scaled once for all rows, in chunks of kChunk samples (the entries of dW are stored between
+/// chunks and reloaded: same bits).
 ///
 /// Every entry is ((dW_ij + d_i0 x'_j0) + d_i1 x'_j1) + … in sample order with fused
 /// multiply-adds, x' = s·x rounded (x itself without a scale), as in the AVX-512 kernel.
@@ -42,6 +48,10 @@ public:
   /// column-major; s: n entries, or none for s = 1).
   static void run(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x, Index n,
                   const Scalar* scale) {
+    if (n <= kChunk && cols * n <= kRowOrderEntries) {
+      in_row_order(dw, rows, cols, d, x, n, scale);
+      return;
+    }
     Index j = 0;
     for (; j + kPanels * kLanes <= cols; j += kPanels * kLanes)
       columns<Packet, kPanels>(dw, rows, cols, d, x, n, scale, j);
@@ -63,6 +73,36 @@ private:
   // Samples of X scaled at a time: the buffer on the stack stays at 4 KiB (float, 2 panels);
   // the paper's batches (8, and 8 × 56 im2col columns) take 1 and 7 chunks.
   static constexpr Index kChunk = 64;
+  // Entries of X (scaled) that the row order keeps on the stack: 16 KiB in float; the paper's
+  // dense layers at batch 8 take at most 420 × 8.
+  static constexpr Index kRowOrderEntries = 4096;
+
+  static void in_row_order(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
+                           Index n, const Scalar* scale) {
+    alignas(64) Scalar scaled[kRowOrderEntries];
+    if (scale != nullptr) {
+      for (Index k = 0; k < n; ++k)
+        for (Index c = 0; c < cols; ++c) scaled[k * cols + c] = scale[k] * x[k * cols + c];
+      x = scaled;
+    }
+    Index i = 0;
+    for (; i + kRows <= rows; i += kRows) row_block<kRows>(dw + i * cols, cols, d + i, rows, x, n);
+    for (; i < rows; ++i) row_block<1>(dw + i * cols, cols, d + i, rows, x, n);
+  }
+
+  /// Every column of rows first … first + Rows − 1 (dw and d point at the first).
+  template <int Rows>
+  static void row_block(Scalar* dw, Index cols, const Scalar* d, Index ldd, const Scalar* x,
+                        Index n) {
+    Index j = 0;
+    for (; j + kPanels * kLanes <= cols; j += kPanels * kLanes)
+      update_rows<Packet, kPanels, Rows>(dw + j, cols, d, ldd, x + j, cols, n);
+    for (; j + kLanes <= cols; j += kLanes)
+      update_rows<Packet, 1, Rows>(dw + j, cols, d, ldd, x + j, cols, n);
+    for (; j + kHalfLanes <= cols; j += kHalfLanes)
+      update_rows<HalfPacket, 1, Rows>(dw + j, cols, d, ldd, x + j, cols, n);
+    for (; j < cols; ++j) update_rows<Scalar, 1, Rows>(dw + j, cols, d, ldd, x + j, cols, n);
+  }
 
   /// Columns first … first + Panels·(P's lanes) − 1 of every row.
   template <class P, int Panels>

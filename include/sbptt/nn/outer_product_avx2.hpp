@@ -70,8 +70,9 @@ private:
   static constexpr Index kHalfLanes = lanes_of<HalfPacket>;
   static constexpr int kPanels = 2;
   static constexpr int kRows = 6;
-  // Samples of X scaled at a time: the buffer on the stack stays at 4 KiB (float, 2 panels);
-  // the paper's batches (8, and 8 × 56 im2col columns) take 1 and 7 chunks.
+  // Samples of X scaled at a time in column order: the buffer on the stack stays at 4 KiB
+  // (float, 2 panels); the convolution's 8 × 56 im2col columns take 7 chunks. The row order
+  // takes sums of up to kChunk samples too.
   static constexpr Index kChunk = 64;
   // Entries of X (scaled) that the row order keeps on the stack: 16 KiB in float; the paper's
   // dense layers at batch 8 take at most 420 × 8.

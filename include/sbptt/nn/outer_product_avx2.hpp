@@ -52,13 +52,9 @@ public:
       in_row_order(dw, rows, cols, d, x, n, scale);
       return;
     }
-    Index j = 0;
-    for (; j + kPanels * kLanes <= cols; j += kPanels * kLanes)
-      columns<Packet, kPanels>(dw, rows, cols, d, x, n, scale, j);
-    for (; j + kLanes <= cols; j += kLanes) columns<Packet, 1>(dw, rows, cols, d, x, n, scale, j);
-    for (; j + kHalfLanes <= cols; j += kHalfLanes)
-      columns<HalfPacket, 1>(dw, rows, cols, d, x, n, scale, j);
-    for (; j < cols; ++j) columns<Scalar, 1>(dw, rows, cols, d, x, n, scale, j);
+    for_column_blocks(cols, [&]<class P, int Panels>(Index j) {
+      columns<P, Panels>(dw, rows, cols, d, x, n, scale, j);
+    });
   }
 
 private:
@@ -82,27 +78,43 @@ private:
                            Index n, const Scalar* scale) {
     alignas(64) Scalar scaled[kRowOrderEntries];
     if (scale != nullptr) {
-      for (Index k = 0; k < n; ++k)
-        for (Index c = 0; c < cols; ++c) scaled[k * cols + c] = scale[k] * x[k * cols + c];
+      scale_samples(scaled, cols, x, cols, scale, n);
       x = scaled;
     }
-    Index i = 0;
-    for (; i + kRows <= rows; i += kRows) row_block<kRows>(dw + i * cols, cols, d + i, rows, x, n);
-    for (; i < rows; ++i) row_block<1>(dw + i * cols, cols, d + i, rows, x, n);
+    for_row_blocks(rows, [&]<int Rows>(Index i) {
+      for_column_blocks(cols, [&]<class P, int Panels>(Index j) {
+        update_rows<P, Panels, Rows>(dw + i * cols + j, cols, d + i, rows, x + j, cols, n);
+      });
+    });
   }
 
-  /// Every column of rows first … first + Rows − 1 (dw and d point at the first).
-  template <int Rows>
-  static void row_block(Scalar* dw, Index cols, const Scalar* d, Index ldd, const Scalar* x,
-                        Index n) {
+  /// visit.template operator()<P, Panels>(j) for each block of a row's columns: 2-panel
+  /// blocks, then single panels, then a half register, then one at a time, so that no load or
+  /// store reaches past the row.
+  template <class Visit>
+  EIGEN_ALWAYS_INLINE static void for_column_blocks(Index cols, const Visit& visit) {
     Index j = 0;
     for (; j + kPanels * kLanes <= cols; j += kPanels * kLanes)
-      update_rows<Packet, kPanels, Rows>(dw + j, cols, d, ldd, x + j, cols, n);
-    for (; j + kLanes <= cols; j += kLanes)
-      update_rows<Packet, 1, Rows>(dw + j, cols, d, ldd, x + j, cols, n);
-    for (; j + kHalfLanes <= cols; j += kHalfLanes)
-      update_rows<HalfPacket, 1, Rows>(dw + j, cols, d, ldd, x + j, cols, n);
-    for (; j < cols; ++j) update_rows<Scalar, 1, Rows>(dw + j, cols, d, ldd, x + j, cols, n);
+      visit.template operator()<Packet, kPanels>(j);
+    for (; j + kLanes <= cols; j += kLanes) visit.template operator()<Packet, 1>(j);
+    for (; j + kHalfLanes <= cols; j += kHalfLanes) visit.template operator()<HalfPacket, 1>(j);
+    for (; j < cols; ++j) visit.template operator()<Scalar, 1>(j);
+  }
+
+  /// visit.template operator()<Rows>(i) for blocks of kRows rows, then the rows left one at a
+  /// time.
+  template <class Visit>
+  EIGEN_ALWAYS_INLINE static void for_row_blocks(Index rows, const Visit& visit) {
+    Index i = 0;
+    for (; i + kRows <= rows; i += kRows) visit.template operator()<kRows>(i);
+    for (; i < rows; ++i) visit.template operator()<1>(i);
+  }
+
+  /// scaled[k·width + c] = s_k·x[k·ldx + c] (one rounding) for `samples` samples.
+  static void scale_samples(Scalar* scaled, Index width, const Scalar* x, Index ldx,
+                            const Scalar* scale, Index samples) {
+    for (Index k = 0; k < samples; ++k)
+      for (Index c = 0; c < width; ++c) scaled[k * width + c] = scale[k] * x[k * ldx + c];
   }
 
   /// Columns first … first + Panels·(P's lanes) − 1 of every row.
@@ -116,18 +128,14 @@ private:
       const Scalar* xk = x + k0 * cols + first;
       Index ldx = cols;
       if (scale != nullptr) {
-        for (Index k = 0; k < samples; ++k)
-          for (Index c = 0; c < width; ++c)
-            scaled[k * width + c] = scale[k0 + k] * xk[k * cols + c];
+        scale_samples(scaled, width, xk, cols, scale + k0, samples);
         xk = scaled;
         ldx = width;
       }
       const Scalar* dk = d + k0 * rows;
-      Index i = 0;
-      for (; i + kRows <= rows; i += kRows)
-        update_rows<P, Panels, kRows>(dw + i * cols + first, cols, dk + i, rows, xk, ldx, samples);
-      for (; i < rows; ++i)
-        update_rows<P, Panels, 1>(dw + i * cols + first, cols, dk + i, rows, xk, ldx, samples);
+      for_row_blocks(rows, [&]<int Rows>(Index i) {
+        update_rows<P, Panels, Rows>(dw + i * cols + first, cols, dk + i, rows, xk, ldx, samples);
+      });
     }
   }
 

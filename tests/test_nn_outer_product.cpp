@@ -34,11 +34,14 @@ TEMPLATE_TEST_CASE("dW += D X^T within the rounding bound, nothing written outsi
   // of every 2nd (17 × 10 float, 19 × 5 double), 3rd (21 × 6 float) or 8th row (23 × 2
   // float); rows of one entry go to Eigen (30 × 1). A quarter of a register after whole panels
   // or alone (100 and 52 in float, 26 and 2 in double; quarter_strip.hpp) goes 4 rows a register,
-  // the last 1 … 3 rows on their own (17 × 52, 6 × 26, 3 × 100, 23 × 2).
+  // the last 1 … 3 rows on their own (17 × 52, 6 × 26, 3 × 100, 23 × 2). Half a register
+  // after 1 or 2 whole panels, starting the row or after a block of 3 (float 24, 40, 72, 88;
+  // double 12, 20, 44), goes by half-width instructions.
   for (const auto& [rows, cols] :
        {std::pair<Index, Index>{1, 100}, {2, 100}, {3, 10}, {5, 8}, {7, 16}, {100, 100},
         {100, 24}, {60, 180}, {17, 53}, {33, 64}, {9, 80}, {17, 10}, {19, 5}, {21, 4}, {21, 6},
-        {23, 2}, {30, 1}, {18, 37}, {18, 21}, {9, 41}, {17, 52}, {6, 26}, {3, 100}}) {
+        {23, 2}, {30, 1}, {18, 37}, {18, 21}, {9, 41}, {17, 52}, {6, 26}, {3, 100},
+        {13, 40}, {7, 72}, {9, 88}, {5, 12}, {6, 20}, {4, 44}}) {
     for (const Index n : {1, 3, 7, 8, 9, 16, 21, 56, 70}) {
       const Matrix<S> d = random_matrix<S>(rows, n, ++seed, 1.0);
       const Matrix<S> x = random_matrix<S>(cols, n, ++seed, 1.0);
@@ -126,7 +129,9 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel sums each entry in sample or
   // an odd 97, 2 and 3 entries); a partial panel in one block with 1 or 2 whole panels,
   // starting the row or after blocks of 3; alone after them (100 × 100); the convolution's
   // 60 × 180; a quarter of a register's columns, alone or after whole panels, 4 rows a
-  // register (quarter_strip.hpp). 70 samples: the AVX2 kernel scales X in chunks of 64.
+  // register (quarter_strip.hpp); half a register after 0 … 2 whole panels, starting the row
+  // or after a block of 3 (half-width instructions with AVX-512). 70 samples: the AVX2 kernel
+  // scales X in chunks of 64.
   using S = TestType;
   constexpr Index kLanes = sizeof(S) == 4 ? 16 : 8;
   std::uint64_t seed = 900;
@@ -136,7 +141,8 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel sums each entry in sample or
       {9, 5 * kLanes + 1},   {11, 4 * kLanes + 7}, {100, 100},       {60, 180},
       {100, 24},             {100, 2},             {41, 3},          {23, kLanes / 2 - 1},
       {17, 3 * kLanes + 5},  {29, kLanes / 4},     {5, 2},           {7, kLanes},
-      {5, 2 * kLanes}};
+      {5, 2 * kLanes},       {6, kLanes + kLanes / 2}, {13, 2 * kLanes + kLanes / 2},
+      {19, 3 * kLanes + kLanes / 2}, {7, 4 * kLanes + kLanes / 2}, {9, 5 * kLanes + kLanes / 2}};
   for (Index rows = 1; rows <= 17; ++rows) shapes.emplace_back(rows, kLanes / 2);
   // A quarter of a register left after whole panels or alone (quarter_strip.hpp), 4 rows a
   // register and the last 1 … 3 rows on their own.

@@ -22,6 +22,8 @@
 /// fused multiply-adds, x' = s·x rounded (x itself without a scale), whatever the shapes;
 /// Eigen's product has an order of its own. Either way the order depends only on the shapes,
 /// so results do not depend on the thread count.
+#include <type_traits>
+
 #include <Eigen/Core>
 
 #include "sbptt/core/count_dispatch.hpp"
@@ -43,6 +45,8 @@ class OuterProductKernel {
 public:
   using Packet = typename Eigen::internal::packet_traits<Scalar>::type;
   static constexpr Index kLanes = Eigen::internal::unpacket_traits<Packet>::size;
+  using HalfPacket = typename Eigen::internal::packet_traits<Scalar>::half;
+  static constexpr Index kHalfLanes = Eigen::internal::unpacket_traits<HalfPacket>::size;
 
   /// dW (rows × cols, row-major) += D (rows × n, column-major) diag(s) Xᵀ (X: cols × n,
   /// column-major; s: n entries, or none for s = 1).
@@ -68,6 +72,9 @@ private:
   static constexpr int kRows = 2;
   // One row a block is also what lets `columns` order the rows in passes.
   static constexpr int kMaskedRows = 1;
+  /// How a block's last panel covers its columns: a whole register, the first lanes of one
+  /// (masked loads and stores), or exactly half of one (half-width instructions).
+  enum class Last { Whole, Masked, Half };
 
   static const Scalar* at(const Scalar* scale, Index k) {
     return scale == nullptr ? nullptr : scale + k;
@@ -85,38 +92,43 @@ private:
     const bool partial = full_panels * kLanes < cols;
     Index p = 0;
     for (; p + kPanels <= full_panels; p += kPanels)
-      columns<Samples, kPanels, false>(dw, rows, cols, d, x, scale, p * kLanes);
+      columns<Samples, kPanels, Last::Whole>(dw, rows, cols, d, x, scale, p * kLanes);
     const Index left = full_panels - p;  // whole panels after the blocks of kPanels: 0, 1, 2
     const Index first = p * kLanes;
     if (!partial) {
-      if (left == 2) columns<Samples, 2, false>(dw, rows, cols, d, x, scale, first);
-      if (left == 1) columns<Samples, 1, false>(dw, rows, cols, d, x, scale, first);
+      if (left == 2) columns<Samples, 2, Last::Whole>(dw, rows, cols, d, x, scale, first);
+      if (left == 1) columns<Samples, 1, Last::Whole>(dw, rows, cols, d, x, scale, first);
+    } else if (cols - first - left * kLanes == kHalfLanes) {
+      with_count<3>(left + 1, [&](auto panels) {  // the whole panels left and the half
+        columns<Samples, decltype(panels)::value, Last::Half>(dw, rows, cols, d, x, scale, first);
+      });
     } else if (left == 2) {
-      columns<Samples, 3, true, kMaskedRows>(dw, rows, cols, d, x, scale, first);
+      columns<Samples, 3, Last::Masked, kMaskedRows>(dw, rows, cols, d, x, scale, first);
     } else if (left == 1) {
-      columns<Samples, 2, true, kMaskedRows>(dw, rows, cols, d, x, scale, first);
+      columns<Samples, 2, Last::Masked, kMaskedRows>(dw, rows, cols, d, x, scale, first);
     } else if (cols - first == QuarterStrip<Scalar>::kWidth) {
       QuarterStrip<Scalar>::template add<Samples>(dw, rows, cols, d, x, scale, first);
     } else if (full_panels == 0) {
-      columns<Samples, 1, true, kMaskedRows>(dw, rows, cols, d, x, scale, first);
+      columns<Samples, 1, Last::Masked, kMaskedRows>(dw, rows, cols, d, x, scale, first);
     } else {
-      columns<Samples, 1, true>(dw, rows, cols, d, x, scale, first);
+      columns<Samples, 1, Last::Masked>(dw, rows, cols, d, x, scale, first);
     }
   }
 
   /// Columns first … first + Panels·kLanes − 1 of every row, the last panel only up to cols
   /// when `Masked`, in blocks of `Rows` rows. A scale multiplies X's block in the registers,
   /// once for all rows.
-  template <int Samples, int Panels, bool Masked, int Rows = kRows>
+  template <int Samples, int Panels, Last LastPanel, int Rows = kRows>
   static void columns(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
                       const Scalar* scale, Index first) {
+    constexpr bool Masked = LastPanel == Last::Masked;
     const Index lanes = Masked ? cols - first - (Panels - 1) * kLanes : kLanes;
     Packet xs[Panels][Samples];
     SBPTT_UNROLL
     for (int p = 0; p < Panels; ++p) {
       SBPTT_UNROLL
       for (int k = 0; k < Samples; ++k)
-        xs[p][k] = load_panel<Panels, Masked>(x + k * cols + first + p * kLanes, p, lanes);
+        xs[p][k] = load_panel<Panels, LastPanel>(x + k * cols + first + p * kLanes, p, lanes);
     }
     if (scale != nullptr) {
       SBPTT_UNROLL
@@ -129,8 +141,8 @@ private:
     Index i = 0;
     if constexpr (Rows > 1) {
       for (; i + Rows <= rows; i += Rows)
-        update_rows<Samples, Panels, Rows, Masked>(dw + i * cols + first, cols, d + i, rows,
-                                                   xs, lanes);
+        update_rows<Samples, Panels, Rows, LastPanel>(dw + i * cols + first, cols, d + i, rows,
+                                                      xs, lanes);
     }
     // The rows left, one at a time (all of them in a block of one row). A masked store
     // reaches up to a register past the end of its row, and a load that overlaps a store
@@ -145,11 +157,11 @@ private:
     const Index stride = Rows == 1 && Masked && first == 0 ? (span + cols - 1) / cols : 1;
     for (Index start = i; start < i + stride; ++start)
       for (Index r = start; r < rows; r += stride)
-        update_rows<Samples, Panels, 1, Masked>(dw + r * cols + first, cols, d + r, rows, xs,
-                                                lanes);
+        update_rows<Samples, Panels, 1, LastPanel>(dw + r * cols + first, cols, d + r, rows, xs,
+                                                   lanes);
   }
 
-  template <int Samples, int Panels, int Rows, bool Masked>
+  template <int Samples, int Panels, int Rows, Last LastPanel>
   EIGEN_ALWAYS_INLINE static void update_rows(Scalar* dw, Index ldw, const Scalar* d, Index ldd,
                                               const Packet (&xs)[Panels][Samples],
                                               Index lanes) {
@@ -158,7 +170,7 @@ private:
     for (int r = 0; r < Rows; ++r) {
       SBPTT_UNROLL
       for (int p = 0; p < Panels; ++p)
-        acc[r][p] = load_panel<Panels, Masked>(dw + r * ldw + p * kLanes, p, lanes);
+        acc[r][p] = load_panel<Panels, LastPanel>(dw + r * ldw + p * kLanes, p, lanes);
     }
     SBPTT_UNROLL
     for (int k = 0; k < Samples; ++k) {
@@ -166,31 +178,60 @@ private:
       for (int r = 0; r < Rows; ++r) {
         const Packet dk = Eigen::internal::pset1<Packet>(d[r + k * ldd]);
         SBPTT_UNROLL
-        for (int p = 0; p < Panels; ++p)
-          acc[r][p] = Eigen::internal::pmadd(xs[p][k], dk, acc[r][p]);
+        for (int p = 0; p < Panels; ++p) {
+          if (LastPanel == Last::Half && p == Panels - 1) {
+            acc[r][p] = widen(Eigen::internal::pmadd(halve(xs[p][k]), halve(dk), halve(acc[r][p])));
+          } else {
+            acc[r][p] = Eigen::internal::pmadd(xs[p][k], dk, acc[r][p]);
+          }
+        }
       }
     }
     SBPTT_UNROLL
     for (int r = 0; r < Rows; ++r) {
       SBPTT_UNROLL
       for (int p = 0; p < Panels; ++p)
-        store_panel<Panels, Masked>(dw + r * ldw + p * kLanes, acc[r][p], p, lanes);
+        store_panel<Panels, LastPanel>(dw + r * ldw + p * kLanes, acc[r][p], p, lanes);
     }
   }
 
-  /// Panel p of a block whose last panel is masked when `Masked` (its first `lanes` lanes).
-  template <int Panels, bool Masked>
+  /// Panel p of a block whose last panel is as `LastPanel` says (masked: its first `lanes`
+  /// lanes; half: the lower half of the register, the upper half undefined).
+  template <int Panels, Last LastPanel>
   EIGEN_ALWAYS_INLINE static Packet load_panel(const Scalar* from, int p, Index lanes) {
-    return Masked && p == Panels - 1 ? load_first_lanes(from, lanes)
-                                     : Eigen::internal::ploadu<Packet>(from);
+    if (p == Panels - 1) {
+      if constexpr (LastPanel == Last::Masked) return load_first_lanes(from, lanes);
+      if constexpr (LastPanel == Last::Half)
+        return widen(Eigen::internal::ploadu<HalfPacket>(from));
+    }
+    return Eigen::internal::ploadu<Packet>(from);
   }
-  template <int Panels, bool Masked>
+  template <int Panels, Last LastPanel>
   EIGEN_ALWAYS_INLINE static void store_panel(Scalar* to, const Packet& value, int p,
                                               Index lanes) {
-    if (Masked && p == Panels - 1) {
+    if (LastPanel == Last::Masked && p == Panels - 1) {
       store_first_lanes(to, value, lanes);
+    } else if (LastPanel == Last::Half && p == Panels - 1) {
+      Eigen::internal::pstoreu(to, halve(value));
     } else {
       Eigen::internal::pstoreu(to, value);
+    }
+  }
+
+  /// The lower half of a register, and a half as the lower half of one (upper undefined):
+  /// both free, no instruction.
+  EIGEN_ALWAYS_INLINE static HalfPacket halve(const Packet& v) {
+    if constexpr (std::is_same_v<Scalar, float>) {
+      return _mm512_castps512_ps256(v);
+    } else {
+      return _mm512_castpd512_pd256(v);
+    }
+  }
+  EIGEN_ALWAYS_INLINE static Packet widen(const HalfPacket& v) {
+    if constexpr (std::is_same_v<Scalar, float>) {
+      return _mm512_castps256_ps512(v);
+    } else {
+      return _mm512_castpd256_pd512(v);
     }
   }
 };

@@ -73,7 +73,12 @@ private:
   // One row a block is also what lets `columns` order the rows in passes.
   static constexpr int kMaskedRows = 1;
   /// How a block's last panel covers its columns: a whole register, the first lanes of one
-  /// (masked loads and stores), or exactly half of one (half-width instructions).
+  /// (masked loads and stores), or exactly half of one (half-width instructions). Where a
+  /// core splits a 512-bit multiply-add in two 256-bit halves (AMD Zen 4), a masked register
+  /// costs a whole one and half a register half of one: 100 × 24 × 8 in float with its bias
+  /// in 430–432 ns against 482–487 masked (docs/benchmark-runs-zen4.md, thirty-second run).
+  /// The lanes summed are the same, so are the bits. Blocks with a half go kRows rows at a
+  /// time: no store reaches past its row.
   enum class Last { Whole, Masked, Half };
 
   static const Scalar* at(const Scalar* scale, Index k) {
@@ -116,13 +121,13 @@ private:
   }
 
   /// Columns first … first + Panels·kLanes − 1 of every row, the last panel only up to cols
-  /// when `Masked`, in blocks of `Rows` rows. A scale multiplies X's block in the registers,
-  /// once for all rows.
+  /// when masked or half (`LastPanel`), in blocks of `Rows` rows. A scale multiplies X's block
+  /// in the registers, once for all rows.
   template <int Samples, int Panels, Last LastPanel, int Rows = kRows>
   static void columns(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
                       const Scalar* scale, Index first) {
-    constexpr bool Masked = LastPanel == Last::Masked;
-    const Index lanes = Masked ? cols - first - (Panels - 1) * kLanes : kLanes;
+    constexpr bool masked = LastPanel == Last::Masked;
+    const Index lanes = masked ? cols - first - (Panels - 1) * kLanes : kLanes;
     Packet xs[Panels][Samples];
     SBPTT_UNROLL
     for (int p = 0; p < Panels; ++p) {
@@ -154,7 +159,7 @@ private:
     // starts 3 registers into its row, further than any store reaches past the row before, so
     // it needs no passes; `samples` gives the blocks at column 0 one row at a time.
     const Index span = Panels * kLanes;
-    const Index stride = Rows == 1 && Masked && first == 0 ? (span + cols - 1) / cols : 1;
+    const Index stride = Rows == 1 && masked && first == 0 ? (span + cols - 1) / cols : 1;
     for (Index start = i; start < i + stride; ++start)
       for (Index r = start; r < rows; r += stride)
         update_rows<Samples, Panels, 1, LastPanel>(dw + r * cols + first, cols, d + r, rows, xs,
@@ -180,7 +185,8 @@ private:
         SBPTT_UNROLL
         for (int p = 0; p < Panels; ++p) {
           if (LastPanel == Last::Half && p == Panels - 1) {
-            acc[r][p] = widen(Eigen::internal::pmadd(halve(xs[p][k]), halve(dk), halve(acc[r][p])));
+            acc[r][p] =
+                widen(Eigen::internal::pmadd(halve(xs[p][k]), halve(dk), halve(acc[r][p])));
           } else {
             acc[r][p] = Eigen::internal::pmadd(xs[p][k], dk, acc[r][p]);
           }

@@ -87,8 +87,8 @@ private:
 
   /// One pass over dW adding `Samples` samples' outer products: blocks of kPanels column
   /// panels, then one more block with the whole panels left and a row's partial last panel
-  /// (on its own when no whole panel is left; by quarter_strip.hpp when it fills a quarter of
-  /// a register).
+  /// (half-width when it is half a register; on its own when no whole panel is left; by
+  /// quarter_strip.hpp when it fills a quarter of a register).
   template <int Samples>
   static void samples(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
                       const Scalar* scale) {
@@ -183,14 +183,8 @@ private:
       for (int r = 0; r < Rows; ++r) {
         const Packet dk = Eigen::internal::pset1<Packet>(d[r + k * ldd]);
         SBPTT_UNROLL
-        for (int p = 0; p < Panels; ++p) {
-          if (LastPanel == Last::Half && p == Panels - 1) {
-            acc[r][p] =
-                widen(Eigen::internal::pmadd(halve(xs[p][k]), halve(dk), halve(acc[r][p])));
-          } else {
-            acc[r][p] = Eigen::internal::pmadd(xs[p][k], dk, acc[r][p]);
-          }
-        }
+        for (int p = 0; p < Panels; ++p)
+          acc[r][p] = madd_panel<Panels, LastPanel>(xs[p][k], dk, acc[r][p], p);
       }
     }
     SBPTT_UNROLL
@@ -211,6 +205,14 @@ private:
         return widen(Eigen::internal::ploadu<HalfPacket>(from));
     }
     return Eigen::internal::ploadu<Packet>(from);
+  }
+  /// x·d + acc for panel p, at half width for a half last panel.
+  template <int Panels, Last LastPanel>
+  EIGEN_ALWAYS_INLINE static Packet madd_panel(const Packet& x, const Packet& d,
+                                               const Packet& acc, int p) {
+    if (LastPanel == Last::Half && p == Panels - 1)
+      return widen(Eigen::internal::pmadd(halve(x), halve(d), halve(acc)));
+    return Eigen::internal::pmadd(x, d, acc);
   }
   template <int Panels, Last LastPanel>
   EIGEN_ALWAYS_INLINE static void store_panel(Scalar* to, const Packet& value, int p,

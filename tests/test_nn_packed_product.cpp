@@ -63,16 +63,21 @@ TEMPLATE_TEST_CASE("packed product equals a long-double product within the round
   }
 }
 
-// Row counts that reach every way the panels are cut into blocks: 1, 2, 3, 4, 5, 7, 8, 9 and
-// 11 panels, the last one partial or whole (100 rows: 7 panels of 16 floats, 13 of 8 doubles).
+// Row counts that reach every way the panels are cut into blocks: 1, 2, 3, 4, 5, 6, 7, 8, 9
+// and 11 panels, the last one partial or whole (100 rows: 7 panels of 16 floats, 13 of 8
+// doubles), and with AVX-512 every width of a partial last panel: a quarter of a register or
+// less, half or less, more than half.
 template <class S>
 std::vector<Index> panel_row_counts() {
   const Index lanes = PackedMatrix<S>::kLanes;
   // lanes / 2 + 1: one partial panel, more rows than the dot products take.
+  // lanes / 2: one panel of half a register; 3 · lanes − lanes / 2: three, the last half.
+  // 6 · lanes − 3 · lanes / 4: six, the last a quarter.
   // 4 · lanes − 4: four panels, the last partial (the quantum CNN's 60 rows with AVX-512).
-  return {Index{100},    lanes / 2 + 1, lanes,         2 * lanes - 1, 2 * lanes + 1,
-          3 * lanes,     4 * lanes - 4, 4 * lanes,     5 * lanes,     7 * lanes - 5,
-          8 * lanes - 1, 9 * lanes - 3, 10 * lanes + 1};
+  return {Index{100},         lanes / 2 + 1, lanes / 2,     lanes,
+          2 * lanes - 1,      2 * lanes + 1, 3 * lanes,     3 * lanes - lanes / 2,
+          4 * lanes - 4,      4 * lanes,     5 * lanes,     6 * lanes - 3 * lanes / 4,
+          7 * lanes - 5,      8 * lanes - 1, 9 * lanes - 3, 10 * lanes + 1};
 }
 
 TEMPLATE_TEST_CASE("a column's result does not depend on the batch around it", "[nn][packed]",

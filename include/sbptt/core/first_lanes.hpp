@@ -3,7 +3,10 @@
 /// and stores: a matrix's last panel narrower than a register (the packed and the outer
 /// products), or a tile's columns shorter than one (the simulators' lane rows), without
 /// reading or writing past its end. Lanes not loaded are 0; memory past the lanes stored is
-/// left as it was. Defined only where Eigen vectorizes with AVX-512, for float and double.
+/// left as it was. And the lower half or quarter of a register as a narrower one, for a panel
+/// that fills no more: where a core splits a 512-bit multiply-add in two 256-bit halves (AMD
+/// Zen 4), a masked register costs a whole one, half a register half of one. Defined only
+/// where Eigen vectorizes with AVX-512, for float and double.
 #include <type_traits>
 
 #include <Eigen/Core>
@@ -44,6 +47,75 @@ EIGEN_ALWAYS_INLINE void store_first_lanes(Scalar* to, const FullPacket<Scalar>&
   } else {
     _mm512_mask_storeu_pd(to, first_lanes_mask<__mmask8>(count), value);
   }
+}
+
+/// The register of the lower 1/Fraction of a `FullPacket` (Fraction 1, 2 or 4). Named
+/// type by type: a vector type as a template argument loses its attributes (GCC warns).
+template <int Fraction, class Scalar>
+struct LowerPacketOf;
+template <class Scalar>
+struct LowerPacketOf<1, Scalar> {
+  using type = FullPacket<Scalar>;
+};
+template <class Scalar>
+struct LowerPacketOf<2, Scalar> {
+  using type = typename Eigen::internal::packet_traits<Scalar>::half;
+};
+template <>
+struct LowerPacketOf<4, float> {
+  using type = Eigen::internal::Packet4f;
+};
+template <>
+struct LowerPacketOf<4, double> {
+  using type = Eigen::internal::Packet2d;
+};
+template <int Fraction, class Scalar>
+using LowerPacket = typename LowerPacketOf<Fraction, Scalar>::type;
+
+/// The lower 1/Fraction of `value`'s lanes as a narrower register, and such a register as the
+/// lower lanes of a whole one (the others undefined): casts, no instruction.
+template <int Fraction, class Scalar>
+EIGEN_ALWAYS_INLINE LowerPacket<Fraction, Scalar> lower_part(const FullPacket<Scalar>& value) {
+  static_assert(FloatOrDouble<Scalar> && (Fraction == 1 || Fraction == 2 || Fraction == 4));
+  if constexpr (Fraction == 1) {
+    return value;
+  } else if constexpr (std::is_same_v<Scalar, float>) {
+    if constexpr (Fraction == 2) return _mm512_castps512_ps256(value);
+    else return _mm512_castps512_ps128(value);
+  } else {
+    if constexpr (Fraction == 2) return _mm512_castpd512_pd256(value);
+    else return _mm512_castpd512_pd128(value);
+  }
+}
+template <int Fraction, class Scalar>
+EIGEN_ALWAYS_INLINE FullPacket<Scalar> from_lower_part(const LowerPacket<Fraction, Scalar>& value) {
+  static_assert(FloatOrDouble<Scalar> && (Fraction == 1 || Fraction == 2 || Fraction == 4));
+  if constexpr (Fraction == 1) {
+    return value;
+  } else if constexpr (std::is_same_v<Scalar, float>) {
+    if constexpr (Fraction == 2) return _mm512_castps256_ps512(value);
+    else return _mm512_castps128_ps512(value);
+  } else {
+    if constexpr (Fraction == 2) return _mm512_castpd256_pd512(value);
+    else return _mm512_castpd128_pd512(value);
+  }
+}
+
+/// a·b + c in the lower 1/Fraction of the registers (the other lanes undefined).
+template <int Fraction, class Scalar>
+EIGEN_ALWAYS_INLINE FullPacket<Scalar> lower_madd(const FullPacket<Scalar>& a,
+                                                  const FullPacket<Scalar>& b,
+                                                  const FullPacket<Scalar>& c) {
+  return from_lower_part<Fraction, Scalar>(
+      Eigen::internal::pmadd(lower_part<Fraction, Scalar>(a), lower_part<Fraction, Scalar>(b),
+                             lower_part<Fraction, Scalar>(c)));
+}
+
+/// The first 1/Fraction of a register's lanes from memory, by a load of that width.
+template <int Fraction, class Scalar>
+EIGEN_ALWAYS_INLINE FullPacket<Scalar> load_lower_part(const Scalar* from) {
+  return from_lower_part<Fraction, Scalar>(
+      Eigen::internal::ploadu<LowerPacket<Fraction, Scalar>>(from));
 }
 
 }  // namespace sbptt::detail

@@ -45,8 +45,7 @@ class OuterProductKernel {
 public:
   using Packet = typename Eigen::internal::packet_traits<Scalar>::type;
   static constexpr Index kLanes = Eigen::internal::unpacket_traits<Packet>::size;
-  using HalfPacket = typename Eigen::internal::packet_traits<Scalar>::half;
-  static constexpr Index kHalfLanes = Eigen::internal::unpacket_traits<HalfPacket>::size;
+  static constexpr Index kHalfLanes = kLanes / 2;
 
   /// dW (rows × cols, row-major) += D (rows × n, column-major) diag(s) Xᵀ (X: cols × n,
   /// column-major; s: n entries, or none for s = 1).
@@ -201,8 +200,7 @@ private:
   EIGEN_ALWAYS_INLINE static Packet load_panel(const Scalar* from, int p, Index lanes) {
     if (p == Panels - 1) {
       if constexpr (LastPanel == Last::Masked) return load_first_lanes(from, lanes);
-      if constexpr (LastPanel == Last::Half)
-        return widen(Eigen::internal::ploadu<HalfPacket>(from));
+      if constexpr (LastPanel == Last::Half) return load_lower_part<2>(from);
     }
     return Eigen::internal::ploadu<Packet>(from);
   }
@@ -210,8 +208,7 @@ private:
   template <int Panels, Last LastPanel>
   EIGEN_ALWAYS_INLINE static Packet madd_panel(const Packet& x, const Packet& d,
                                                const Packet& acc, int p) {
-    if (LastPanel == Last::Half && p == Panels - 1)
-      return widen(Eigen::internal::pmadd(halve(x), halve(d), halve(acc)));
+    if (LastPanel == Last::Half && p == Panels - 1) return lower_madd<2, Scalar>(x, d, acc);
     return Eigen::internal::pmadd(x, d, acc);
   }
   template <int Panels, Last LastPanel>
@@ -220,26 +217,9 @@ private:
     if (LastPanel == Last::Masked && p == Panels - 1) {
       store_first_lanes(to, value, lanes);
     } else if (LastPanel == Last::Half && p == Panels - 1) {
-      Eigen::internal::pstoreu(to, halve(value));
+      Eigen::internal::pstoreu(to, lower_part<2, Scalar>(value));
     } else {
       Eigen::internal::pstoreu(to, value);
-    }
-  }
-
-  /// The lower half of a register, and a half as the lower half of one (upper undefined):
-  /// both free, no instruction.
-  EIGEN_ALWAYS_INLINE static HalfPacket halve(const Packet& v) {
-    if constexpr (std::is_same_v<Scalar, float>) {
-      return _mm512_castps512_ps256(v);
-    } else {
-      return _mm512_castpd512_pd256(v);
-    }
-  }
-  EIGEN_ALWAYS_INLINE static Packet widen(const HalfPacket& v) {
-    if constexpr (std::is_same_v<Scalar, float>) {
-      return _mm512_castps256_ps512(v);
-    } else {
-      return _mm512_castpd256_pd512(v);
     }
   }
 };

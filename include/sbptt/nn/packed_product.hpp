@@ -121,7 +121,7 @@ public:
       const Index unpaired_from = full_panels - full_panels % 2;  // where the pairs stop
       for (; unpaired_done + 8 <= n; unpaired_done += 8)
         for (Index p = unpaired_from; p < panels; ++p)
-          block<1, 8>(p, x + unpaired_done * ldx, ldx, y + unpaired_done * ldy, ldy);
+          block_at<1, 8>(p, x + unpaired_done * ldx, ldx, y + unpaired_done * ldy, ldy);
     }
     Index j = 0;
     auto blocks_of = [&](auto columns) {
@@ -147,16 +147,16 @@ public:
         // docs/benchmark-runs.md, twenty-second run).
         if constexpr (4 * width + 4 + 1 <= EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS) {
           for (; p + 4 <= full_panels && p + 4 <= paired; p += 4)
-            block<4, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+            block_at<4, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
         }
         for (; p + 2 <= paired; p += 2)
-          block<2, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+          block_at<2, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
         if (last_three && p + 3 == panels) {
-          block<3, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+          block_at<3, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
           p += 3;
         }
         if (j + width <= unpaired_done) continue;
-        for (; p < panels; ++p) block<1, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+        for (; p < panels; ++p) block_at<1, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
       }
     };
     blocks_of(std::integral_constant<int, kColumnBlock>{});
@@ -187,37 +187,49 @@ private:
         EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS >= 32 ? 8 : (Columns == 1 ? 7 : 4);
     Index p = 0;
     for (; p + block_panels <= panels; p += block_panels)
-      block<block_panels, Columns>(p, x, ldx, y, ldy);
+      block_at<block_panels, Columns>(p, x, ldx, y, ldy);
     detail::with_count<block_panels - 1>(panels - p, [&](auto count) {
-      block<decltype(count)::value, Columns>(p, x, ldx, y, ldy);
+      block_at<decltype(count)::value, Columns>(p, x, ldx, y, ldy);
     });
   }
 
-  /// Rows p·kLanes … (p + Panels)·kLanes − 1 of Y, columns 0 … Columns − 1; its loops over
-  /// registers are `static_for`s (core/unroll.hpp). Never inlined: inlined into `multiply`'s
-  /// loops, the same block made guidance's R epoch 2% slower at -O3 than the plain loops;
-  /// kept apart, 7–8% faster (13.59–13.78 against 14.79–15.02 ms; docs/benchmark-runs.md,
-  /// seventeenth run).
+  /// `block` for the Panels panels from p, the last panel of A at the narrowest width that
+  /// holds its rows where that is cheaper (`kNarrowLastPanel`).
   template <int Panels, int Columns>
+  void block_at(Index p, const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
+    if constexpr (kNarrowLastPanel) {
+      const Index last_rows = rows_ - (p + Panels - 1) * kLanes;  // rows of the block's last
+      if (4 * last_rows <= kLanes) return block<Panels, Columns, 4>(p, x, ldx, y, ldy);
+      if (2 * last_rows <= kLanes) return block<Panels, Columns, 2>(p, x, ldx, y, ldy);
+    }
+    block<Panels, Columns, 1>(p, x, ldx, y, ldy);
+  }
+
+  /// Rows p·kLanes … (p + Panels)·kLanes − 1 of Y, columns 0 … Columns − 1, the last panel in
+  /// the lower 1/LastFraction of its registers (1: whole); its loops over registers are
+  /// `static_for`s (core/unroll.hpp). Never inlined: inlined into `multiply`'s loops, the same
+  /// block made guidance's R epoch 2% slower at -O3 than the plain loops; kept apart, 7–8%
+  /// faster (13.59–13.78 against 14.79–15.02 ms; docs/benchmark-runs.md, seventeenth run).
+  template <int Panels, int Columns, int LastFraction>
   [[gnu::noinline]] void block(Index p, const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
-    using Eigen::internal::pmadd;
     using Eigen::internal::pset1;
-    using Eigen::internal::ploadu;
     Packet acc[Panels][Columns];
     const Scalar* a[Panels];
     detail::static_for<Panels>([&](auto q) SBPTT_ALWAYS_INLINE {
-      const Packet b = ploadu<Packet>(bias_.data() + (p + q) * kLanes);
+      const Packet b = load<fraction<Panels, LastFraction>(q)>(bias_.data() + (p + q) * kLanes);
       detail::static_for<Columns>([&](auto c) SBPTT_ALWAYS_INLINE { acc[q][c] = b; });
       a[q] = data_.data() + (p + q) * kLanes * cols_;
     });
     for (Index k = 0; k < cols_; ++k) {
       Packet w[Panels];
-      detail::static_for<Panels>(
-          [&](auto q) SBPTT_ALWAYS_INLINE { w[q] = ploadu<Packet>(a[q] + k * kLanes); });
+      detail::static_for<Panels>([&](auto q) SBPTT_ALWAYS_INLINE {
+        w[q] = load<fraction<Panels, LastFraction>(q)>(a[q] + k * kLanes);
+      });
       detail::static_for<Columns>([&](auto c) SBPTT_ALWAYS_INLINE {
         const Packet xk = pset1<Packet>(x[k + c * ldx]);
-        detail::static_for<Panels>(
-            [&](auto q) SBPTT_ALWAYS_INLINE { acc[q][c] = pmadd(w[q], xk, acc[q][c]); });
+        detail::static_for<Panels>([&](auto q) SBPTT_ALWAYS_INLINE {
+          acc[q][c] = madd<fraction<Panels, LastFraction>(q)>(w[q], xk, acc[q][c]);
+        });
       });
     }
     detail::static_for<Panels>([&](auto q) SBPTT_ALWAYS_INLINE {
@@ -227,6 +239,45 @@ private:
         store_rows(y + c * ldy + first, count, acc[q][c]);
       });
     });
+  }
+
+  // Where a core splits a 512-bit multiply-add in two 256-bit halves (AMD Zen 4), a last
+  // panel of 4 rows in a whole register costs as much as one of 16: the 100 × 100 Wᵀ product
+  // at 8 columns in float (its 7th panel of 4 rows at a quarter of the width) took 1474–1476
+  // ns against 1596–1604 (docs/benchmark-runs-zen4.md, thirty-third run). AVX-512 builds
+  // only; the others are unchanged.
+#if defined(EIGEN_VECTORIZE_AVX512)
+  static constexpr bool kNarrowLastPanel = FloatOrDouble<Scalar>;
+#else
+  static constexpr bool kNarrowLastPanel = false;
+#endif
+
+  /// The width of panel q of a block: the last in 1/LastFraction of a register, the others whole.
+  template <int Panels, int LastFraction>
+  static constexpr int fraction(int q) {
+    return q == Panels - 1 ? LastFraction : 1;
+  }
+  /// A panel's column (or bias) of kLanes scalars, its first 1/Fraction by a load of that width.
+  template <int Fraction>
+  SBPTT_ALWAYS_INLINE static Packet load(const Scalar* from) {
+    if constexpr (Fraction == 1) {
+      return Eigen::internal::ploadu<Packet>(from);
+    } else {
+#if defined(EIGEN_VECTORIZE_AVX512)
+      return detail::load_lower_part<Fraction>(from);
+#endif
+    }
+  }
+  /// w·x + acc in the first 1/Fraction of the registers.
+  template <int Fraction>
+  SBPTT_ALWAYS_INLINE static Packet madd(const Packet& w, const Packet& x, const Packet& acc) {
+    if constexpr (Fraction == 1) {
+      return Eigen::internal::pmadd(w, x, acc);
+    } else {
+#if defined(EIGEN_VECTORIZE_AVX512)
+      return detail::lower_madd<Fraction, Scalar>(w, x, acc);
+#endif
+    }
   }
 
   /// Whether A is short and kept in the row-major layout of the file comment.

@@ -55,22 +55,22 @@ template <int Fraction, class Scalar>
 struct LowerPacketOf;
 template <class Scalar>
 struct LowerPacketOf<1, Scalar> {
-  using type = FullPacket<Scalar>;
+  using Type = FullPacket<Scalar>;
 };
 template <class Scalar>
 struct LowerPacketOf<2, Scalar> {
-  using type = typename Eigen::internal::packet_traits<Scalar>::half;
+  using Type = typename Eigen::internal::packet_traits<Scalar>::half;
 };
 template <>
 struct LowerPacketOf<4, float> {
-  using type = Eigen::internal::Packet4f;
+  using Type = Eigen::internal::Packet4f;
 };
 template <>
 struct LowerPacketOf<4, double> {
-  using type = Eigen::internal::Packet2d;
+  using Type = Eigen::internal::Packet2d;
 };
 template <int Fraction, class Scalar>
-using LowerPacket = typename LowerPacketOf<Fraction, Scalar>::type;
+using LowerPacket = typename LowerPacketOf<Fraction, Scalar>::Type;
 
 /// The lower 1/Fraction of `value`'s lanes as a narrower register, and such a register as the
 /// lower lanes of a whole one (the others undefined): casts, no instruction.
@@ -79,12 +79,14 @@ EIGEN_ALWAYS_INLINE LowerPacket<Fraction, Scalar> lower_part(const FullPacket<Sc
   static_assert(FloatOrDouble<Scalar> && (Fraction == 1 || Fraction == 2 || Fraction == 4));
   if constexpr (Fraction == 1) {
     return value;
+  } else if constexpr (std::is_same_v<Scalar, float> && Fraction == 2) {
+    return _mm512_castps512_ps256(value);
   } else if constexpr (std::is_same_v<Scalar, float>) {
-    if constexpr (Fraction == 2) return _mm512_castps512_ps256(value);
-    else return _mm512_castps512_ps128(value);
+    return _mm512_castps512_ps128(value);
+  } else if constexpr (Fraction == 2) {
+    return _mm512_castpd512_pd256(value);
   } else {
-    if constexpr (Fraction == 2) return _mm512_castpd512_pd256(value);
-    else return _mm512_castpd512_pd128(value);
+    return _mm512_castpd512_pd128(value);
   }
 }
 template <int Fraction, class Scalar>
@@ -92,12 +94,14 @@ EIGEN_ALWAYS_INLINE FullPacket<Scalar> from_lower_part(const LowerPacket<Fractio
   static_assert(FloatOrDouble<Scalar> && (Fraction == 1 || Fraction == 2 || Fraction == 4));
   if constexpr (Fraction == 1) {
     return value;
+  } else if constexpr (std::is_same_v<Scalar, float> && Fraction == 2) {
+    return _mm512_castps256_ps512(value);
   } else if constexpr (std::is_same_v<Scalar, float>) {
-    if constexpr (Fraction == 2) return _mm512_castps256_ps512(value);
-    else return _mm512_castps128_ps512(value);
+    return _mm512_castps128_ps512(value);
+  } else if constexpr (Fraction == 2) {
+    return _mm512_castpd256_pd512(value);
   } else {
-    if constexpr (Fraction == 2) return _mm512_castpd256_pd512(value);
-    else return _mm512_castpd128_pd512(value);
+    return _mm512_castpd128_pd512(value);
   }
 }
 

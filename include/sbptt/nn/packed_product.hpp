@@ -198,7 +198,7 @@ private:
   template <int Panels, int Columns>
   void block_at(Index p, const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
     if constexpr (kNarrowLastPanel) {
-      const Index last_rows = rows_ - (p + Panels - 1) * kLanes;  // rows of the block's last
+      const Index last_rows = rows_ - (p + Panels - 1) * kLanes;  // in the block's last panel
       if (4 * last_rows <= kLanes) return block<Panels, Columns, 4>(p, x, ldx, y, ldy);
       if (2 * last_rows <= kLanes) return block<Panels, Columns, 2>(p, x, ldx, y, ldy);
     }
@@ -255,29 +255,26 @@ private:
   /// The width of panel q of a block: the last in 1/LastFraction of a register, the others whole.
   template <int Panels, int LastFraction>
   static constexpr int fraction(int q) {
-    return q == Panels - 1 ? LastFraction : 1;
+    if (q == Panels - 1) return LastFraction;
+    return 1;
   }
   /// A panel's column (or bias) of kLanes scalars, its first 1/Fraction by a load of that width.
   template <int Fraction>
   SBPTT_ALWAYS_INLINE static Packet load(const Scalar* from) {
-    if constexpr (Fraction == 1) {
-      return Eigen::internal::ploadu<Packet>(from);
-    } else {
+    static_assert(Fraction == 1 || kNarrowLastPanel);
 #if defined(EIGEN_VECTORIZE_AVX512)
-      return detail::load_lower_part<Fraction>(from);
+    if constexpr (Fraction != 1) return detail::load_lower_part<Fraction>(from);
 #endif
-    }
+    return Eigen::internal::ploadu<Packet>(from);
   }
   /// w·x + acc in the first 1/Fraction of the registers.
   template <int Fraction>
   SBPTT_ALWAYS_INLINE static Packet madd(const Packet& w, const Packet& x, const Packet& acc) {
-    if constexpr (Fraction == 1) {
-      return Eigen::internal::pmadd(w, x, acc);
-    } else {
+    static_assert(Fraction == 1 || kNarrowLastPanel);
 #if defined(EIGEN_VECTORIZE_AVX512)
-      return detail::lower_madd<Fraction, Scalar>(w, x, acc);
+    if constexpr (Fraction != 1) return detail::lower_madd<Fraction, Scalar>(w, x, acc);
 #endif
-    }
+    return Eigen::internal::pmadd(w, x, acc);
   }
 
   /// Whether A is short and kept in the row-major layout of the file comment.

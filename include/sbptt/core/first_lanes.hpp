@@ -49,14 +49,10 @@ EIGEN_ALWAYS_INLINE void store_first_lanes(Scalar* to, const FullPacket<Scalar>&
   }
 }
 
-/// The register of the lower 1/Fraction of a `FullPacket` (Fraction 1, 2 or 4). Named
-/// type by type: a vector type as a template argument loses its attributes (GCC warns).
+/// The register of the lower 1/Fraction of a `FullPacket` (Fraction 2 or 4). Named type by
+/// type: a vector type as a template argument loses its attributes (GCC warns).
 template <int Fraction, class Scalar>
 struct LowerPacketOf;
-template <class Scalar>
-struct LowerPacketOf<1, Scalar> {
-  using Type = FullPacket<Scalar>;
-};
 template <class Scalar>
 struct LowerPacketOf<2, Scalar> {
   using Type = typename Eigen::internal::packet_traits<Scalar>::half;
@@ -76,32 +72,22 @@ using LowerPacket = typename LowerPacketOf<Fraction, Scalar>::Type;
 /// lower lanes of a whole one (the others undefined): casts, no instruction.
 template <int Fraction, class Scalar>
 EIGEN_ALWAYS_INLINE LowerPacket<Fraction, Scalar> lower_part(const FullPacket<Scalar>& value) {
-  static_assert(FloatOrDouble<Scalar> && (Fraction == 1 || Fraction == 2 || Fraction == 4));
-  if constexpr (Fraction == 1) {
-    return value;
-  } else if constexpr (std::is_same_v<Scalar, float> && Fraction == 2) {
-    return _mm512_castps512_ps256(value);
-  } else if constexpr (std::is_same_v<Scalar, float>) {
-    return _mm512_castps512_ps128(value);
-  } else if constexpr (Fraction == 2) {
-    return _mm512_castpd512_pd256(value);
+  if constexpr (std::is_same_v<Scalar, float>) {
+    if constexpr (Fraction == 2) return _mm512_castps512_ps256(value);
+    if constexpr (Fraction == 4) return _mm512_castps512_ps128(value);
   } else {
-    return _mm512_castpd512_pd128(value);
+    if constexpr (Fraction == 2) return _mm512_castpd512_pd256(value);
+    if constexpr (Fraction == 4) return _mm512_castpd512_pd128(value);
   }
 }
 template <int Fraction, class Scalar>
 EIGEN_ALWAYS_INLINE FullPacket<Scalar> from_lower_part(const LowerPacket<Fraction, Scalar>& value) {
-  static_assert(FloatOrDouble<Scalar> && (Fraction == 1 || Fraction == 2 || Fraction == 4));
-  if constexpr (Fraction == 1) {
-    return value;
-  } else if constexpr (std::is_same_v<Scalar, float> && Fraction == 2) {
-    return _mm512_castps256_ps512(value);
-  } else if constexpr (std::is_same_v<Scalar, float>) {
-    return _mm512_castps128_ps512(value);
-  } else if constexpr (Fraction == 2) {
-    return _mm512_castpd256_pd512(value);
+  if constexpr (std::is_same_v<Scalar, float>) {
+    if constexpr (Fraction == 2) return _mm512_castps256_ps512(value);
+    if constexpr (Fraction == 4) return _mm512_castps128_ps512(value);
   } else {
-    return _mm512_castpd128_pd512(value);
+    if constexpr (Fraction == 2) return _mm512_castpd256_pd512(value);
+    if constexpr (Fraction == 4) return _mm512_castpd128_pd512(value);
   }
 }
 

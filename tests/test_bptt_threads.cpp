@@ -105,6 +105,7 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
     CHECK(pairs[t].loss == pairs[0].loss);
     CHECK(pairs[t].regular == pairs[0].regular);
     CHECK(pairs[t].modified == pairs[0].modified);
+    CHECK(pairs[t].combined == pairs[0].combined);
     CHECK(truncated_pairs[t].regular == truncated_pairs[0].regular);
     CHECK(truncated_pairs[t].modified == truncated_pairs[0].modified);
     check_same(truncated_pairs[t].modified_diagnostics, truncated_pairs[0].modified_diagnostics);
@@ -122,6 +123,10 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
     if (settings[t].second == 0) CHECK_FALSE(overlapped[t]);
   }
   CHECK_FALSE(overlapped[0]);
+  // The pair's g_C, formed in the comparison's pass, is combine(g_M, g_R).
+  Vector<S> combined;
+  combine(pairs[0].modified, pairs[0].regular, combined);
+  CHECK(pairs[0].combined == combined);
   // The sweeps of the pair equal the single sweeps (bit for bit when they run apart, to
   // round-off when one control lets them share the network's backward pass), and training
   // moved the parameters.

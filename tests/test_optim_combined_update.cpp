@@ -242,3 +242,31 @@ TEMPLATE_TEST_CASE("CombinedUpdate: a fixed gradient sequence gives bitwise-iden
   CHECK(first == run());
   CHECK(first.cwiseAbs().maxCoeff() > Scalar(0));
 }
+
+TEMPLATE_TEST_CASE("CombinedUpdate::step_combined with g_C formed beforehand is step",
+                   "[optim][combine]", float, double) {
+  // The engine forms g_C in the pass that compares g_M with g_R; stepping with it must leave
+  // the parameters, the optimizer and the logged figures exactly as `step` from g_M and g_R.
+  using Scalar = TestType;
+  using Update = sbptt::CombinedUpdate<sbptt::Adam<Scalar>>;
+  sbptt::Rng rng(5);
+  Update from_pair(sbptt::Adam<Scalar>(), ClipMode::Norm, Scalar(1));
+  Update from_combined(sbptt::Adam<Scalar>(), ClipMode::Norm, Scalar(1));
+  Vector<Scalar> theta = Vector<Scalar>::Zero(57), theta_combined = theta, g_c;
+  for (int t = 0; t < 20; ++t) {
+    const Vector<Scalar> g_m = random_vector<Scalar>(rng, theta.size());
+    const Vector<Scalar> g_r = random_vector<Scalar>(rng, theta.size());
+    from_pair.step(theta, g_m, g_r);
+    sbptt::combine(g_m, g_r, g_c);
+    from_combined.step_combined(theta_combined, g_c, sbptt::sign_agreement(g_m, g_r));
+    INFO("step " << t);
+    CHECK(theta_combined == theta);
+    CHECK(from_combined.last_norm2() == from_pair.last_norm2());
+    CHECK(from_combined.last_agreement() == from_pair.last_agreement());
+  }
+  CHECK(from_combined.inner().iterations() == 20);
+  CHECK(theta.cwiseAbs().maxCoeff() > Scalar(0));
+  CHECK_THROWS_WITH(from_combined.step_combined(theta_combined, g_c, Scalar(1.5)),
+                    Catch::Contains("agreement = 1.5; expected a fraction in [0, 1]"));
+  CHECK(from_combined.inner().iterations() == 20);
+}

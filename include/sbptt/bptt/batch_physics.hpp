@@ -5,6 +5,8 @@
 /// thread's `SampleScratch` (serially or over threads, as the caller decides). Implementation
 /// details of `sbptt::Engine`; the forward rollout, the evaluation and the reverse sweeps all
 /// go through here, so that the two paths are chosen in one place.
+#include <algorithm>
+
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/core/unroll.hpp"
@@ -52,15 +54,29 @@ void step_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>&
 /// the results, 2B columns. A `BatchSimulator`'s column does not depend on the others, so the
 /// results are the two calls' bit for bit; and where a batch fills less than a block of lanes
 /// (the paper's 8 samples in 16 float lanes) both sweeps share one block instead of two.
+/// Column-major, so each half is one contiguous run of entries and goes in and out by one
+/// copy: Eigen's assignments of column blocks took 0.12 µs a step of guidance's pair, twice
+/// these copies (docs/benchmark-runs-zen4.md, thirty-fourth run).
 template <class Scalar>
 struct PairedColumns {
   Matrix<Scalar> x, u, lambda, lambda_x, lambda_u;
 
-  /// [a b] into `into`, each B columns.
+  /// [a b] into `into`; a and b have the same shape.
   static void place(const Matrix<Scalar>& a, const Matrix<Scalar>& b, Matrix<Scalar>& into) {
     into.resize(a.rows(), 2 * a.cols());
-    into.leftCols(a.cols()) = a;
-    into.rightCols(a.cols()) = b;
+    const Index half = a.size();
+    std::copy_n(a.data(), half, into.data());
+    std::copy_n(b.data(), half, into.data() + half);
+  }
+
+  /// [a b] = `from` (an even number of columns): a and b get its halves.
+  static void split(const Matrix<Scalar>& from, Matrix<Scalar>& a, Matrix<Scalar>& b) {
+    const Index cols = from.cols() / 2;
+    a.resize(from.rows(), cols);
+    b.resize(from.rows(), cols);
+    const Index half = a.size();
+    std::copy_n(from.data(), half, a.data());
+    std::copy_n(from.data() + half, half, b.data());
   }
 };
 
@@ -78,18 +94,14 @@ void vjp_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& 
     if (sweeps.size() == 2) {
       auto* first = *sweeps.begin();
       auto* second = *(sweeps.begin() + 1);
-      const Index batch = x.cols();
       PairedColumns<Scalar>::place(x, x, paired.x);
       PairedColumns<Scalar>::place(u, u, paired.u);
       PairedColumns<Scalar>::place(first->lambda, second->lambda, paired.lambda);
       sim.vjp_batch(paired.x, paired.u, paired.lambda, physics ? &paired.lambda_x : nullptr,
                     &paired.lambda_u);
-      first->mu = paired.lambda_u.leftCols(batch);
-      second->mu = paired.lambda_u.rightCols(batch);
-      if (physics) {
-        first->propagated = paired.lambda_x.leftCols(batch);
-        second->propagated = paired.lambda_x.rightCols(batch);
-      }
+      PairedColumns<Scalar>::split(paired.lambda_u, first->mu, second->mu);
+      if (physics)
+        PairedColumns<Scalar>::split(paired.lambda_x, first->propagated, second->propagated);
       return;
     }
     for (auto* s : sweeps)

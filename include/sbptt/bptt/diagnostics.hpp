@@ -50,18 +50,18 @@ struct ComparisonDiagnostics {
 };
 
 
-/// cos(g_M, g_R) and the sign-agreement fraction of `sign_agreement` (core/sign.hpp: sign(0) =
-/// 0, NaN never agrees, 1 for empty vectors) of g_M and g_R (size n each).
+namespace detail {
+
+/// `compare`, writing the combined vector to `combined` (n entries) in the same pass unless it
+/// is null.
 template <class Scalar>
-[[nodiscard]] ComparisonDiagnostics compare(const Vector<Scalar>& modified,
-                                            const Vector<Scalar>& regular) {
-  detail::require(modified.size() == regular.size(), "compare: g_R size = ", regular.size(),
-                  ", expected the g_M size ", modified.size());
-  detail::PairSums<Scalar> sums;
-  constexpr bool one_pass = detail::pair_sums_in_registers<Scalar>;
-  const Index agreeing = detail::agreement_pass<Scalar>(modified.data(), regular.data(),
-                                                        modified.size(), nullptr,
-                                                        one_pass ? &sums : nullptr);
+[[nodiscard]] ComparisonDiagnostics compare_in_pass(const Vector<Scalar>& modified,
+                                                    const Vector<Scalar>& regular,
+                                                    Scalar* combined) {
+  PairSums<Scalar> sums;
+  constexpr bool one_pass = pair_sums_in_registers<Scalar>;
+  const Index agreeing = agreement_pass<Scalar>(modified.data(), regular.data(), modified.size(),
+                                                combined, one_pass ? &sums : nullptr);
   if constexpr (!one_pass) {
     sums.dot = modified.dot(regular);
     sums.modified_norm2 = modified.squaredNorm();
@@ -72,8 +72,40 @@ template <class Scalar>
                                            std::sqrt(sums.regular_norm2));
   result.cos_modified_regular = norms > 0 ? static_cast<double>(sums.dot) / norms : 0.0;
   result.agree_fraction =
-      static_cast<double>(detail::agreement_fraction<Scalar>(agreeing, modified.size()));
+      static_cast<double>(agreement_fraction<Scalar>(agreeing, modified.size()));
   return result;
+}
+
+template <class Scalar>
+void require_same_size(const Vector<Scalar>& modified, const Vector<Scalar>& regular,
+                       const char* caller) {
+  require(modified.size() == regular.size(), caller, ": g_R size = ", regular.size(),
+          ", expected the g_M size ", modified.size());
+}
+
+}  // namespace detail
+
+/// cos(g_M, g_R) and the sign-agreement fraction of `sign_agreement` (core/sign.hpp: sign(0) =
+/// 0, NaN never agrees, 1 for empty vectors) of g_M and g_R (size n each).
+template <class Scalar>
+[[nodiscard]] ComparisonDiagnostics compare(const Vector<Scalar>& modified,
+                                            const Vector<Scalar>& regular) {
+  detail::require_same_size(modified, regular, "compare");
+  return detail::compare_in_pass<Scalar>(modified, regular, nullptr);
+}
+
+/// `compare`, and `combined` = combine(g_M, g_R) (optim/combined_update.hpp; resized to n)
+/// from the same pass over both vectors: a pass of its own costs as much as reading them
+/// (guidance's 13,004 floats: 2.0 µs, docs/benchmark-runs-zen4.md, thirty-fourth run).
+template <class Scalar>
+[[nodiscard]] ComparisonDiagnostics compare_and_combine(const Vector<Scalar>& modified,
+                                                        const Vector<Scalar>& regular,
+                                                        Vector<Scalar>& combined) {
+  detail::require_same_size(modified, regular, "compare_and_combine");
+  detail::require(&combined != &modified && &combined != &regular,
+                  "compare_and_combine: combined is g_M or g_R; expected a vector of its own");
+  combined.resize(modified.size());
+  return detail::compare_in_pass<Scalar>(modified, regular, combined.data());
 }
 
 /// Loss and both vectors the combined update needs, from one forward pass.
@@ -82,6 +114,7 @@ struct GradientPair {
   Scalar loss = 0;
   Vector<Scalar> regular;   ///< g_R, the true gradient (Full)
   Vector<Scalar> modified;  ///< g_M, gradient stopped at the network input (PhysicsOnly)
+  Vector<Scalar> combined;  ///< g_C = combine(g_M, g_R), formed in `comparison`'s pass
   SweepDiagnostics regular_diagnostics;
   SweepDiagnostics modified_diagnostics;
   ComparisonDiagnostics comparison;

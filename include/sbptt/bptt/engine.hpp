@@ -321,7 +321,8 @@ private:
   void finish_pair(GradientPair<Scalar>& result) const {
     result.regular_diagnostics = sweeps_[0].diagnostics;
     result.modified_diagnostics = sweeps_[1].diagnostics;
-    result.comparison = compare(result.modified, result.regular);
+    result.comparison =
+        compare_and_combine(result.modified, result.regular, result.combined);
   }
 
   /// Batch-mean loss of the stored trajectory.

@@ -130,6 +130,18 @@ public:
     clipped_.step_in_place(params, combined_);
   }
 
+  /// As `step`, with g_C already formed (size n, e.g. `GradientPair::combined`, which the
+  /// engine forms in the pass that compares g_M with g_R): clips `combined` in place and steps
+  /// `params` (size n) with it. `agreement` in [0, 1] is the fraction of g_M that it kept,
+  /// reported by `last_agreement`.
+  void step_combined(Vector<Scalar>& params, Vector<Scalar>& combined, Scalar agreement) {
+    detail::require(agreement >= Scalar(0) && agreement <= Scalar(1),
+                    "CombinedUpdate::step_combined: agreement = ", agreement,
+                    "; expected a fraction in [0, 1]");
+    last_agreement_ = agreement;
+    clipped_.step_in_place(params, combined);
+  }
+
   /// ‖g_C‖² before clipping, of the last step.
   [[nodiscard]] double last_norm2() const { return clipped_.last_norm2(); }
   /// Fraction of components whose signs agreed in the last step (see `sign_agreement`).

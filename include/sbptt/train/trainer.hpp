@@ -270,7 +270,8 @@ private:
       bad = pair_.forward_non_finite ? pair_.forward_non_finite
                                      : pair_.modified_diagnostics.first_non_finite;
       if (!bad) {
-        combined_.step(controller_.params(), pair_.modified, pair_.regular);
+        combined_.step_combined(controller_.params(), pair_.combined,
+                                static_cast<Scalar>(pair_.comparison.agree_fraction));
         last_norm2_ = combined_.last_norm2();
         last_comparison_ = pair_.comparison;
       }

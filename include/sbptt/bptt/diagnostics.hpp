@@ -96,7 +96,7 @@ template <class Scalar>
 
 /// `compare`, and `combined` = combine(g_M, g_R) (optim/combined_update.hpp; resized to n)
 /// from the same pass over both vectors: a pass of its own costs as much as reading them
-/// (guidance's 13,004 floats: 2.0 µs, docs/benchmark-runs-zen4.md, thirty-fourth run).
+/// (guidance's 13,004 floats: 2.0 µs, docs/benchmark-runs-zen4.md, thirty-third run).
 template <class Scalar>
 [[nodiscard]] ComparisonDiagnostics compare_and_combine(const Vector<Scalar>& modified,
                                                         const Vector<Scalar>& regular,

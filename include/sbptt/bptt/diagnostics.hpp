@@ -76,13 +76,6 @@ template <class Scalar>
   return result;
 }
 
-template <class Scalar>
-void require_same_size(const Vector<Scalar>& modified, const Vector<Scalar>& regular,
-                       const char* caller) {
-  require(modified.size() == regular.size(), caller, ": g_R size = ", regular.size(),
-          ", expected the g_M size ", modified.size());
-}
-
 }  // namespace detail
 
 /// cos(g_M, g_R) and the sign-agreement fraction of `sign_agreement` (core/sign.hpp: sign(0) =

@@ -162,6 +162,14 @@ Index agreement_pass(const Scalar* modified, const Scalar* regular, Index n, Sca
   return agreeing;
 }
 
+/// Throws `InvalidArgument` naming `caller` unless g_M and g_R have the same size.
+template <std::floating_point Scalar>
+void require_same_size(const Vector<Scalar>& g_modified, const Vector<Scalar>& g_regular,
+                       const char* caller) {
+  require(g_modified.size() == g_regular.size(), caller, ": g_R size = ", g_regular.size(),
+          ", expected the g_M size ", g_modified.size());
+}
+
 /// agreeing / n, and 1 for n = 0 (nothing disagrees).
 template <std::floating_point Scalar>
 [[nodiscard]] Scalar agreement_fraction(Index agreeing, Index n) {
@@ -176,8 +184,7 @@ template <std::floating_point Scalar>
 template <std::floating_point Scalar>
 [[nodiscard]] Scalar sign_agreement(const Vector<Scalar>& g_modified,
                                     const Vector<Scalar>& g_regular) {
-  detail::require(g_modified.size() == g_regular.size(), "sign_agreement: g_R size = ",
-                  g_regular.size(), ", expected the g_M size ", g_modified.size());
+  detail::require_same_size(g_modified, g_regular, "sign_agreement");
   const Index agreeing = detail::agreement_pass<Scalar>(g_modified.data(), g_regular.data(),
                                                         g_modified.size(), nullptr, nullptr);
   return detail::agreement_fraction<Scalar>(agreeing, g_modified.size());

@@ -47,8 +47,7 @@ namespace detail {
 template <std::floating_point Scalar>
 Index combine_counting(const Vector<Scalar>& g_modified, const Vector<Scalar>& g_regular,
                        Vector<Scalar>& out) {
-  require(g_modified.size() == g_regular.size(), "combine: g_R size = ", g_regular.size(),
-          ", expected the g_M size ", g_modified.size());
+  require_same_size(g_modified, g_regular, "combine");
   // Sizes are equal here, so the resize is a no-op when `out` aliases an input, and each
   // component is read before it is written: aliasing either input is safe.
   out.resize(g_modified.size());
@@ -126,8 +125,8 @@ public:
   void step(Vector<Scalar>& params, const Vector<Scalar>& g_modified,
             const Vector<Scalar>& g_regular) {
     const Index agreeing = detail::combine_counting(g_modified, g_regular, combined_);
-    last_agreement_ = detail::agreement_fraction<Scalar>(agreeing, g_modified.size());
-    clipped_.step_in_place(params, combined_);
+    step_combined(params, combined_,
+                  detail::agreement_fraction<Scalar>(agreeing, g_modified.size()));
   }
 
   /// As `step`, with g_C already formed (size n, e.g. `GradientPair::combined`, which the

@@ -55,7 +55,7 @@ void step_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>&
 /// results are the two calls' bit for bit; and where a batch fills less than a block of lanes
 /// (the paper's 8 samples in 16 float lanes) both sweeps share one block instead of two.
 /// Column-major, so each half is one contiguous run of entries and goes in and out by one
-/// copy: guidance's five a step took 52–83 ns, Eigen's assignments of column blocks 70–104
+/// copy: guidance's five a step took 52–79 ns, Eigen's assignments of column blocks 70–104
 /// (docs/benchmark-runs-zen4.md, thirty-fourth run).
 template <class Scalar>
 struct PairedColumns {

@@ -84,10 +84,11 @@ void check_no_allocation(Engine& engine, const Matrix<Scalar>& x0, Index threads
   const Scalar evaluated = engine.evaluate(x0);
   const Vector<Scalar> first_full = g_full, first_regular = pair.regular,
                        first_modified = pair.modified;
-  // With one control the pair shares one backward pass and hands its parameter products to
-  // whichever thread holds the ring's lock; the scaled adjoints live in the ring's slots, so
-  // the pair allocates nothing after its first call, on any number of threads. Guarded five
-  // times, so that the sweeping thread too takes its turns at the adding.
+  // With one control the pair shares one backward pass and splits its steps between two
+  // threads; the odd steps' adjoints live in the split's slots, whichever thread fills or adds
+  // them, so the pair allocates nothing after its first call, on any number of threads.
+  // Guarded five times, so that the sweeping thread too takes its turns (until the second
+  // thread starts, and at the end).
   const std::size_t pair_repeats = threads == 1 ? 1 : 5;
 
   const Matrix<Scalar> narrower = x0.leftCols(x0.cols() - 1);

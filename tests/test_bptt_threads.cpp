@@ -2,8 +2,8 @@
 // evaluation of a set, its non-finite report, and the parameters after a few Trainer epochs
 // are bitwise identical for 1, 2 and 3 threads (cart pole with an MLP, guidance, and quantum
 // control with a CNN; batches and sets whose sizes do not divide evenly; the pair also
-// truncated), whether the per-sample loops are split or a sweep hands its parameter products
-// to a second thread (a lone sweep, or the pair's shared backward pass with one control).
+// truncated), whether the per-sample loops are split, a lone sweep hands its parameter
+// products to a second thread, or the pair with one control splits its steps between two.
 #include <catch2/catch.hpp>
 
 #include <cmath>

@@ -29,15 +29,16 @@
 /// fixed chunks of `kEvaluateChunk` samples independently. A lone sweep (`reverse`) whose
 /// per-sample loops are too cheap to split hands the parameter products of a
 /// `SplitBackwardController` to a second thread instead, step by step, and adds them in step
-/// order (param_handoff.hpp, `ParamHandoff`); so does the pair
-/// of `regular_and_modified` when its sweeps share one backward pass (one control), else its
-/// two sweeps run at once. Every sample is computed by the same operations whatever the
-/// thread count, and every batch sum is taken in a fixed order, so all results are bitwise
-/// identical for any number of threads. With more than one thread the controller's
-/// `backward` must be safe to call concurrently on one workspace, its `add_param_gradient`
-/// (both) concurrently with `backward_inputs` of another step, and the scaled
-/// `add_param_gradient` concurrently with itself on one workspace and one record, with
-/// different `scaled` buffers and gradients (the pair's two sweeps; `Network`'s are all of
+/// order (param_handoff.hpp, `ParamHandoff`). The pair of `regular_and_modified` splits its
+/// steps between two threads when its sweeps share one backward pass (one control:
+/// shared_seed_sweeps.hpp, step_split.hpp), else its two sweeps run at once. Every sample is
+/// computed by the same operations whatever the thread count, and every batch sum is taken in a
+/// fixed order, so all results are bitwise identical for any number of threads. With more than
+/// one thread the controller's `backward` must be safe to call concurrently on one workspace,
+/// its `add_param_gradient` (both) concurrently with `backward_inputs` of another step,
+/// `backward_inputs` concurrently with itself into different records, and the scaled
+/// `add_param_gradient` concurrently with itself on different steps, with different `scaled`
+/// buffers and gradients (`Network`'s are all of
 /// these), and the loss functor must be thread-safe (a `const` pure function).
 #include <cmath>
 #include <initializer_list>
@@ -233,7 +234,7 @@ public:
                                    : fork_[1].probing() || fork_[1].fork();
       if (handoff_ && !split_loops) {
         Handoff& h = *handoff_;
-        auto add = [&](std::size_t slot, int) {
+        auto add = [&](std::size_t slot) {
           detail::ReverseSweeps::add_params(*this, h, slot, gradient);
         };
         h.run(*pool_, steps_, add, [&] {

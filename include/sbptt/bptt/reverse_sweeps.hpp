@@ -33,7 +33,7 @@ struct ReverseSweeps {
                    Vector<typename Engine::Scalar>& gradient, Index truncation, bool parallel,
                    typename Engine::Handoff* handoff) {
     begin(e, s, gradient, handoff != nullptr);
-    auto add = [&](std::size_t slot, int) { add_params(e, *handoff, slot, gradient); };
+    auto add = [&](std::size_t slot) { add_params(e, *handoff, slot, gradient); };
     for (Index n = e.steps_ - 1; n >= 0; --n) {
       const auto i = static_cast<std::size_t>(n);
       const FlowMode mode = schedule.at(n);

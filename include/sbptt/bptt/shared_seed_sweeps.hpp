@@ -11,126 +11,164 @@
 /// equal the two separate sweeps up to round-off, because (μ·Δ(1))·x is another grouping of
 /// the same products.
 ///
-/// Threads: the sweeping thread runs both sweeps' per-sample VJPs and the one backward pass,
-/// and records each step (layer adjoints and both μ_n) into a `ParamHandoff` ring with a chain
-/// per sweep; each sweep's parameter products are added from it in step order, on whichever
-/// thread holds that chain's lock, so the sums are the single thread's bit for bit, and the
-/// two threads can add the two sweeps' products at once. The per-sample
-/// loops are never split over the threads here, even where a lone sweep would split them:
-/// for quantum control (2 × 8 VJPs of about 0.76 µs per step) splitting them instead of
-/// handing off the products made the two-thread C epoch 301.8 ms, against 248–263 ms
-/// (docs/benchmark-runs.md, fifth run).
+/// Threads: the steps are split between the two threads, each adding the products of the
+/// backward passes it ran, so that the layer adjoints stay on the core that wrote them
+/// (step_split.hpp). The products of the odd recordings (k = m − 1 − n) are summed apart from
+/// those of the even ones and added to them at the end, on one thread as on two, so the
+/// results are the same bits for every thread count. The per-sample loops are never split
+/// over the threads here, even where a lone sweep would split them: for quantum control
+/// (2 × 8 VJPs of about 0.76 µs per step) splitting them instead of handing the products to
+/// the second thread (the schedule before this one) made the two-thread C epoch 301.8 ms,
+/// against 248–263 ms (docs/benchmark-runs.md, fifth run).
+#include <array>
 #include <atomic>
 #include <cstddef>
 #include <memory>
 
 #include "sbptt/bptt/flow_mode.hpp"
 #include "sbptt/bptt/packed_controller.hpp"
-#include "sbptt/bptt/param_handoff.hpp"
 #include "sbptt/bptt/reverse_sweeps.hpp"
+#include "sbptt/bptt/step_split.hpp"
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/core/unroll.hpp"
 
 namespace sbptt::detail {
 
-/// One recorded step: the layer adjoints of the seed 1 and, per sweep (0: Full, 1:
-/// PhysicsOnly), the control adjoints μ_n (1 × B) and room for the scaled adjoints. The room
-/// belongs to the slot and the sweep, not to a thread, so that no call allocates after the
-/// first (whichever thread adds the slot) and the two sweeps' products can run at once.
-template <class Adjoints, class Scalar>
-struct SharedSeedStep {
-  Adjoints adjoints;
-  Adjoints scaled[2];
-  Matrix<Scalar> mu[2];
-};
-
 /// The shared-seed sweeps of an `Engine` (its friend) whose controller has layer adjoints of
 /// type `Adjoints`.
 template <class Adjoints, class Scalar>
 class SharedSeedSweeps {
 public:
-  /// With threads, steps are handed to the engine's second thread (else added in place).
-  void set_threaded(bool threaded) {
-    handoff_ = threaded ? std::make_unique<Handoff>() : nullptr;
-  }
+  /// With threads, the odd recordings go to the engine's second thread.
+  void set_threaded(bool threaded) { split_ = threaded ? std::make_unique<Split>() : nullptr; }
 
   /// g_R into `result.regular`, g_M into `result.modified`, and both sweeps' diagnostics in
   /// the engine's sweep buffers, over the engine's stored trajectory.
   template <class Engine, class Pair>
   void run(Engine& engine, Pair& result, Index truncation) {
-    Handoff* h = handoff_.get();
-    auto add = [&](std::size_t slot, int sweep_index) {
-      add_step(engine, h->ring[slot], h->steps[slot], sweep_index, result);
-    };
-    if (h == nullptr) {
-      sweep(engine, result, truncation, nullptr, add);
-    } else {
-      h->run(*engine.pool_, engine.steps_, add,
-             [&] { sweep(engine, result, truncation, h, add); });
+    Split* split = split_.get();
+    unit_seed_.setOnes(1, engine.trajectory_.batch());  // before the second thread reads it
+    if (split == nullptr) {
+      sweep(engine, result, truncation, nullptr);
+      return;
     }
+    split->reset(engine.steps_);
+    auto prepare = [&](Index task, Slot& slot) { prepare_task(engine, truncation, task, slot); };
+    auto add = [&](Index task, Slot& slot) { add_task(engine, task, slot); };
+    auto second = [&](Index, Index) { split->keep_working(prepare, add); };
+    engine.pool_->run_beside(1, second, [&] {
+      try {
+        sweep(engine, result, truncation, split);
+      } catch (...) {
+        split->abandoned.store(true, std::memory_order_release);
+        throw;
+      }
+    });
   }
 
 private:
-  using Step = SharedSeedStep<Adjoints, Scalar>;
-  using Handoff = ParamHandoff<Step, 2>;  // a chain per sweep: g_R and g_M
+  using Split = StepSplit<Adjoints, Scalar>;
+  using Slot = typename Split::Slot;
+  using Scaled = std::array<Adjoints, 2>;
+  using Seeds = std::array<Matrix<Scalar>, 2>;
 
-  /// One machine copy (SBPTT_ONE_COPY): the calls with and without the hand-off must give the
-  /// same bits, or the results would depend on the thread count.
-  template <class Engine, class Pair, class Add>
-  SBPTT_ONE_COPY void sweep(Engine& e, Pair& result, Index truncation, Handoff* handoff,
-                            Add& add) {
-    const Index batch = e.trajectory_.batch();
+  /// The pair over the whole trajectory, the odd recordings' work in `split` if set. One
+  /// machine copy (SBPTT_ONE_COPY) with and without the split, and every backward pass and
+  /// every product through one copy too (`backward_pass`, `add_products`): the two must give
+  /// the same bits, or the results would depend on the thread count. Returns early, its work
+  /// unfinished, when the second thread failed; `run_beside` then rethrows its exception.
+  template <class Engine, class Pair>
+  SBPTT_ONE_COPY void sweep(Engine& e, Pair& result, Index truncation, Split* split) {
     auto& full = e.sweeps_[0];
     auto& physics = e.sweeps_[1];
-    ReverseSweeps::begin(e, full, result.regular, handoff != nullptr);
-    ReverseSweeps::begin(e, physics, result.modified, handoff != nullptr);
-    unit_seed_.setOnes(1, batch);
-    for (Index n = e.steps_ - 1; n >= 0; --n) {
-      const auto i = static_cast<std::size_t>(n);
+    auto prepare = [&](Index task, Slot& slot) { prepare_task(e, truncation, task, slot); };
+    auto add = [&](Index task, Slot& slot) { add_task(e, task, slot); };
+    ReverseSweeps::begin(e, full, result.regular, split != nullptr);
+    ReverseSweeps::begin(e, physics, result.modified, split != nullptr);
+    odd_regular_.setZero(result.regular.size());
+    odd_modified_.setZero(result.modified.size());
+    for (Index k = 0; k < e.steps_; ++k) {
+      const Index n = e.steps_ - 1 - k;
       const bool cut = truncated_at(n, truncation);
+      const bool odd = k % 2 == 1;
       ReverseSweeps::adjoint_products(e, {&full, &physics}, n, !cut, false);
-      const Index k = e.steps_ - 1 - n;  // steps recorded so far
-      const std::size_t slot = handoff != nullptr ? handoff->slot_for(k, add) : 0;
-      Step& step = handoff != nullptr ? handoff->ring[slot] : single_;
-      step.mu[0] = full.mu;
-      step.mu[1] = physics.mu;
-      e.packed_controller_.backward_inputs(e.trajectory_.workspaces[i], unit_seed_,
-                                           cut ? nullptr : &full.input_adjoint, step.adjoints);
-      if (handoff != nullptr) {
-        handoff->steps[slot] = n;
-        handoff->recorded.store(k + 1, std::memory_order_release);
+      const Matrix<Scalar>* input_adjoint = &full.input_adjoint;  // K_nᵀ1
+      if (split != nullptr && odd) {
+        const Index task = k / 2;
+        Seeds& mu = split->mu[static_cast<std::size_t>(task)];
+        mu[0] = full.mu;
+        mu[1] = physics.mu;
+        split->swept.store(task + 1, std::memory_order_release);
+        if (!split->wait_prepared(task, prepare, add)) return;
+        input_adjoint = &split->input_adjoints[static_cast<std::size_t>(task)];
       } else {
-        add_step(e, step, n, 0, result);
-        add_step(e, step, n, 1, result);
+        seeds_[0] = full.mu;
+        seeds_[1] = physics.mu;
+        backward_pass(e, n, cut, unit_seed_, adjoints_, full.input_adjoint);
+        add_products(e, n, adjoints_, seeds_, scaled_, odd ? odd_regular_ : result.regular,
+                     odd ? odd_modified_ : result.modified);
       }
       if (cut) {
         full.lambda.setZero();
         physics.lambda.setZero();
       } else {
         full.lambda.swap(full.propagated);
-        full.lambda.array() += full.input_adjoint.array().rowwise() * full.mu.row(0).array();
+        full.lambda.array() += input_adjoint->array().rowwise() * full.mu.row(0).array();
         physics.lambda.swap(physics.propagated);
       }
     }
-    if (handoff != nullptr) handoff->wait_added(e.steps_, add);
+    if (split != nullptr && !split->wait_added(prepare, add)) return;
+    result.regular += odd_regular_;
+    result.modified += odd_modified_;
     full.end(result.regular);
     physics.end(result.modified);
   }
 
-  /// Adds the parameter products of step `n`, recorded in `step`, of one sweep (0: Full into
-  /// g_R, 1: PhysicsOnly into g_M).
-  template <class Engine, class Pair>
-  static void add_step(const Engine& e, Step& step, Index n, int sweep_index, Pair& result) {
-    const auto& workspace = e.trajectory_.workspaces[static_cast<std::size_t>(n)];
-    const auto i = static_cast<std::size_t>(sweep_index);
-    e.controller_.add_param_gradient(workspace, step.adjoints, step.mu[i], step.scaled[i],
-                                     sweep_index == 0 ? result.regular : result.modified);
+  /// Task j of the split: the backward pass of recording 2j + 1.
+  template <class Engine>
+  void prepare_task(const Engine& e, Index truncation, Index task, Slot& slot) const {
+    const Index n = e.steps_ - 2 - 2 * task;
+    backward_pass(e, n, truncated_at(n, truncation), unit_seed_, slot.adjoints,
+                  split_->input_adjoints[static_cast<std::size_t>(task)]);
   }
 
-  std::unique_ptr<Handoff> handoff_;  ///< with threads
-  Step single_;  ///< the one step in use without threads
-  Matrix<Scalar> unit_seed_;  ///< 1 × B ones
+  /// The products of task j into the odd recordings' sums.
+  template <class Engine>
+  void add_task(const Engine& e, Index task, Slot& slot) {
+    add_products(e, e.steps_ - 2 - 2 * task, slot.adjoints,
+                 split_->mu[static_cast<std::size_t>(task)], slot.scaled, odd_regular_,
+                 odd_modified_);
+  }
+
+  /// The backward pass of step `n` with the seed 1: its layer adjoints, and K_nᵀ1 into
+  /// `input_adjoint` unless the truncation window cuts there.
+  template <class Engine>
+  SBPTT_ONE_COPY static void backward_pass(const Engine& e, Index n, bool cut,
+                                           const Matrix<Scalar>& unit_seed, Adjoints& adjoints,
+                                           Matrix<Scalar>& input_adjoint) {
+    e.packed_controller_.backward_inputs(e.trajectory_.workspaces[static_cast<std::size_t>(n)],
+                                         unit_seed, cut ? nullptr : &input_adjoint, adjoints);
+  }
+
+  /// Adds the parameter products of step `n` from its backward pass `adjoints`: scaled by the
+  /// Full sweep's μ_n (`mu[0]`) into `regular`, by the PhysicsOnly sweep's (`mu[1]`) into
+  /// `modified`.
+  template <class Engine>
+  SBPTT_ONE_COPY static void add_products(const Engine& e, Index n, const Adjoints& adjoints,
+                                          const Seeds& mu, Scaled& scaled,
+                                          Vector<Scalar>& regular, Vector<Scalar>& modified) {
+    const auto& workspace = e.trajectory_.workspaces[static_cast<std::size_t>(n)];
+    e.controller_.add_param_gradient(workspace, adjoints, mu[0], scaled[0], regular);
+    e.controller_.add_param_gradient(workspace, adjoints, mu[1], scaled[1], modified);
+  }
+
+  std::unique_ptr<Split> split_;  ///< with threads
+  Adjoints adjoints_;             ///< the backward pass of a step run in `sweep`
+  Scaled scaled_;                 ///< its seeds scaled by each sweep's μ_n
+  Seeds seeds_;                   ///< both sweeps' μ_n of that step
+  Vector<Scalar> odd_regular_, odd_modified_;  ///< the odd recordings' sums of g_R and g_M
+  Matrix<Scalar> unit_seed_;      ///< 1 × B ones
 };
 
 /// `SharedSeedSweeps` for a `SeedScalingController`, else `Absent`.

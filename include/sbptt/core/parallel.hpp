@@ -34,6 +34,17 @@ inline void cpu_relax() {
 #endif
 }
 
+/// One turn of a busy wait: `pause` at first, then yield the core, because on a machine with
+/// fewer free cores than threads the thread waited for may have been preempted. A wait takes
+/// a few microseconds, less than waking a sleeping thread.
+inline void back_off(int& turns) {
+  if (++turns < 2048) {
+    cpu_relax();
+  } else {
+    std::this_thread::yield();
+  }
+}
+
 /// Fork-join pool of `threads − 1` background workers plus the calling thread.
 class ThreadPool {
 public:

@@ -146,6 +146,32 @@ TEMPLATE_TEST_CASE("engine: cart pole with the paper's MLP allocates nothing aft
   }
 }
 
+// Truncation is not a shape: a pair whose first call was truncated (every other step cut)
+// allocates nothing in an untruncated call, on two threads, where the cut steps' input
+// adjoints belong to the split's tasks.
+TEST_CASE("engine: the pair warmed up with truncation allocates nothing without it",
+          "[bptt][malloc]") {
+  const CartPole<float, 4> sim;
+  auto net = Network<float>::mlp(sim.state_dim(), {100, 100}, 1);
+  Rng rng(3);
+  glorot_uniform(net, rng);
+  Engine engine(sim, net, cartpole_objective<float, 4>(), 100);
+  const Matrix<float> x0 = cartpole_initial_states(sim, rng, 8);
+  engine.set_threads(2);
+  GradientPair<float> pair;
+  engine.regular_and_modified(x0, pair, 2);
+  eigen_failures = 0;
+  long allocations = 0;
+  {
+    MallocGuard guard;
+    const long before = heap_allocations;
+    for (int repeat = 0; repeat < 5; ++repeat) engine.regular_and_modified(x0, pair);
+    allocations = heap_allocations - before;
+  }
+  CHECK(eigen_failures == 0);
+  CHECK(allocations == 0);
+}
+
 TEMPLATE_TEST_CASE("engine: quantum control with the paper's CNN allocates nothing after "
                    "warm-up", "[bptt][malloc]", float, double) {
   using S = TestType;

@@ -35,7 +35,7 @@ bool sweep(Split& split, Prepare& prepare, Add& add) {
     split.swept.store(task + 1, std::memory_order_release);
     if (!split.wait_prepared(task, prepare, add)) return false;
   }
-  return split.wait_added(prepare, add);
+  return split.wait_added(add);
 }
 
 }  // namespace

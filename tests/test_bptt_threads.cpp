@@ -283,7 +283,7 @@ TEST_CASE("threads: bad settings are rejected with a clear message", "[bptt][thr
                     Catch::Contains("threads = -2"));
 }
 
-TEST_CASE("threads: a sweep that throws while handing off its parameter products stops both "
+TEST_CASE("threads: a sweep that throws while a second thread works on its steps stops both "
           "threads, and the engine sweeps correctly afterwards", "[bptt][threads]") {
   /// The cart pole, whose VJP throws once `countdown` further calls have been made (never
   /// while it is negative).
@@ -314,8 +314,8 @@ TEST_CASE("threads: a sweep that throws while handing off its parameter products
   CHECK_FALSE(engine.reverse(FlowMode::Full, g).params_overlapped);  // the loops are timed
   REQUIRE(engine.reverse(FlowMode::Full, g).params_overlapped);
   // At the first VJP, and in the middle of the sweep (6 samples a step, 2 VJPs each in the
-  // pair, whose single control makes both sweeps share a backward pass and hand off both
-  // sweeps' products).
+  // pair, whose single control makes both sweeps share a backward pass and split the steps
+  // between the threads).
   for (const int calls_before_failure : {0, 60}) {
     INFO("failing after " << calls_before_failure << " VJPs");
     countdown = calls_before_failure;

@@ -118,7 +118,7 @@ private:
         physics.lambda.swap(physics.propagated);
       }
     }
-    if (split != nullptr && !split->wait_added(prepare, add)) return;
+    if (split != nullptr && !split->wait_added(add)) return;
     result.regular += odd_regular_;
     result.modified += odd_modified_;
     full.end(result.regular);
@@ -142,11 +142,13 @@ private:
   }
 
   /// The backward pass of step `n` with the seed 1: its layer adjoints, and K_nᵀ1 into
-  /// `input_adjoint` unless the truncation window cuts there.
+  /// `input_adjoint` unless the truncation window cuts there. Sized even where it cuts: a
+  /// task's K_nᵀ1 is its own, and a later call without truncation must not allocate it.
   template <class Engine>
   SBPTT_ONE_COPY static void backward_pass(const Engine& e, Index n, bool cut,
                                            const Matrix<Scalar>& unit_seed, Adjoints& adjoints,
                                            Matrix<Scalar>& input_adjoint) {
+    if (cut) input_adjoint.resize(e.sim_.state_dim(), e.trajectory_.batch());
     e.packed_controller_.backward_inputs(e.trajectory_.workspaces[static_cast<std::size_t>(n)],
                                          unit_seed, cut ? nullptr : &input_adjoint, adjoints);
   }

@@ -8,8 +8,9 @@
 /// even recordings. The odd recording 2j + 1 is task j of this split. Its backward pass (the
 /// seed 1: Δ_l(1) and K_nᵀ1) reads only the forward pass, so the second thread runs it ahead of
 /// the sweep, into a ring slot; its products need both sweeps' μ_n, which the sweep records
-/// here when it reaches the step. So Δ (6.4 KB a step for the cart pole) is written and read on
-/// one core, and only K_nᵀ1 and the μ_n cross (docs/benchmark-runs-zen4.md, thirty-sixth run).
+/// here when it reaches the step. So in the steady state Δ (6.4 KB a step for the cart pole)
+/// is written and read on one core, and only K_nᵀ1 and the μ_n cross
+/// (docs/benchmark-runs-zen4.md, thirty-sixth run).
 /// The tasks' products are added in task order under a lock, into sums of their own.
 ///
 /// The sweep never waits for a thread that may not have started: until the second thread has
@@ -123,14 +124,14 @@ struct StepSplit {
     return true;
   }
 
-  /// The sweep's wait, at its end, for every task's products; false if the second thread
-  /// failed.
-  template <class Prepare, class Add>
-  bool wait_added(Prepare& prepare, Add& add) {
+  /// The sweep's wait, at its end, for every task's products, adding them too; false if the
+  /// second thread failed.
+  template <class Add>
+  bool wait_added(Add& add) {
     int turns = 0;
     while (added.load(std::memory_order_acquire) < tasks) {
       if (failed.load(std::memory_order_acquire)) return false;
-      if (!try_preparing(prepare) && !try_adding(add)) back_off(turns);
+      if (!try_adding(add)) back_off(turns);  // every task is prepared by now
     }
     return true;
   }

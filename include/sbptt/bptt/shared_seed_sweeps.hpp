@@ -103,10 +103,8 @@ private:
         if (!split->wait_prepared(task, prepare, add)) return;
         input_adjoint = &split->input_adjoints[static_cast<std::size_t>(task)];
       } else {
-        seeds_[0] = full.mu;
-        seeds_[1] = physics.mu;
         backward_pass(e, n, cut, unit_seed_, adjoints_, full.input_adjoint);
-        add_products(e, n, adjoints_, seeds_, scaled_, odd ? odd_regular_ : result.regular,
+        add_products(e, n, adjoints_, full.mu, physics.mu, scaled_, odd ? odd_regular_ : result.regular,
                      odd ? odd_modified_ : result.modified);
       }
       if (cut) {
@@ -136,9 +134,9 @@ private:
   /// The products of task j into the odd recordings' sums.
   template <class Engine>
   void add_task(const Engine& e, Index task, Slot& slot) {
-    add_products(e, e.steps_ - 2 - 2 * task, slot.adjoints,
-                 split_->mu[static_cast<std::size_t>(task)], slot.scaled, odd_regular_,
-                 odd_modified_);
+    const Seeds& mu = split_->mu[static_cast<std::size_t>(task)];
+    add_products(e, e.steps_ - 2 - 2 * task, slot.adjoints, mu[0], mu[1], slot.scaled,
+                 odd_regular_, odd_modified_);
   }
 
   /// The backward pass of step `n` with the seed 1: its layer adjoints, and K_nᵀ1 into
@@ -154,21 +152,20 @@ private:
   }
 
   /// Adds the parameter products of step `n` from its backward pass `adjoints`: scaled by the
-  /// Full sweep's μ_n (`mu[0]`) into `regular`, by the PhysicsOnly sweep's (`mu[1]`) into
-  /// `modified`.
+  /// Full sweep's μ_n into `regular`, by the PhysicsOnly sweep's into `modified`.
   template <class Engine>
   SBPTT_ONE_COPY static void add_products(const Engine& e, Index n, const Adjoints& adjoints,
-                                          const Seeds& mu, Scaled& scaled,
+                                          const Matrix<Scalar>& mu_full,
+                                          const Matrix<Scalar>& mu_physics, Scaled& scaled,
                                           Vector<Scalar>& regular, Vector<Scalar>& modified) {
     const auto& workspace = e.trajectory_.workspaces[static_cast<std::size_t>(n)];
-    e.controller_.add_param_gradient(workspace, adjoints, mu[0], scaled[0], regular);
-    e.controller_.add_param_gradient(workspace, adjoints, mu[1], scaled[1], modified);
+    e.controller_.add_param_gradient(workspace, adjoints, mu_full, scaled[0], regular);
+    e.controller_.add_param_gradient(workspace, adjoints, mu_physics, scaled[1], modified);
   }
 
   std::unique_ptr<Split> split_;  ///< with threads
   Adjoints adjoints_;             ///< the backward pass of a step run in `sweep`
   Scaled scaled_;                 ///< its seeds scaled by each sweep's μ_n
-  Seeds seeds_;                   ///< both sweeps' μ_n of that step
   Vector<Scalar> odd_regular_, odd_modified_;  ///< the odd recordings' sums of g_R and g_M
   Matrix<Scalar> unit_seed_;      ///< 1 × B ones
 };

@@ -5,6 +5,7 @@
 // once per step instead of twice.
 #include <catch2/catch.hpp>
 
+#include <atomic>
 #include <limits>
 
 #include "sbptt/bptt/engine.hpp"
@@ -23,11 +24,12 @@ using namespace sbptt;
 
 namespace {
 
-/// A `Network` that counts its backward passes, whole and split.
+/// A `Network` that counts its backward passes, whole and split. Atomic counts: on two threads
+/// both threads run backward passes at once.
 template <class Scalar>
 struct CountingNetwork : Network<Scalar> {
   using Network<Scalar>::Network;
-  mutable long whole = 0, input_halves = 0;
+  mutable std::atomic<long> whole{0}, input_halves{0};
 
   void backward(const typename Network<Scalar>::Workspace& ws, const Matrix<Scalar>& dy,
                 Vector<Scalar>& grad, Matrix<Scalar>* dx,
@@ -58,10 +60,11 @@ void check_pair(const Sim& sim, Net& net, const Objective<Loss>& objective, Inde
   INFO("threads " << threads << ", truncation " << truncation);
   Engine engine(sim, net, objective, steps);
   engine.set_threads(threads);
-  net.whole = net.input_halves = 0;
+  net.whole = 0;
+  net.input_halves = 0;
   const GradientPair<S> pair = engine.regular_and_modified(x0, truncation);
-  CHECK(net.whole == 0);
-  CHECK(net.input_halves == steps);  // one backward pass per step serves both sweeps
+  CHECK(net.whole.load() == 0);
+  CHECK(net.input_halves.load() == steps);  // one backward pass per step serves both sweeps
 
   Vector<S> full, physics;
   engine.forward(x0);

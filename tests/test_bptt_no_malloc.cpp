@@ -85,7 +85,7 @@ void check_no_allocation(Engine& engine, const Matrix<Scalar>& x0, Index threads
   const Vector<Scalar> first_full = g_full, first_regular = pair.regular,
                        first_modified = pair.modified;
   // With one control the pair shares one backward pass and splits its steps between two
-  // threads; the odd steps' adjoints live in the split's slots, whichever thread fills or adds
+  // threads; the split's tasks' adjoints live in its slots, whichever thread fills or adds
   // them, so the pair allocates nothing after its first call, on any number of threads.
   // Guarded five times, so that the sweeping thread too takes its turns (until the second
   // thread starts, and at the end).

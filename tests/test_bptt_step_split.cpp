@@ -1,9 +1,9 @@
-// StepSplit (bptt/step_split.hpp), the split of the shared-seed pair's odd recordings between
-// the sweeping thread and a second one: every task's backward pass runs exactly once and
-// before its products, the products are added exactly once and in task order, only after the
-// sweep has recorded the task's μ, whichever thread does the work; the sweep finishes alone
-// when the second thread never starts, stops waiting when the second thread fails, and a
-// sweep that gives up stops the second thread.
+// StepSplit (bptt/step_split.hpp), the split of the shared-seed pair's recordings between
+// the sweeping thread and a second one: the pattern of the tasks (StepShare) by enumeration;
+// every task's backward pass runs exactly once and before its products, the products are added
+// exactly once and in task order, only after the sweep has recorded the task's μ, whichever
+// thread does the work; the sweep finishes alone when the second thread never starts, stops
+// waiting when the second thread fails, and a sweep that gives up stops the second thread.
 #include <catch2/catch.hpp>
 
 #include <atomic>
@@ -48,7 +48,7 @@ TEST_CASE("step split: each task prepared once, added once and in order, on one 
       for (int round = 0; round < (second_thread ? 100 : 1); ++round) {
         Split split;
         split.reset(steps);
-        REQUIRE(split.tasks == steps / 2);
+        REQUIRE(split.tasks == sbptt::detail::StepShare::tasks_before(steps));
         Record record(split.tasks);
         auto prepare = [&](Index task, Split::Slot& slot) {
           record.prepared[static_cast<std::size_t>(task)].fetch_add(1);
@@ -72,6 +72,24 @@ TEST_CASE("step split: each task prepared once, added once and in order, on one 
         CHECK(record.added_before_swept.load() == 0);
         CHECK(record.added_before_prepared.load() == 0);
       }
+    }
+  }
+}
+
+TEST_CASE("step split: 7 of every 13 recordings are tasks, spread evenly, numbered in order",
+          "[bptt][threads]") {
+  using Share = sbptt::detail::StepShare;
+  Index tasks = 0, since_task = 0;
+  for (Index recording = 0; recording < 13 * 40; ++recording) {
+    INFO("recording " << recording);
+    if (recording % 13 == 0) CHECK(tasks == 7 * (recording / 13));
+    CHECK(Share::tasks_before(recording) == tasks);
+    if (Share::is_task(recording)) {
+      CHECK(Share::recording_of(tasks) == recording);
+      ++tasks;
+      since_task = 0;
+    } else {
+      CHECK(++since_task < 2);  // never two of the sweep's own in a row
     }
   }
 }

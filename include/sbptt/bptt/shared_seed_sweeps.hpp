@@ -13,13 +13,13 @@
 ///
 /// Threads: the steps are split between the two threads, each adding the products of the
 /// backward passes it ran, so that the layer adjoints stay on the core that wrote them
-/// (step_split.hpp). The products of the odd recordings (k = m − 1 − n) are summed apart from
-/// those of the even ones and added to them at the end, on one thread as on two, so the
-/// results are the same bits for every thread count. The per-sample loops are never split
-/// over the threads here, even where a lone sweep would split them: for quantum control
-/// (2 × 8 VJPs of about 0.76 µs per step) splitting them instead of handing the products to
-/// the second thread (the schedule before this one) made the two-thread C epoch 301.8 ms,
-/// against 248–263 ms (docs/benchmark-runs.md, fifth run).
+/// (step_split.hpp). The products of the split's tasks (7 of every 13 recordings k = m − 1 − n,
+/// `StepShare`) are summed apart from those of the other recordings and added to them at the
+/// end, on one thread as on two, so the results are the same bits for every thread count. The
+/// per-sample loops are never split over the threads here, even where a lone sweep would split
+/// them: for quantum control (2 × 8 VJPs of about 0.76 µs per step) splitting them instead of
+/// handing the products to the second thread (the schedule before this one) made the
+/// two-thread C epoch 301.8 ms, against 248–263 ms (docs/benchmark-runs.md, fifth run).
 #include <array>
 #include <atomic>
 #include <cstddef>
@@ -40,7 +40,7 @@ namespace sbptt::detail {
 template <class Adjoints, class Scalar>
 class SharedSeedSweeps {
 public:
-  /// With threads, the odd recordings go to the engine's second thread.
+  /// With threads, the split's tasks go to the engine's second thread.
   void set_threaded(bool threaded) { split_ = threaded ? std::make_unique<Split>() : nullptr; }
 
   /// g_R into `result.regular`, g_M into `result.modified`, and both sweeps' diagnostics in
@@ -73,7 +73,7 @@ private:
   using Scaled = std::array<Adjoints, 2>;
   using Seeds = std::array<Matrix<Scalar>, 2>;
 
-  /// The pair over the whole trajectory, the odd recordings' work in `split` if set. One
+  /// The pair over the whole trajectory, the tasks' work in `split` if set. One
   /// machine copy (SBPTT_ONE_COPY) with and without the split, and every backward pass and
   /// every product through one copy too (`backward_pass`, `add_products`): the two must give
   /// the same bits, or the results would depend on the thread count. Returns early, its work
@@ -86,16 +86,16 @@ private:
     auto add = [&](Index task, Slot& slot) { add_task(e, task, slot); };
     ReverseSweeps::begin(e, full, result.regular, split != nullptr);
     ReverseSweeps::begin(e, physics, result.modified, split != nullptr);
-    odd_regular_.setZero(result.regular.size());
-    odd_modified_.setZero(result.modified.size());
+    tasks_regular_.setZero(result.regular.size());
+    tasks_modified_.setZero(result.modified.size());
     for (Index k = 0; k < e.steps_; ++k) {
       const Index n = e.steps_ - 1 - k;
       const bool cut = truncated_at(n, truncation);
-      const bool odd = k % 2 == 1;
+      const bool is_task = StepShare::is_task(k);
       ReverseSweeps::adjoint_products(e, {&full, &physics}, n, !cut, false);
       const Matrix<Scalar>* input_adjoint = &full.input_adjoint;  // K_nᵀ1
-      if (split != nullptr && odd) {
-        const Index task = k / 2;
+      if (split != nullptr && is_task) {
+        const Index task = StepShare::tasks_before(k);
         Seeds& mu = split->mu[static_cast<std::size_t>(task)];
         mu[0] = full.mu;
         mu[1] = physics.mu;
@@ -104,8 +104,9 @@ private:
         input_adjoint = &split->input_adjoints[static_cast<std::size_t>(task)];
       } else {
         backward_pass(e, n, cut, unit_seed_, adjoints_, full.input_adjoint);
-        add_products(e, n, adjoints_, full.mu, physics.mu, scaled_, odd ? odd_regular_ : result.regular,
-                     odd ? odd_modified_ : result.modified);
+        add_products(e, n, adjoints_, full.mu, physics.mu, scaled_,
+                     is_task ? tasks_regular_ : result.regular,
+                     is_task ? tasks_modified_ : result.modified);
       }
       if (cut) {
         full.lambda.setZero();
@@ -117,26 +118,32 @@ private:
       }
     }
     if (split != nullptr && !split->wait_added(add)) return;
-    result.regular += odd_regular_;
-    result.modified += odd_modified_;
+    result.regular += tasks_regular_;
+    result.modified += tasks_modified_;
     full.end(result.regular);
     physics.end(result.modified);
   }
 
-  /// Task j of the split: the backward pass of recording 2j + 1.
+  /// Task j of the split: the backward pass of its recording.
   template <class Engine>
   void prepare_task(const Engine& e, Index truncation, Index task, Slot& slot) const {
-    const Index n = e.steps_ - 2 - 2 * task;
+    const Index n = step_of(e, task);
     backward_pass(e, n, truncated_at(n, truncation), unit_seed_, slot.adjoints,
                   split_->input_adjoints[static_cast<std::size_t>(task)]);
   }
 
-  /// The products of task j into the odd recordings' sums.
+  /// The products of task j into the tasks' sums.
   template <class Engine>
   void add_task(const Engine& e, Index task, Slot& slot) {
     const Seeds& mu = split_->mu[static_cast<std::size_t>(task)];
-    add_products(e, e.steps_ - 2 - 2 * task, slot.adjoints, mu[0], mu[1], slot.scaled,
-                 odd_regular_, odd_modified_);
+    add_products(e, step_of(e, task), slot.adjoints, mu[0], mu[1], slot.scaled,
+                 tasks_regular_, tasks_modified_);
+  }
+
+  /// The step n of task j.
+  template <class Engine>
+  static Index step_of(const Engine& e, Index task) {
+    return e.steps_ - 1 - StepShare::recording_of(task);
   }
 
   /// The backward pass of step `n` with the seed 1: its layer adjoints, and K_nᵀ1 into
@@ -166,7 +173,7 @@ private:
   std::unique_ptr<Split> split_;  ///< with threads
   Adjoints adjoints_;             ///< the backward pass of a step run in `sweep`
   Scaled scaled_;                 ///< its seeds scaled by each sweep's μ_n
-  Vector<Scalar> odd_regular_, odd_modified_;  ///< the odd recordings' sums of g_R and g_M
+  Vector<Scalar> tasks_regular_, tasks_modified_;  ///< the tasks' sums of g_R and g_M
   Matrix<Scalar> unit_seed_;      ///< 1 × B ones
 };
 

@@ -4,12 +4,13 @@
 /// detail of `SharedSeedSweeps` (shared_seed_sweeps.hpp).
 ///
 /// The pair records its steps from the last: recording k is step n = m − 1 − k. The sweeping
-/// thread runs the VJPs of every step, and the backward pass and the parameter products of the
-/// even recordings. The odd recording 2j + 1 is task j of this split. Its backward pass (the
-/// seed 1: Δ_l(1) and K_nᵀ1) reads only the forward pass, so the second thread runs it ahead of
-/// the sweep, into a ring slot; its products need both sweeps' μ_n, which the sweep records
-/// here when it reaches the step. So in the steady state Δ (6.4 KB a step for the cart pole)
-/// is written and read on one core, and only K_nᵀ1 and the μ_n cross
+/// thread runs the VJPs of every step; the network's work of each step (its backward pass and
+/// parameter products) goes to one thread or the other, by a fixed pattern (`StepShare`): 7 of
+/// every 13 recordings are the tasks of this split, the rest the sweep's own. A task's backward
+/// pass (the seed 1: Δ_l(1) and K_nᵀ1) reads only the forward pass, so the second thread runs
+/// it ahead of the sweep, into a ring slot; its products need both sweeps' μ_n, which the sweep
+/// records here when it reaches the step. So in the steady state Δ (6.4 KB a step for the cart
+/// pole) is written and read on one core, and only K_nᵀ1 and the μ_n cross
 /// (docs/benchmark-runs-zen4.md, thirty-sixth run).
 /// The tasks' products are added in task order under a lock, into sums of their own.
 ///
@@ -18,7 +19,7 @@
 /// it finishes even if the second thread never starts. Once that thread runs, the sweep leaves
 /// it the tasks and waits, except at the end, where it helps add what is left: a task it ran
 /// would hand its Δ to the other core after all, and the sweeping thread, with every step's
-/// VJPs besides its half of the network's work, is the busier of the two. If the
+/// VJPs besides its share of the network's work, is the busier of the two. If the
 /// second thread throws, it says so (`failed`), and the sweep stops waiting and returns, so
 /// that `ThreadPool::run_beside` rethrows that thread's exception.
 #include <array>
@@ -31,6 +32,30 @@
 #include "sbptt/core/types.hpp"
 
 namespace sbptt::detail {
+
+/// Which recordings are the split's tasks: 7 of every 13, spread evenly (recording k is one
+/// when ⌊7(k + 1)/13⌋ > ⌊7k/13⌋: 1, 3, 5, 7, 9, 11, 12, 14, …). A fixed pattern, so that the
+/// sums are grouped alike for every thread count. More than half, because the sweeping thread
+/// also runs every step's VJPs: for the cart pole 1.2 thousand clock ticks a step against
+/// 15.4 of network work (docs/benchmark-runs-zen4.md, thirty-fifth run), which splits evenly
+/// at about 0.54. Measured on two threads, the cart pole's C epoch against one thread, in most
+/// rounds: 1.71–1.73 times with every other recording, 1.76–1.79 with 6/11, 7/13 or 8/15
+/// (thirty-seventh run).
+struct StepShare {
+  static constexpr Index kTasks = 7, kPeriod = 13;
+
+  [[nodiscard]] static constexpr bool is_task(Index recording) {
+    return tasks_before(recording + 1) > tasks_before(recording);
+  }
+  /// The tasks among recordings 0 … recordings − 1; for a task, its number.
+  [[nodiscard]] static constexpr Index tasks_before(Index recordings) {
+    return recordings * kTasks / kPeriod;
+  }
+  /// The recording of task j: the least k with tasks_before(k + 1) = j + 1.
+  [[nodiscard]] static constexpr Index recording_of(Index task) {
+    return ((task + 1) * kPeriod + kTasks - 1) / kTasks - 1;
+  }
+};
 
 /// The shared state of a `SharedSeedSweeps` call on two threads. `Adjoints` are a controller's
 /// layer adjoints.
@@ -59,7 +84,7 @@ struct StepSplit {
 
   /// Ready for a sweep of `steps` steps.
   void reset(Index steps) {
-    tasks = steps / 2;
+    tasks = StepShare::tasks_before(steps);
     if (static_cast<Index>(mu.size()) < tasks) {
       input_adjoints.resize(static_cast<std::size_t>(tasks));
       mu.resize(static_cast<std::size_t>(tasks));

@@ -147,8 +147,8 @@ TEMPLATE_TEST_CASE("engine: cart pole with the paper's MLP allocates nothing aft
 }
 
 // Truncation is not a shape: a pair whose first call was truncated (every other step cut)
-// allocates nothing in an untruncated call, on two threads, where the cut steps' input
-// adjoints belong to the split's tasks.
+// allocates nothing in an untruncated call, on two threads, where some of the cut steps'
+// input adjoints belong to the split's tasks.
 TEST_CASE("engine: the pair warmed up with truncation allocates nothing without it",
           "[bptt][malloc]") {
   const CartPole<float, 4> sim;

@@ -140,7 +140,6 @@ private:
                  tasks_regular_, tasks_modified_);
   }
 
-  /// The step n of task j.
   template <class Engine>
   static Index step_of(const Engine& e, Index task) {
     return e.steps_ - 1 - StepShare::recording_of(task);

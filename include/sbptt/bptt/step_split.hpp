@@ -18,10 +18,9 @@
 /// started, the sweep runs the tasks it needs itself, and it adds products while it waits; so
 /// it finishes even if the second thread never starts. Once that thread runs, the sweep leaves
 /// it the tasks and waits, except at the end, where it helps add what is left: a task it ran
-/// would hand its Δ to the other core after all, and the sweeping thread, with every step's
-/// VJPs besides its share of the network's work, is the busier of the two. If the
-/// second thread throws, it says so (`failed`), and the sweep stops waiting and returns, so
-/// that `ThreadPool::run_beside` rethrows that thread's exception.
+/// would hand its Δ to the other core after all. If the second thread throws, it says so
+/// (`failed`), and the sweep stops waiting and returns, so that `ThreadPool::run_beside`
+/// rethrows that thread's exception.
 #include <array>
 #include <atomic>
 #include <cstddef>
@@ -33,27 +32,24 @@
 
 namespace sbptt::detail {
 
-/// Which recordings are the split's tasks: 7 of every 13, spread evenly (recording k is one
-/// when ⌊7(k + 1)/13⌋ > ⌊7k/13⌋: 1, 3, 5, 7, 9, 11, 12, 14, …). A fixed pattern, so that the
-/// sums are grouped alike for every thread count. More than half, because the sweeping thread
-/// also runs every step's VJPs: for the cart pole 1.2 thousand clock ticks a step against
-/// 15.4 of network work (docs/benchmark-runs-zen4.md, thirty-fifth run), which splits evenly
-/// at about 0.54. Measured on two threads, the cart pole's C epoch against one thread, in most
-/// rounds: 1.71–1.73 times with every other recording, 1.76–1.79 with 6/11, 7/13 or 8/15
-/// (thirty-seventh run).
+/// Which recordings are the split's tasks: 7 of every 13, spread evenly (1, 3, 5, 7, 9, 11,
+/// 12, 14, …). Fixed, not measured at run time, so that the sums are grouped alike for every
+/// machine and thread count. More than half, because the sweeping thread also runs every
+/// step's VJPs: for the cart pole the threads are even when the second one takes about 0.54
+/// of the network's work (docs/design.md, decision of 2026-11-30).
 struct StepShare {
-  static constexpr Index kTasks = 7, kPeriod = 13;
+  static constexpr Index tasks_per_period = 7, period = 13;
 
   [[nodiscard]] static constexpr bool is_task(Index recording) {
     return tasks_before(recording + 1) > tasks_before(recording);
   }
   /// The tasks among recordings 0 … recordings − 1; for a task, its number.
   [[nodiscard]] static constexpr Index tasks_before(Index recordings) {
-    return recordings * kTasks / kPeriod;
+    return recordings * tasks_per_period / period;
   }
   /// The recording of task j: the least k with tasks_before(k + 1) = j + 1.
   [[nodiscard]] static constexpr Index recording_of(Index task) {
-    return ((task + 1) * kPeriod + kTasks - 1) / kTasks - 1;
+    return ((task + 1) * period + tasks_per_period - 1) / tasks_per_period - 1;
   }
 };
 

@@ -70,6 +70,17 @@ struct MallocGuard {
   MallocGuard& operator=(const MallocGuard&) = delete;
 };
 
+/// The heap allocations that `work()` makes with Eigen's allocator switched off; Eigen's
+/// refusals go to `eigen_failures`, which starts at 0.
+template <class Work>
+long allocations_during(Work&& work) {
+  eigen_failures = 0;
+  const MallocGuard guard;
+  const long before = heap_allocations;
+  work();
+  return heap_allocations - before;
+}
+
 /// Warm-up, then the same calls again with Eigen's allocator switched off. The results of the
 /// guarded calls must equal the warm-up's (the guard changes nothing but the check).
 template <class Engine, class Scalar>
@@ -92,12 +103,8 @@ void check_no_allocation(Engine& engine, const Matrix<Scalar>& x0, Index threads
   const std::size_t pair_repeats = threads == 1 ? 1 : 5;
 
   const Matrix<Scalar> narrower = x0.leftCols(x0.cols() - 1);
-  eigen_failures = 0;
   std::array<Scalar, 2> losses{}, evaluations{};
-  long allocations = 0;
-  {
-    MallocGuard guard;
-    const long before = heap_allocations;
+  const long allocations = allocations_during([&] {
     for (std::size_t repeat = 0; repeat < 2; ++repeat) {
       losses[repeat] = engine.forward(x0);
       engine.reverse(FlowMode::Full, g_full);
@@ -105,8 +112,7 @@ void check_no_allocation(Engine& engine, const Matrix<Scalar>& x0, Index threads
       for (std::size_t k = 0; k < pair_repeats; ++k) engine.regular_and_modified(x0, pair);
       evaluations[repeat] = engine.evaluate(x0);
     }
-    allocations = heap_allocations - before;
-  }
+  });
   CHECK(eigen_failures == 0);
   CHECK(allocations == 0);
   for (std::size_t repeat = 0; repeat < 2; ++repeat) {
@@ -160,14 +166,9 @@ TEST_CASE("engine: the pair warmed up with truncation allocates nothing without 
   engine.set_threads(2);
   GradientPair<float> pair;
   engine.regular_and_modified(x0, pair, 2);
-  eigen_failures = 0;
-  long allocations = 0;
-  {
-    MallocGuard guard;
-    const long before = heap_allocations;
+  const long allocations = allocations_during([&] {
     for (int repeat = 0; repeat < 5; ++repeat) engine.regular_and_modified(x0, pair);
-    allocations = heap_allocations - before;
-  }
+  });
   CHECK(eigen_failures == 0);
   CHECK(allocations == 0);
 }

@@ -172,8 +172,9 @@ TEMPLATE_TEST_CASE("threads: cart pole results are bitwise identical for 1, 2 an
                             cartpole_objective<S, 2>(), 30, train, test, 5);
 }
 
-// In float guidance is a BatchSimulator: on one thread the pair's sweeps then share one call
-// of 2B columns per step (ReverseSweeps::pair_in_step), against two calls of B on two threads.
+// In float guidance is a PairedBatchSimulator: on one thread the pair's sweeps then share one
+// `vjp_batch_pair` call per step (ReverseSweeps::pair_in_step), against a `vjp_batch` call of
+// B columns each on two threads.
 TEMPLATE_TEST_CASE("threads: guidance (continuous loss, regulariser) is bitwise identical",
                    "[bptt][threads]", float, double) {
   using S = TestType;

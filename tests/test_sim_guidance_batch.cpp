@@ -2,11 +2,14 @@
 // per-sample step and vjp, against the analytic Jacobians in double (themselves checked against
 // finite differences and automatic differentiation in test_sim_guidance.cpp and
 // test_sim_autodiff_crosscheck.cpp), against central differences of the batched step itself,
-// independence from the other columns, and two agents on the same spot.
+// independence from the other columns, two agents on the same spot, and the pair call
+// (vjp_batch_pair) against vjp_batch of the two batches side by side.
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <cstring>
 
+#include "sbptt/core/concepts.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/sim/guidance_task.hpp"
 #include "support/batch_simulator.hpp"
@@ -153,4 +156,61 @@ TEST_CASE("guidance batch: bad shapes are rejected with a message", "[sim][guida
                     Catch::Contains("u is 4 x 3; expected 4 x 4"));
   CHECK_THROWS_WITH(sim.vjp_batch(x, u, Matrix<float>::Zero(24, 3), &out, nullptr),
                     Catch::Contains("lambda is 24 x 3; expected 24 x 4"));
+}
+
+namespace {
+
+// [a b]
+Matrix<float> side_by_side(const Matrix<float>& a, const Matrix<float>& b) {
+  Matrix<float> both(a.rows(), a.cols() + b.cols());
+  both << a, b;
+  return both;
+}
+
+bool same_bits(const Matrix<float>& a, const Matrix<float>& b) {
+  return a.rows() == b.rows() && a.cols() == b.cols() &&
+         std::memcmp(a.data(), b.data(), sizeof(float) * static_cast<std::size_t>(a.size())) == 0;
+}
+
+}  // namespace
+
+TEST_CASE("guidance batch: vjp_batch_pair gives vjp_batch of [x x], [u u], [λ₁ λ₂] bit for bit",
+          "[sim][guidance]") {
+  static_assert(sbptt::PairedBatchSimulator<GuidanceByRepulsion<float, 2, 4>>);
+  const GuidanceByRepulsion<float, 2, 4> sim;
+  sbptt::Rng rng(57);
+  // 2B below, at and above a block of 16 lanes, and a block holding the end of λ₁ and the
+  // start of λ₂ (B = 12, 17).
+  for (Index size : {1, 5, 8, 12, 17}) {
+    CAPTURE(size);
+    const Batch b = random_batch(sim, size, rng);
+    const Batch other = random_batch(sim, size, rng);
+    Matrix<float> whole_x, whole_u;
+    sim.vjp_batch(side_by_side(b.x, b.x), side_by_side(b.u, b.u),
+                  side_by_side(b.lambda, other.lambda), &whole_x, &whole_u);
+    Matrix<float> x_1, x_2, u_1, u_2;
+    sim.vjp_batch_pair(b.x, b.u, b.lambda, other.lambda, &x_1, &x_2, &u_1, &u_2);
+    CHECK(same_bits(side_by_side(x_1, x_2), whole_x));
+    CHECK(same_bits(side_by_side(u_1, u_2), whole_u));
+    Matrix<float> only_1, only_2;
+    sim.vjp_batch_pair(b.x, b.u, b.lambda, other.lambda, nullptr, nullptr, &only_1, &only_2);
+    CHECK(same_bits(side_by_side(only_1, only_2), whole_u));
+  }
+}
+
+TEST_CASE("guidance batch: vjp_batch_pair rejects bad shapes and shared outputs",
+          "[sim][guidance]") {
+  const GuidanceByRepulsion<float, 2, 4> sim;
+  const Matrix<float> x = Matrix<float>::Zero(24, 4), u = Matrix<float>::Zero(4, 4);
+  const Matrix<float> lambda = Matrix<float>::Zero(24, 4);
+  Matrix<float> a, b, c, d;
+  CHECK_THROWS_WITH(sim.vjp_batch_pair(x, u, lambda, Matrix<float>::Zero(24, 3), &a, &b, &c, &d),
+                    Catch::Contains("vjp_batch_pair: lambda is 24 x 3; expected 24 x 4"));
+  CHECK_THROWS_WITH(sim.vjp_batch_pair(x, u, lambda, lambda, &a, nullptr, &c, &d),
+                    Catch::Contains("one lambda_x is null; expected both null or both set"));
+  CHECK_THROWS_WITH(sim.vjp_batch_pair(x, u, lambda, lambda, &a, &b, &c, &c),
+                    Catch::Contains("an output is an input or the other output"));
+  Matrix<float> adjoint = lambda;
+  CHECK_THROWS_WITH(sim.vjp_batch_pair(x, u, lambda, adjoint, &adjoint, &b, &c, &d),
+                    Catch::Contains("an output is an input or the other output"));
 }

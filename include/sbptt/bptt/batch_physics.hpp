@@ -50,12 +50,13 @@ void step_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>&
   }
 }
 
-/// The two sweeps of a pair side by side for one `vjp_batch` call: [x x], [u u], [λ₁ λ₂] and
-/// the results, 2B columns. A `BatchSimulator`'s column does not depend on the others, so the
-/// results are the two calls' bit for bit; and where a batch fills less than a block of lanes
-/// (the paper's 8 samples in 16 float lanes) both sweeps share one block instead of two.
-/// Column-major, so each half is one contiguous run of entries and goes in and out by one
-/// copy: guidance's five a step took 52–79 ns, Eigen's assignments of column blocks 70–104
+/// The two sweeps of a pair side by side for one `vjp_batch` call of a simulator without
+/// `vjp_batch_pair` (core/concepts.hpp): [x x], [u u], [λ₁ λ₂] and the results, 2B columns.
+/// A `BatchSimulator`'s column does not depend on the others, so the results are the two
+/// calls' bit for bit; and where a batch fills less than a block of lanes (the paper's 8
+/// samples in 16 float lanes) both sweeps share one block instead of two. Column-major, so
+/// each half is one contiguous run of entries and goes in and out by one copy: guidance's five
+/// a step took 52–79 ns, Eigen's assignments of column blocks 70–104
 /// (docs/benchmark-runs-zen4.md, thirty-fourth run).
 template <class Scalar>
 struct PairedColumns {
@@ -84,7 +85,8 @@ struct PairedColumns {
 /// columns): mu = Bᵀλ per column and, when `physics`, propagated = Aᵀλ, at the step (x, u).
 /// `seed(b, t)`, if `seeded`, first adds sample b's loss seed to every sweep's λ. Per sample,
 /// the seed and the VJPs of all sweeps share one pass (one fork when the loop is split); a
-/// `BatchSimulator` gets one call for two sweeps, through `paired`.
+/// `BatchSimulator` gets one call for two sweeps: `vjp_batch_pair` if it has one, else
+/// `vjp_batch` through `paired`.
 template <class Sim, class Scalar, class Sweeps, class Seed, class ForEachSample>
 void vjp_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& u,
                  const Sweeps& sweeps, bool physics, bool seeded, Seed&& seed,
@@ -94,14 +96,20 @@ void vjp_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& 
     if (sweeps.size() == 2) {
       auto* first = *sweeps.begin();
       auto* second = *(sweeps.begin() + 1);
-      PairedColumns<Scalar>::place(x, x, paired.x);
-      PairedColumns<Scalar>::place(u, u, paired.u);
-      PairedColumns<Scalar>::place(first->lambda, second->lambda, paired.lambda);
-      sim.vjp_batch(paired.x, paired.u, paired.lambda, physics ? &paired.lambda_x : nullptr,
-                    &paired.lambda_u);
-      PairedColumns<Scalar>::split(paired.lambda_u, first->mu, second->mu);
-      if (physics)
-        PairedColumns<Scalar>::split(paired.lambda_x, first->propagated, second->propagated);
+      if constexpr (PairedBatchSimulator<Sim>) {
+        sim.vjp_batch_pair(x, u, first->lambda, second->lambda,
+                           physics ? &first->propagated : nullptr,
+                           physics ? &second->propagated : nullptr, &first->mu, &second->mu);
+      } else {
+        PairedColumns<Scalar>::place(x, x, paired.x);
+        PairedColumns<Scalar>::place(u, u, paired.u);
+        PairedColumns<Scalar>::place(first->lambda, second->lambda, paired.lambda);
+        sim.vjp_batch(paired.x, paired.u, paired.lambda, physics ? &paired.lambda_x : nullptr,
+                      &paired.lambda_u);
+        PairedColumns<Scalar>::split(paired.lambda_u, first->mu, second->mu);
+        if (physics)
+          PairedColumns<Scalar>::split(paired.lambda_x, first->propagated, second->propagated);
+      }
       return;
     }
     for (auto* s : sweeps)

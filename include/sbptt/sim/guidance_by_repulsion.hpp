@@ -40,6 +40,7 @@
 
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
+#include "sbptt/core/unroll.hpp"
 #include "sbptt/sim/guidance_forces.hpp"
 #include "sbptt/sim/lane_rows.hpp"
 
@@ -212,24 +213,37 @@ public:
     requires(std::is_same_v<Scalar, float> && kAgents != Eigen::Dynamic)
   {
     check_batch(x, u, "vjp_batch");
-    detail::require(lambda.rows() == state_dim() && lambda.cols() == x.cols(),
-                    "GuidanceByRepulsion::vjp_batch: lambda is ", lambda.rows(), " x ",
-                    lambda.cols(), "; expected ", state_dim(), " x ", x.cols());
+    check_adjoint(lambda, x, "vjp_batch");
     if (lambda_x != nullptr) lambda_x->resize(state_dim(), x.cols());
     if (lambda_u != nullptr) lambda_u->resize(control_dim(), x.cols());
-    RowLanes<kStateSize> state, cotangent, propagated;
-    RowLanes<kControlSize> control, control_cotangent;
-    for (Index first = 0; first < x.cols(); first += detail::LaneRows<Scalar>::kLanes) {
-      const int count = detail::LaneRows<Scalar>::count(x.cols(), first);
-      load(x, first, count, state);
-      load(u, first, count, control);
-      load(lambda, first, count, cotangent);
-      vjp_values(state.data(), control.data(), cotangent.data(),
-                 lambda_x ? propagated.data() : nullptr,
-                 lambda_u ? control_cotangent.data() : nullptr);
-      if (lambda_x) store(propagated, first, count, *lambda_x);
-      if (lambda_u) store(control_cotangent, first, count, *lambda_u);
-    }
+    vjp_lanes({&x}, {&u}, {&lambda}, {lambda_x}, {lambda_u});
+  }
+
+  /// `vjp_batch` of two adjoints per sample, lambda_1 and lambda_2 (each state_dim × B), in
+  /// one call: the two halves of vjp_batch([x x], [u u], [lambda_1 lambda_2]) into lambda_x_k
+  /// and lambda_u_k, bit for bit, without forming those matrices. Each pair of outputs is both
+  /// null or both set, and no output is an input or the other output. The combined update's
+  /// two sweeps go through here (bptt/batch_physics.hpp).
+  void vjp_batch_pair(const Matrix<Scalar>& x, const Matrix<Scalar>& u,
+                      const Matrix<Scalar>& lambda_1, const Matrix<Scalar>& lambda_2,
+                      Matrix<Scalar>* lambda_x_1, Matrix<Scalar>* lambda_x_2,
+                      Matrix<Scalar>* lambda_u_1, Matrix<Scalar>* lambda_u_2) const
+    requires(std::is_same_v<Scalar, float> && kAgents != Eigen::Dynamic)
+  {
+    check_batch(x, u, "vjp_batch_pair");
+    check_adjoint(lambda_1, x, "vjp_batch_pair");
+    check_adjoint(lambda_2, x, "vjp_batch_pair");
+    const std::array<const Matrix<Scalar>*, 6> matrices{&lambda_1,  &lambda_2,  lambda_x_1,
+                                                         lambda_x_2, lambda_u_1, lambda_u_2};
+    for (std::size_t i = 2; i < matrices.size(); ++i)
+      for (std::size_t j = 0; j < i; ++j)
+        detail::require(matrices[i] == nullptr || matrices[i] != matrices[j],
+                        "GuidanceByRepulsion::vjp_batch_pair: an output is an input or the "
+                        "other output; expected matrices of their own");
+    size_pair(lambda_x_1, lambda_x_2, state_dim(), x.cols(), "lambda_x");
+    size_pair(lambda_u_1, lambda_u_2, control_dim(), x.cols(), "lambda_u");
+    vjp_lanes({&x, &x}, {&u, &u}, {&lambda_1, &lambda_2}, {lambda_x_1, lambda_x_2},
+              {lambda_u_1, lambda_u_2});
   }
 
 private:
@@ -397,15 +411,58 @@ private:
   }
 
   /// Columns first … first + count − 1 of `m` into one lane array per row, and back.
-  template <class Rows>
-  static void load(const Matrix<Scalar>& m, Index first, int count, Rows& rows) {
+  template <class Rows, class Source>
+  static void load(const Source& m, Index first, int count, Rows& rows) {
     eigen_assert(static_cast<Index>(rows.size()) == m.rows());
     detail::LaneRows<Scalar>::load_rows(m, first, count, rows.data());
   }
-  template <class Rows>
-  static void store(const Rows& rows, Index first, int count, Matrix<Scalar>& m) {
+  template <class Rows, class Target>
+  static void store(const Rows& rows, Index first, int count, Target&& m) {
     eigen_assert(static_cast<Index>(rows.size()) == m.rows());
     detail::LaneRows<Scalar>::store_rows(rows.data(), first, count, m);
+  }
+
+  using Columns = detail::SideBySide<const Matrix<Scalar>>;
+  using ColumnsOut = detail::SideBySide<Matrix<Scalar>>;
+
+  /// The VJPs of `vjp_batch` block by block over the columns of `lambda` (x's and u's as
+  /// many); an output without a matrix is skipped. One machine copy (SBPTT_ONE_COPY) for
+  /// `vjp_batch` and `vjp_batch_pair`, so that the pair's halves are the single calls' bits.
+  SBPTT_ONE_COPY void vjp_lanes(const Columns& x, const Columns& u, const Columns& lambda,
+                                const ColumnsOut& lambda_x, const ColumnsOut& lambda_u) const {
+    RowLanes<kStateSize> state, cotangent, propagated;
+    RowLanes<kControlSize> control, control_cotangent;
+    const Index columns = lambda.cols();
+    for (Index first = 0; first < columns; first += detail::LaneRows<Scalar>::kLanes) {
+      const int count = detail::LaneRows<Scalar>::count(columns, first);
+      load(x, first, count, state);
+      load(u, first, count, control);
+      load(lambda, first, count, cotangent);
+      vjp_values(state.data(), control.data(), cotangent.data(),
+                 lambda_x.left ? propagated.data() : nullptr,
+                 lambda_u.left ? control_cotangent.data() : nullptr);
+      if (lambda_x.left) store(propagated, first, count, lambda_x);
+      if (lambda_u.left) store(control_cotangent, first, count, lambda_u);
+    }
+  }
+
+  void check_adjoint(const Matrix<Scalar>& lambda, const Matrix<Scalar>& x,
+                     const char* caller) const {
+    detail::require(lambda.rows() == state_dim() && lambda.cols() == x.cols(),
+                    "GuidanceByRepulsion::", caller, ": lambda is ", lambda.rows(), " x ",
+                    lambda.cols(), "; expected ", state_dim(), " x ", x.cols());
+  }
+
+  /// Resizes `first` and `second` (`name` of `vjp_batch_pair`), both null or both set, to
+  /// rows × cols.
+  static void size_pair(Matrix<Scalar>* first, Matrix<Scalar>* second, Index rows, Index cols,
+                        const char* name) {
+    detail::require((first == nullptr) == (second == nullptr),
+                    "GuidanceByRepulsion::vjp_batch_pair: one ", name, " is null; expected ",
+                    "both null or both set");
+    if (first == nullptr) return;
+    first->resize(rows, cols);
+    second->resize(rows, cols);
   }
 
   /// 0 as one number or as a lane array.

@@ -26,6 +26,25 @@
 
 namespace sbptt::detail {
 
+/// Two batch matrices of one shape read and written as one, [a b]: column j is column j of a
+/// for j < a.cols(), else column j − a.cols() of b; or a alone (`right` null). The combined
+/// update's pair hands a simulator both sweeps' adjoints at the same states this way, in one
+/// block of lanes, without forming [x x] and [λ₁ λ₂] (`GuidanceByRepulsion::vjp_batch_pair`).
+/// `M` is `const Matrix<Scalar>` to read, `Matrix<Scalar>` to write.
+template <class M>
+struct SideBySide {
+  M* left = nullptr;
+  M* right = nullptr;
+
+  [[nodiscard]] Index rows() const { return left->rows(); }
+  [[nodiscard]] Index cols() const { return right == nullptr ? left->cols() : 2 * left->cols(); }
+  /// Where column j starts.
+  [[nodiscard]] auto* column(Index j) const {
+    const Index half = left->cols();
+    return j < half ? left->data() + j * rows() : right->data() + (j - half) * rows();
+  }
+};
+
 template <class Scalar>
 struct LaneRows {
   static constexpr int kLanes = static_cast<int>(64 / sizeof(Scalar));
@@ -48,28 +67,41 @@ struct LaneRows {
     for (int l = 0; l < count; ++l) m(row, first + l) = v(l);
   }
 
+  using Columns = SideBySide<const Matrix<Scalar>>;
+  using ColumnsOut = SideBySide<Matrix<Scalar>>;
+
   /// Every row of columns first … first + count − 1 of `m` into `rows` (m.rows() arrays), as
   /// `load` row by row.
-  EIGEN_ALWAYS_INLINE static void load_rows(const Matrix<Scalar>& m, Index first, int count,
+  EIGEN_ALWAYS_INLINE static void load_rows(const Columns& m, Index first, int count,
                                             Values* rows) {
 #if defined(EIGEN_VECTORIZE_AVX512)
     if constexpr (kTransposeInRegisters) {
       return load_tiles(m, first, count, rows);
     }
 #endif
-    for (Index r = 0; r < m.rows(); ++r) rows[r] = load(m, r, first, count);
+    for (Index r = 0; r < m.rows(); ++r)
+      for (int l = 0; l < kLanes; ++l) rows[r](l) = l < count ? m.column(first + l)[r] : Scalar(0);
+  }
+  EIGEN_ALWAYS_INLINE static void load_rows(const Matrix<Scalar>& m, Index first, int count,
+                                            Values* rows) {
+    load_rows(Columns{&m}, first, count, rows);
   }
 
   /// The first `count` lanes of `rows` (m.rows() arrays) into columns first … first + count − 1
   /// of `m`, as `store` row by row.
   EIGEN_ALWAYS_INLINE static void store_rows(const Values* rows, Index first, int count,
-                                             Matrix<Scalar>& m) {
+                                             const ColumnsOut& m) {
 #if defined(EIGEN_VECTORIZE_AVX512)
     if constexpr (kTransposeInRegisters) {
       return store_tiles(rows, first, count, m);
     }
 #endif
-    for (Index r = 0; r < m.rows(); ++r) store(rows[r], m, r, first, count);
+    for (Index r = 0; r < m.rows(); ++r)
+      for (int l = 0; l < count; ++l) m.column(first + l)[r] = rows[r](l);
+  }
+  EIGEN_ALWAYS_INLINE static void store_rows(const Values* rows, Index first, int count,
+                                             Matrix<Scalar>& m) {
+    store_rows(rows, first, count, ColumnsOut{&m});
   }
 
 private:
@@ -78,14 +110,14 @@ private:
   using Packet = typename Eigen::internal::packet_traits<Scalar>::type;
   static Packet zero() { return Eigen::internal::pset1<Packet>(Scalar(0)); }
 
-  EIGEN_ALWAYS_INLINE static void load_tiles(const Matrix<Scalar>& m, Index first, int count,
+  EIGEN_ALWAYS_INLINE static void load_tiles(const Columns& m, Index first, int count,
                                              Values* rows) {
     for (Index top = 0; top < m.rows(); top += kLanes) {
       const Index height = std::min<Index>(kLanes, m.rows() - top);
       Packet tile[kLanes];
       SBPTT_UNROLL
       for (int l = 0; l < kLanes; ++l)
-        tile[l] = l < count ? load_first_lanes(&m(top, first + l), height) : zero();
+        tile[l] = l < count ? load_first_lanes(m.column(first + l) + top, height) : zero();
       transpose_tile<Scalar>(tile);
       SBPTT_UNROLL
       for (Index i = 0; i < height; ++i) Eigen::internal::pstoreu(rows[top + i].data(), tile[i]);
@@ -93,7 +125,7 @@ private:
   }
 
   EIGEN_ALWAYS_INLINE static void store_tiles(const Values* rows, Index first, int count,
-                                              Matrix<Scalar>& m) {
+                                              const ColumnsOut& m) {
     for (Index top = 0; top < m.rows(); top += kLanes) {
       const Index height = std::min<Index>(kLanes, m.rows() - top);
       Packet tile[kLanes];
@@ -102,7 +134,7 @@ private:
         tile[i] = i < height ? Eigen::internal::ploadu<Packet>(rows[top + i].data()) : zero();
       transpose_tile<Scalar>(tile);
       SBPTT_UNROLL
-      for (int l = 0; l < count; ++l) store_first_lanes(&m(top, first + l), tile[l], height);
+      for (int l = 0; l < count; ++l) store_first_lanes(m.column(first + l) + top, tile[l], height);
     }
   }
 

@@ -7,7 +7,6 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
-#include <cstring>
 
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/rng.hpp"
@@ -167,11 +166,6 @@ Matrix<float> side_by_side(const Matrix<float>& a, const Matrix<float>& b) {
   return both;
 }
 
-bool same_bits(const Matrix<float>& a, const Matrix<float>& b) {
-  return a.rows() == b.rows() && a.cols() == b.cols() &&
-         std::memcmp(a.data(), b.data(), sizeof(float) * static_cast<std::size_t>(a.size())) == 0;
-}
-
 }  // namespace
 
 TEST_CASE("guidance batch: vjp_batch_pair gives vjp_batch of [x x], [u u], [λ₁ λ₂] bit for bit",
@@ -190,27 +184,35 @@ TEST_CASE("guidance batch: vjp_batch_pair gives vjp_batch of [x x], [u u], [λ�
                   side_by_side(b.lambda, other.lambda), &whole_x, &whole_u);
     Matrix<float> x_1, x_2, u_1, u_2;
     sim.vjp_batch_pair(b.x, b.u, b.lambda, other.lambda, &x_1, &x_2, &u_1, &u_2);
-    CHECK(same_bits(side_by_side(x_1, x_2), whole_x));
-    CHECK(same_bits(side_by_side(u_1, u_2), whole_u));
+    CHECK(side_by_side(x_1, x_2) == whole_x);
+    CHECK(side_by_side(u_1, u_2) == whole_u);
     Matrix<float> only_1, only_2;
     sim.vjp_batch_pair(b.x, b.u, b.lambda, other.lambda, nullptr, nullptr, &only_1, &only_2);
-    CHECK(same_bits(side_by_side(only_1, only_2), whole_u));
+    CHECK(side_by_side(only_1, only_2) == whole_u);
   }
 }
 
 TEST_CASE("guidance batch: vjp_batch_pair rejects bad shapes and shared outputs",
           "[sim][guidance]") {
   const GuidanceByRepulsion<float, 2, 4> sim;
-  const Matrix<float> x = Matrix<float>::Zero(24, 4), u = Matrix<float>::Zero(4, 4);
-  const Matrix<float> lambda = Matrix<float>::Zero(24, 4);
+  const Matrix<float> u = Matrix<float>::Zero(4, 20);
+  Matrix<float> x = Matrix<float>::Zero(24, 20), lambda = Matrix<float>::Zero(24, 20);
   Matrix<float> a, b, c, d;
   CHECK_THROWS_WITH(sim.vjp_batch_pair(x, u, lambda, Matrix<float>::Zero(24, 3), &a, &b, &c, &d),
-                    Catch::Contains("vjp_batch_pair: lambda is 24 x 3; expected 24 x 4"));
+                    Catch::Contains("vjp_batch_pair: lambda_2 is 24 x 3; expected 24 x 20"));
   CHECK_THROWS_WITH(sim.vjp_batch_pair(x, u, lambda, lambda, &a, nullptr, &c, &d),
-                    Catch::Contains("one lambda_x is null; expected both null or both set"));
+                    Catch::Contains("lambda_x_1 is set and lambda_x_2 is null; expected both "
+                                    "null or both set"));
   CHECK_THROWS_WITH(sim.vjp_batch_pair(x, u, lambda, lambda, &a, &b, &c, &c),
-                    Catch::Contains("an output is an input or the other output"));
+                    Catch::Contains("lambda_u_2 is lambda_u_1; expected a matrix of its own"));
   Matrix<float> adjoint = lambda;
   CHECK_THROWS_WITH(sim.vjp_batch_pair(x, u, lambda, adjoint, &adjoint, &b, &c, &d),
-                    Catch::Contains("an output is an input or the other output"));
+                    Catch::Contains("lambda_x_1 is lambda_2; expected a matrix of its own"));
+  // 2B = 40 columns in three blocks: a block writing x's columns as outputs would change what
+  // a later block reads for the other half.
+  CHECK_THROWS_WITH(sim.vjp_batch_pair(x, u, lambda, adjoint, &x, &b, &c, &d),
+                    Catch::Contains("lambda_x_1 is x; expected a matrix of its own"));
+  // Nothing was resized before the checks threw.
+  CHECK(a.size() == 0);
+  CHECK(c.size() == 0);
 }

@@ -370,7 +370,8 @@ private:
   Sweep sweeps_[2];
   /// Each sweep's layer adjoints when it adds its own parameter products (no hand-off).
   typename detail::LayerAdjointsOf<Ctrl>::Type sweep_adjoints_[2];
-  detail::PairedColumns<Scalar> paired_columns_;  ///< both sweeps' VJPs in one batch call
+  /// Both sweeps' VJPs in one `vjp_batch` call, for a simulator without `vjp_batch_pair`.
+  detail::PairedColumns<Scalar> paired_columns_;
   std::vector<EvalChunk> chunks_;
   Vector<Scalar> eval_losses_;
   // Last, so that it is destroyed first: its workers stop before the buffers they work on go.

@@ -122,7 +122,8 @@ concept SimulatorWithJacobians = Simulator<S> && detail::HasSimulatorJacobians<S
 ///   pointer skipping that product.
 /// Column b of a result may differ from `step` / `vjp` of column b by rounding but must depend
 /// neither on the other columns nor on b. The engine then uses these for every rollout and
-/// sweep, and for both sweeps of the combined update in one call of 2B columns.
+/// sweep, and for both sweeps of the combined update in one call of 2B columns (by
+/// `vjp_batch_pair` when the simulator has it, `PairedBatchSimulator` below).
 template <class S>
 concept BatchSimulator =
     Simulator<S> && requires(const S& sim, const Matrix<typename S::Scalar>& x,

@@ -213,7 +213,7 @@ public:
     requires(std::is_same_v<Scalar, float> && kAgents != Eigen::Dynamic)
   {
     check_batch(x, u, "vjp_batch");
-    check_adjoint(lambda, x, "vjp_batch");
+    check_adjoint(lambda, x, "vjp_batch", "lambda");
     if (lambda_x != nullptr) lambda_x->resize(state_dim(), x.cols());
     if (lambda_u != nullptr) lambda_u->resize(control_dim(), x.cols());
     vjp_lanes({&x}, {&u}, {&lambda}, {lambda_x}, {lambda_u});
@@ -222,8 +222,8 @@ public:
   /// `vjp_batch` of two adjoints per sample, lambda_1 and lambda_2 (each state_dim × B), in
   /// one call: the two halves of vjp_batch([x x], [u u], [lambda_1 lambda_2]) into lambda_x_k
   /// and lambda_u_k, bit for bit, without forming those matrices. Each pair of outputs is both
-  /// null or both set, and no output is an input or the other output. The combined update's
-  /// two sweeps go through here (bptt/batch_physics.hpp).
+  /// null or both set, and every output is a matrix of its own, none of the inputs. The
+  /// combined update's two sweeps go through here (bptt/batch_physics.hpp).
   void vjp_batch_pair(const Matrix<Scalar>& x, const Matrix<Scalar>& u,
                       const Matrix<Scalar>& lambda_1, const Matrix<Scalar>& lambda_2,
                       Matrix<Scalar>* lambda_x_1, Matrix<Scalar>* lambda_x_2,
@@ -231,17 +231,30 @@ public:
     requires(std::is_same_v<Scalar, float> && kAgents != Eigen::Dynamic)
   {
     check_batch(x, u, "vjp_batch_pair");
-    check_adjoint(lambda_1, x, "vjp_batch_pair");
-    check_adjoint(lambda_2, x, "vjp_batch_pair");
-    const std::array<const Matrix<Scalar>*, 6> matrices{&lambda_1,  &lambda_2,  lambda_x_1,
-                                                         lambda_x_2, lambda_u_1, lambda_u_2};
-    for (std::size_t i = 2; i < matrices.size(); ++i)
+    check_adjoint(lambda_1, x, "vjp_batch_pair", "lambda_1");
+    check_adjoint(lambda_2, x, "vjp_batch_pair", "lambda_2");
+    // An output that is an input would be written by one block of lanes before a later block
+    // reads that input's columns for the other half.
+    const std::array<const Matrix<Scalar>*, 8> matrices{
+        &x, &u, &lambda_1, &lambda_2, lambda_x_1, lambda_x_2, lambda_u_1, lambda_u_2};
+    constexpr std::array<const char*, 8> names{"x",          "u",          "lambda_1",
+                                               "lambda_2",   "lambda_x_1", "lambda_x_2",
+                                               "lambda_u_1", "lambda_u_2"};
+    for (std::size_t i = 4; i < matrices.size(); ++i)
       for (std::size_t j = 0; j < i; ++j)
         detail::require(matrices[i] == nullptr || matrices[i] != matrices[j],
-                        "GuidanceByRepulsion::vjp_batch_pair: an output is an input or the "
-                        "other output; expected matrices of their own");
-    size_pair(lambda_x_1, lambda_x_2, state_dim(), x.cols(), "lambda_x");
-    size_pair(lambda_u_1, lambda_u_2, control_dim(), x.cols(), "lambda_u");
+                        "GuidanceByRepulsion::vjp_batch_pair: ", names[i], " is ", names[j],
+                        "; expected a matrix of its own");
+    for (std::size_t i = 4; i < matrices.size(); i += 2)
+      detail::require((matrices[i] == nullptr) == (matrices[i + 1] == nullptr),
+                      "GuidanceByRepulsion::vjp_batch_pair: ", names[i],
+                      matrices[i] == nullptr ? " is null and " : " is set and ", names[i + 1],
+                      matrices[i] == nullptr ? " is set" : " is null",
+                      "; expected both null or both set");
+    for (Matrix<Scalar>* out : {lambda_x_1, lambda_x_2})
+      if (out != nullptr) out->resize(state_dim(), x.cols());
+    for (Matrix<Scalar>* out : {lambda_u_1, lambda_u_2})
+      if (out != nullptr) out->resize(control_dim(), x.cols());
     vjp_lanes({&x, &x}, {&u, &u}, {&lambda_1, &lambda_2}, {lambda_x_1, lambda_x_2},
               {lambda_u_1, lambda_u_2});
   }
@@ -422,8 +435,8 @@ private:
     detail::LaneRows<Scalar>::store_rows(rows.data(), first, count, m);
   }
 
-  using Columns = detail::SideBySide<const Matrix<Scalar>>;
-  using ColumnsOut = detail::SideBySide<Matrix<Scalar>>;
+  using Columns = typename detail::LaneRows<Scalar>::Columns;
+  using ColumnsOut = typename detail::LaneRows<Scalar>::ColumnsOut;
 
   /// The VJPs of `vjp_batch` block by block over the columns of `lambda` (x's and u's as
   /// many); an output without a matrix is skipped. One machine copy (SBPTT_ONE_COPY) for
@@ -446,23 +459,11 @@ private:
     }
   }
 
-  void check_adjoint(const Matrix<Scalar>& lambda, const Matrix<Scalar>& x,
-                     const char* caller) const {
+  void check_adjoint(const Matrix<Scalar>& lambda, const Matrix<Scalar>& x, const char* caller,
+                     const char* name) const {
     detail::require(lambda.rows() == state_dim() && lambda.cols() == x.cols(),
-                    "GuidanceByRepulsion::", caller, ": lambda is ", lambda.rows(), " x ",
+                    "GuidanceByRepulsion::", caller, ": ", name, " is ", lambda.rows(), " x ",
                     lambda.cols(), "; expected ", state_dim(), " x ", x.cols());
-  }
-
-  /// Resizes `first` and `second` (`name` of `vjp_batch_pair`), both null or both set, to
-  /// rows × cols.
-  static void size_pair(Matrix<Scalar>* first, Matrix<Scalar>* second, Index rows, Index cols,
-                        const char* name) {
-    detail::require((first == nullptr) == (second == nullptr),
-                    "GuidanceByRepulsion::vjp_batch_pair: one ", name, " is null; expected ",
-                    "both null or both set");
-    if (first == nullptr) return;
-    first->resize(rows, cols);
-    second->resize(rows, cols);
   }
 
   /// 0 as one number or as a lane array.

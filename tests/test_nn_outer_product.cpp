@@ -128,7 +128,7 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel sums each entry in sample or
   // block starts the row). Rows narrower than a register (1 … 17 rows, the paper's 100 × 10,
   // an odd 97, 2 and 3 entries); a partial panel in one block with 1 or 2 whole panels,
   // starting the row or after blocks of 3; alone after them (100 × 100); the convolution's
-  // 60 × 180; a quarter of a register's columns, alone or after whole panels, 4 rows a
+  // 60 × 180; a quarter of a register's columns after 1 … 6 whole panels, or alone 4 rows a
   // register (quarter_strip.hpp); half a register after 0 … 2 whole panels, starting the row
   // or after a block of 3 (half-width instructions with AVX-512). 70 samples: the AVX2 kernel
   // scales X in chunks of 64.
@@ -144,11 +144,12 @@ TEMPLATE_TEST_CASE("dW += D diag(s) X^T: the kernel sums each entry in sample or
       {5, 2 * kLanes},       {6, kLanes + kLanes / 2}, {13, 2 * kLanes + kLanes / 2},
       {19, 3 * kLanes + kLanes / 2}, {7, 4 * kLanes + kLanes / 2}, {9, 5 * kLanes + kLanes / 2}};
   for (Index rows = 1; rows <= 17; ++rows) shapes.emplace_back(rows, kLanes / 2);
-  // A quarter of a register left after whole panels or alone (quarter_strip.hpp), 4 rows a
-  // register and the last 1 … 3 rows on their own.
+  // A quarter of a register left after 1 … 6 whole panels, in a block with up to two of them
+  // (blocks of 2 rows and a row left), or alone (quarter_strip.hpp: 4 rows a register and the
+  // last 1 … 3 rows on their own).
   for (Index rows = 1; rows <= 9; ++rows) {
-    shapes.emplace_back(rows, 6 * kLanes + kLanes / 4);
-    shapes.emplace_back(rows, 3 * kLanes + kLanes / 4);
+    for (Index whole = 1; whole <= 6; ++whole)
+      shapes.emplace_back(rows, whole * kLanes + kLanes / 4);
     shapes.emplace_back(rows, kLanes / 4);
   }
   for (const auto& [rows, cols] : shapes) {

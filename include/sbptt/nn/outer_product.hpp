@@ -46,6 +46,7 @@ public:
   using Packet = typename Eigen::internal::packet_traits<Scalar>::type;
   static constexpr Index kLanes = Eigen::internal::unpacket_traits<Packet>::size;
   static constexpr Index kHalfLanes = kLanes / 2;
+  static constexpr Index kQuarterLanes = kLanes / 4;
 
   /// dW (rows × cols, row-major) += D (rows × n, column-major) diag(s) Xᵀ (X: cols × n,
   /// column-major; s: n entries, or none for s = 1).
@@ -72,13 +73,13 @@ private:
   // One row a block is also what lets `columns` order the rows in passes.
   static constexpr int kMaskedRows = 1;
   /// How a block's last panel covers its columns: a whole register, the first lanes of one
-  /// (masked loads and stores), or exactly half of one (half-width instructions). Where a
-  /// core splits a 512-bit multiply-add in two 256-bit halves (AMD Zen 4), a masked register
-  /// costs a whole one and half a register half of one: 100 × 24 × 8 in float with its bias
-  /// in 430–432 ns against 482–487 masked (docs/benchmark-runs-zen4.md, thirty-second run).
-  /// The lanes summed are the same, so are the bits. Blocks with a half go kRows rows at a
-  /// time: no store reaches past its row.
-  enum class Last { Whole, Masked, Half };
+  /// (masked loads and stores), or exactly half or a quarter of one (half- or quarter-width
+  /// instructions). Where a core splits a 512-bit multiply-add in two 256-bit halves (AMD Zen
+  /// 4), a masked register costs a whole one and half a register half of one: 100 × 24 × 8 in
+  /// float with its bias in 430–432 ns against 482–487 masked (docs/benchmark-runs-zen4.md,
+  /// thirty-second run). The lanes summed are the same, so are the bits. Blocks with a half
+  /// or a quarter go kRows rows at a time: no store reaches past its row.
+  enum class Last { Whole, Masked, Half, Quarter };
 
   static const Scalar* at(const Scalar* scale, Index k) {
     return scale == nullptr ? nullptr : scale + k;
@@ -86,20 +87,36 @@ private:
 
   /// One pass over dW adding `Samples` samples' outer products: blocks of kPanels column
   /// panels, then one more block with the whole panels left and a row's partial last panel
-  /// (half-width when it is half a register; on its own when no whole panel is left; by
-  /// quarter_strip.hpp when it fills a quarter of a register).
+  /// (half- or quarter-width when it is half or a quarter of a register; on its own when no
+  /// whole panel is left, a quarter then by quarter_strip.hpp).
   template <int Samples>
   static void samples(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
                       const Scalar* scale) {
     static_assert(kMaskedRows == 1, "a masked block at column 0 needs its rows in passes");
     const Index full_panels = cols / kLanes;
     const bool partial = full_panels * kLanes < cols;
+    // A last quarter goes in a block with up to two whole panels, never alone after the
+    // blocks of kPanels: 100 × 100 × 8 in float in 1467.6–1475.8 ns as 3 + 1 + (2 + ¼)
+    // panels, against 1531.2–1535.3 as 3 + 3 and then quarter_strip.hpp
+    // (docs/benchmark-runs-zen4.md, thirty-eighth run).
+    const bool quarter_last = full_panels > 0 && cols - full_panels * kLanes == kQuarterLanes;
+    const Index panels_in_blocks = quarter_last ? full_panels - 1 : full_panels;
     Index p = 0;
-    for (; p + kPanels <= full_panels; p += kPanels)
+    for (; p + kPanels <= panels_in_blocks; p += kPanels)
       columns<Samples, kPanels, Last::Whole>(dw, rows, cols, d, x, scale, p * kLanes);
-    const Index left = full_panels - p;  // whole panels after the blocks of kPanels: 0, 1, 2
-    const Index first = p * kLanes;
-    if (!partial) {
+    Index left = full_panels - p;  // whole panels after the blocks: 0, 1, 2 (quarter: 1, 2, 3)
+    Index first = p * kLanes;
+    if (quarter_last) {
+      if (left == kPanels) {
+        columns<Samples, 1, Last::Whole>(dw, rows, cols, d, x, scale, first);
+        first += kLanes;
+        --left;
+      }
+      with_count<2>(left, [&](auto panels) {  // the whole panels left and the quarter
+        columns<Samples, decltype(panels)::value + 1, Last::Quarter>(dw, rows, cols, d, x, scale,
+                                                                     first);
+      });
+    } else if (!partial) {
       if (left == 2) columns<Samples, 2, Last::Whole>(dw, rows, cols, d, x, scale, first);
       if (left == 1) columns<Samples, 1, Last::Whole>(dw, rows, cols, d, x, scale, first);
     } else if (cols - first - left * kLanes == kHalfLanes) {
@@ -120,8 +137,8 @@ private:
   }
 
   /// Columns first … first + Panels·kLanes − 1 of every row, the last panel only up to cols
-  /// when masked or half (`LastPanel`), in blocks of `Rows` rows. A scale multiplies X's block
-  /// in the registers, once for all rows.
+  /// when masked, half or quarter (`LastPanel`), in blocks of `Rows` rows. A scale multiplies
+  /// X's block in the registers, once for all rows.
   template <int Samples, int Panels, Last LastPanel, int Rows = kRows>
   static void columns(Scalar* dw, Index rows, Index cols, const Scalar* d, const Scalar* x,
                       const Scalar* scale, Index first) {
@@ -195,20 +212,22 @@ private:
   }
 
   /// Panel p of a block whose last panel is as `LastPanel` says (masked: its first `lanes`
-  /// lanes; half: the lower half of the register, the upper half undefined).
+  /// lanes; half or quarter: the lower half or quarter of the register, the rest undefined).
   template <int Panels, Last LastPanel>
   EIGEN_ALWAYS_INLINE static Packet load_panel(const Scalar* from, int p, Index lanes) {
     if (p == Panels - 1) {
       if constexpr (LastPanel == Last::Masked) return load_first_lanes(from, lanes);
       if constexpr (LastPanel == Last::Half) return load_lower_part<2>(from);
+      if constexpr (LastPanel == Last::Quarter) return load_lower_part<4>(from);
     }
     return Eigen::internal::ploadu<Packet>(from);
   }
-  /// x·d + acc for panel p, at half width for a half last panel.
+  /// x·d + acc for panel p, at half or quarter width for such a last panel.
   template <int Panels, Last LastPanel>
   EIGEN_ALWAYS_INLINE static Packet madd_panel(const Packet& x, const Packet& d,
                                                const Packet& acc, int p) {
     if (LastPanel == Last::Half && p == Panels - 1) return lower_madd<2, Scalar>(x, d, acc);
+    if (LastPanel == Last::Quarter && p == Panels - 1) return lower_madd<4, Scalar>(x, d, acc);
     return Eigen::internal::pmadd(x, d, acc);
   }
   template <int Panels, Last LastPanel>
@@ -218,6 +237,8 @@ private:
       store_first_lanes(to, value, lanes);
     } else if (LastPanel == Last::Half && p == Panels - 1) {
       Eigen::internal::pstoreu(to, lower_part<2, Scalar>(value));
+    } else if (LastPanel == Last::Quarter && p == Panels - 1) {
+      Eigen::internal::pstoreu(to, lower_part<4, Scalar>(value));
     } else {
       Eigen::internal::pstoreu(to, value);
     }

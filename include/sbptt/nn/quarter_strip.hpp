@@ -1,15 +1,16 @@
 #pragma once
-/// \file The last columns of dW += D diag(s) Xᵀ (outer_product.hpp) when they fill a quarter
-/// of a register: float 4 of 16 lanes, double 2 of 8. Guidance's and the cart pole's hidden
-/// layers have 100 = 6 · 16 + 4 columns.
+/// \file dW += D diag(s) Xᵀ (outer_product.hpp) when its rows are a quarter of a register:
+/// float 4 of 16 lanes, double 2 of 8 (a first layer on the cart pole's 4 states).
 ///
 /// The panel kernel gives such a panel a register per row: each multiply-add fills a quarter
-/// of its lanes and needs a broadcast of its own, and the 4 columns after 96 took 128–146 ns
-/// of the 704–741 of a 100 × 100 × 8 product (float, docs/benchmark-runs.md, twentieth run).
-/// Here one register holds the quarters of 4 rows (row i + r in lanes r·w … r·w + w − 1, w the
-/// quarter's width). X's quarter of a sample is broadcast to the 4 places once per call;
-/// d_ik … d_{i+3,k} come in by one load and are spread over their rows' lanes by one permute;
-/// the rows' quarters go in and out as 128-bit pieces. The product took 664–672 ns.
+/// of its lanes and needs a broadcast of its own. Here one register holds the quarters of 4
+/// rows (row i + r in lanes r·w … r·w + w − 1, w the quarter's width). X's quarter of a
+/// sample is broadcast to the 4 places once per call; d_ik … d_{i+3,k} come in by one load
+/// and are spread over their rows' lanes by one permute; the rows' quarters go in and out as
+/// 128-bit pieces. This once took the 4 columns after 96 of a 100 × 100 × 8 product too
+/// (704–741 ns → 664–672, float, docs/benchmark-runs.md, twentieth run); on Zen 4 that quarter
+/// now goes faster in the panel kernel's blocks at quarter width, where it shares their
+/// broadcasts (docs/benchmark-runs-zen4.md, thirty-eighth run).
 ///
 /// Each entry is still ((dW_ij + d_i0 x'_j0) + d_i1 x'_j1) + … in sample order with fused
 /// multiply-adds, x' = s·x rounded: the panel kernel's order, so the results are the same bit

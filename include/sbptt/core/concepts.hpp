@@ -137,7 +137,7 @@ concept BatchSimulator =
 /// `void vjp_batch_pair(X, U, Lambda_1, Lambda_2, Lambda_x_1, Lambda_x_2, Lambda_u_1,
 /// Lambda_u_2)`, the two halves of `vjp_batch([X X], [U U], [Lambda_1 Lambda_2], …)` without
 /// forming those matrices. The combined update's two sweeps then need no copies in and out of
-/// a 2B-column call (guidance's C/R epoch ratio 0.002–0.009 lower on average in three sets of
+/// a 2B-column call (guidance's C/R epoch ratio 0.002–0.008 lower on average in three sets of
 /// rounds, docs/benchmark-runs-zen4.md, thirty-eighth run).
 template <class S>
 concept PairedBatchSimulator =

@@ -233,28 +233,9 @@ public:
     check_batch(x, u, "vjp_batch_pair");
     check_adjoint(lambda_1, x, "vjp_batch_pair", "lambda_1");
     check_adjoint(lambda_2, x, "vjp_batch_pair", "lambda_2");
-    // An output that is an input would be written by one block of lanes before a later block
-    // reads that input's columns for the other half.
-    const std::array<const Matrix<Scalar>*, 8> matrices{
-        &x, &u, &lambda_1, &lambda_2, lambda_x_1, lambda_x_2, lambda_u_1, lambda_u_2};
-    constexpr std::array<const char*, 8> names{"x",          "u",          "lambda_1",
-                                               "lambda_2",   "lambda_x_1", "lambda_x_2",
-                                               "lambda_u_1", "lambda_u_2"};
-    for (std::size_t i = 4; i < matrices.size(); ++i)
-      for (std::size_t j = 0; j < i; ++j)
-        detail::require(matrices[i] == nullptr || matrices[i] != matrices[j],
-                        "GuidanceByRepulsion::vjp_batch_pair: ", names[i], " is ", names[j],
-                        "; expected a matrix of its own");
-    for (std::size_t i = 4; i < matrices.size(); i += 2)
-      detail::require((matrices[i] == nullptr) == (matrices[i + 1] == nullptr),
-                      "GuidanceByRepulsion::vjp_batch_pair: ", names[i],
-                      matrices[i] == nullptr ? " is null and " : " is set and ", names[i + 1],
-                      matrices[i] == nullptr ? " is set" : " is null",
-                      "; expected both null or both set");
-    for (Matrix<Scalar>* out : {lambda_x_1, lambda_x_2})
-      if (out != nullptr) out->resize(state_dim(), x.cols());
-    for (Matrix<Scalar>* out : {lambda_u_1, lambda_u_2})
-      if (out != nullptr) out->resize(control_dim(), x.cols());
+    detail::size_paired_outputs("GuidanceByRepulsion::vjp_batch_pair", x, u, lambda_1, lambda_2,
+                                {lambda_x_1, lambda_x_2}, {lambda_u_1, lambda_u_2},
+                                state_dim(), control_dim());
     vjp_lanes({&x, &x}, {&u, &u}, {&lambda_1, &lambda_2}, {lambda_x_1, lambda_x_2},
               {lambda_u_1, lambda_u_2});
   }

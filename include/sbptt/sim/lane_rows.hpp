@@ -23,27 +23,9 @@
 #include "sbptt/core/transpose_tile.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/core/unroll.hpp"
+#include "sbptt/sim/side_by_side.hpp"
 
 namespace sbptt::detail {
-
-/// Two batch matrices of one shape read and written as one, [a b]: column j is column j of a
-/// for j < a.cols(), else column j − a.cols() of b; or a alone (`right` null). The combined
-/// update's pair hands a simulator both sweeps' adjoints at the same states this way, in one
-/// block of lanes, without forming [x x] and [λ₁ λ₂] (`GuidanceByRepulsion::vjp_batch_pair`).
-/// `M` is `const Matrix<Scalar>` to read, `Matrix<Scalar>` to write.
-template <class M>
-struct SideBySide {
-  M* left = nullptr;
-  M* right = nullptr;
-
-  [[nodiscard]] Index rows() const { return left->rows(); }
-  [[nodiscard]] Index cols() const { return right == nullptr ? left->cols() : 2 * left->cols(); }
-  /// Where column j starts.
-  [[nodiscard]] auto* column(Index j) const {
-    const Index half = left->cols();
-    return j < half ? left->data() + j * rows() : right->data() + (j - half) * rows();
-  }
-};
 
 template <class Scalar>
 struct LaneRows {

@@ -27,22 +27,19 @@
 /// A term that cannot act costs nothing: no spreading loop with one driver, no flocking loop
 /// with one evader. `step` and `vjp` are written once on the state's numbers (`step_values`,
 /// `vjp_values`) for one sample or, in float with fixed agent counts, a block of 16 samples
-/// in SIMD lanes (`step_batch`, `vjp_batch`). The options, the pair forces and their
-/// Jacobians are in `guidance_forces.hpp`, with how two agents on the same spot are handled
-/// (finite values, continuous Jacobians); the paper's loss and initial states in
-/// `guidance_task.hpp`.
-#include <array>
+/// in SIMD lanes (`step_batch`, `vjp_batch`; the blocks in `guidance_lanes.hpp`). The
+/// options, the pair forces and their Jacobians are in `guidance_forces.hpp`, with how two
+/// agents on the same spot are handled (finite values, continuous Jacobians); the paper's loss
+/// and initial states in `guidance_task.hpp`.
 #include <cmath>
-#include <cstddef>
 #include <type_traits>
 
 #include <Eigen/Core>
 
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
-#include "sbptt/core/unroll.hpp"
 #include "sbptt/sim/guidance_forces.hpp"
-#include "sbptt/sim/lane_rows.hpp"
+#include "sbptt/sim/guidance_lanes.hpp"
 
 namespace sbptt {
 
@@ -191,18 +188,7 @@ public:
   void step_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, Matrix<Scalar>& x_next) const
     requires(std::is_same_v<Scalar, float> && kAgents != Eigen::Dynamic)
   {
-    check_batch(x, u, "step_batch");
-    x_next.resize(state_dim(), x.cols());
-    RowLanes<kStateSize> state, next;
-    RowLanes<kControlSize> control;
-    RowLanes<2 * kAgents> acc;
-    for (Index first = 0; first < x.cols(); first += detail::LaneRows<Scalar>::kLanes) {
-      const int count = detail::LaneRows<Scalar>::count(x.cols(), first);
-      load(x, first, count, state);
-      load(u, first, count, control);
-      step_values(state.data(), control.data(), acc.data(), next.data());
-      store(next, first, count, x_next);
-    }
+    detail::GuidanceLanes<GuidanceByRepulsion>(*this).step(x, u, x_next);
   }
 
   /// `vjp` for every column of x (state_dim × B), u (control_dim × B) and lambda (state_dim ×
@@ -212,11 +198,7 @@ public:
                  Matrix<Scalar>* lambda_x, Matrix<Scalar>* lambda_u) const
     requires(std::is_same_v<Scalar, float> && kAgents != Eigen::Dynamic)
   {
-    check_batch(x, u, "vjp_batch");
-    check_adjoint(lambda, x, "vjp_batch", "lambda");
-    if (lambda_x != nullptr) lambda_x->resize(state_dim(), x.cols());
-    if (lambda_u != nullptr) lambda_u->resize(control_dim(), x.cols());
-    vjp_lanes({&x}, {&u}, {&lambda}, {lambda_x}, {lambda_u});
+    detail::GuidanceLanes<GuidanceByRepulsion>(*this).vjp(x, u, lambda, lambda_x, lambda_u);
   }
 
   /// `vjp_batch` of two adjoints per sample, lambda_1 and lambda_2 (each state_dim × B), in
@@ -230,14 +212,8 @@ public:
                       Matrix<Scalar>* lambda_u_1, Matrix<Scalar>* lambda_u_2) const
     requires(std::is_same_v<Scalar, float> && kAgents != Eigen::Dynamic)
   {
-    check_batch(x, u, "vjp_batch_pair");
-    check_adjoint(lambda_1, x, "vjp_batch_pair", "lambda_1");
-    check_adjoint(lambda_2, x, "vjp_batch_pair", "lambda_2");
-    detail::size_paired_outputs("GuidanceByRepulsion::vjp_batch_pair", x, u, lambda_1, lambda_2,
-                                {lambda_x_1, lambda_x_2}, {lambda_u_1, lambda_u_2},
-                                state_dim(), control_dim());
-    vjp_lanes({&x, &x}, {&u, &u}, {&lambda_1, &lambda_2}, {lambda_x_1, lambda_x_2},
-              {lambda_u_1, lambda_u_2});
+    detail::GuidanceLanes<GuidanceByRepulsion>(*this).vjp_pair(
+        x, u, lambda_1, lambda_2, lambda_x_1, lambda_x_2, lambda_u_1, lambda_u_2);
   }
 
 private:
@@ -246,10 +222,7 @@ private:
   using Kernel = detail::PairKernel<Scalar>;
   /// p̈ of every agent, x then y: scratch of `step`.
   using AccelerationValues = Eigen::Matrix<Scalar, detail::times_or_dynamic(2, kAgents), 1>;
-  /// One lane array per state or control row (`step_batch`; float, fixed agent counts).
-  template <int Rows>
-  using RowLanes = std::array<typename detail::LaneRows<Scalar>::Values,
-                              static_cast<std::size_t>(Rows)>;
+  friend class detail::GuidanceLanes<GuidanceByRepulsion>;  // the batch path: its equations
 
   static Vec2 perp(const Vec2& r) { return Vec2(-r.y(), r.x()); }
 
@@ -404,49 +377,6 @@ private:
     });
   }
 
-  /// Columns first … first + count − 1 of `m` into one lane array per row, and back.
-  template <class Rows, class Source>
-  static void load(const Source& m, Index first, int count, Rows& rows) {
-    eigen_assert(static_cast<Index>(rows.size()) == m.rows());
-    detail::LaneRows<Scalar>::load_rows(m, first, count, rows.data());
-  }
-  template <class Rows, class Target>
-  static void store(const Rows& rows, Index first, int count, Target&& m) {
-    eigen_assert(static_cast<Index>(rows.size()) == m.rows());
-    detail::LaneRows<Scalar>::store_rows(rows.data(), first, count, m);
-  }
-
-  using Columns = typename detail::LaneRows<Scalar>::Columns;
-  using ColumnsOut = typename detail::LaneRows<Scalar>::ColumnsOut;
-
-  /// The VJPs of `vjp_batch` block by block over the columns of `lambda` (x's and u's as
-  /// many); an output without a matrix is skipped. One machine copy (SBPTT_ONE_COPY) for
-  /// `vjp_batch` and `vjp_batch_pair`, so that the pair's halves are the single calls' bits.
-  SBPTT_ONE_COPY void vjp_lanes(const Columns& x, const Columns& u, const Columns& lambda,
-                                const ColumnsOut& lambda_x, const ColumnsOut& lambda_u) const {
-    RowLanes<kStateSize> state, cotangent, propagated;
-    RowLanes<kControlSize> control, control_cotangent;
-    const Index columns = lambda.cols();
-    for (Index first = 0; first < columns; first += detail::LaneRows<Scalar>::kLanes) {
-      const int count = detail::LaneRows<Scalar>::count(columns, first);
-      load(x, first, count, state);
-      load(u, first, count, control);
-      load(lambda, first, count, cotangent);
-      vjp_values(state.data(), control.data(), cotangent.data(),
-                 lambda_x.left ? propagated.data() : nullptr,
-                 lambda_u.left ? control_cotangent.data() : nullptr);
-      if (lambda_x.left) store(propagated, first, count, lambda_x);
-      if (lambda_u.left) store(control_cotangent, first, count, lambda_u);
-    }
-  }
-
-  void check_adjoint(const Matrix<Scalar>& lambda, const Matrix<Scalar>& x, const char* caller,
-                     const char* name) const {
-    detail::require(lambda.rows() == state_dim() && lambda.cols() == x.cols(),
-                    "GuidanceByRepulsion::", caller, ": ", name, " is ", lambda.rows(), " x ",
-                    lambda.cols(), "; expected ", state_dim(), " x ", x.cols());
-  }
-
   /// 0 as one number or as a lane array.
   template <class V>
   [[nodiscard]] static V zero() {
@@ -455,15 +385,6 @@ private:
     } else {
       return V(0);
     }
-  }
-
-  void check_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, const char* caller) const {
-    detail::require(x.rows() == state_dim(), "GuidanceByRepulsion::", caller, ": x has ",
-                    x.rows(), " rows; expected state_dim() = ", state_dim(),
-                    " (one sample per column)");
-    detail::require(u.rows() == control_dim() && u.cols() == x.cols(), "GuidanceByRepulsion::",
-                    caller, ": u is ", u.rows(), " x ", u.cols(), "; expected ", control_dim(),
-                    " x ", x.cols(), " (one control per sample)");
   }
 
   /// Fixed sizes are checked by the compiler; dynamic ones here, since a mismatch would

@@ -222,7 +222,8 @@ private:
   using Kernel = detail::PairKernel<Scalar>;
   /// p̈ of every agent, x then y: scratch of `step`.
   using AccelerationValues = Eigen::Matrix<Scalar, detail::times_or_dynamic(2, kAgents), 1>;
-  friend class detail::GuidanceLanes<GuidanceByRepulsion>;  // the batch path: its equations
+  // The batch path runs the same private `step_values` and `vjp_values` as `step` and `vjp`.
+  friend class detail::GuidanceLanes<GuidanceByRepulsion>;
 
   static Vec2 perp(const Vec2& r) { return Vec2(-r.y(), r.x()); }
 

@@ -3,10 +3,13 @@
 /// side by side in SIMD lanes, one lane array per state or control row (lane_rows.hpp), through
 /// the simulator's own equations on a sample's numbers, `step_values` and `vjp_values`.
 /// Equations and state layout: guidance_by_repulsion.hpp. Implementation detail of its
-/// `step_batch`, `vjp_batch` and `vjp_batch_pair` (how they round: `step_batch`), with their
-/// argument checks.
+/// `step_batch`, `vjp_batch` and `vjp_batch_pair`, with their argument checks; how the lanes
+/// round is in `step_batch`'s documentation.
 #include <array>
 #include <cstddef>
+#include <type_traits>
+
+#include <Eigen/Core>
 
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
@@ -16,13 +19,14 @@
 
 namespace sbptt::detail {
 
-/// The batch calls of the simulator `sim` (a `GuidanceByRepulsion` in float with fixed agent
-/// counts, whose friend this is).
+/// The batch calls of a `GuidanceByRepulsion`, `Sim`, which befriends this class.
 template <class Sim>
 class GuidanceLanes {
 public:
   using Scalar = typename Sim::Scalar;
   using Lanes = LaneRows<Scalar>;
+  static_assert(std::is_same_v<Scalar, float> && Sim::kStateSize != Eigen::Dynamic,
+                "GuidanceLanes: float with fixed agent counts only, as step_batch requires");
 
   explicit GuidanceLanes(const Sim& sim) : sim_(sim) {}
 
@@ -73,7 +77,8 @@ private:
   using Columns = typename Lanes::Columns;
   using ColumnsOut = typename Lanes::ColumnsOut;
 
-  /// Columns first … first + count − 1 of `m` into one lane array per row, and back.
+  /// `LaneRows`' loads and stores, checked in debug builds against the lane arrays' count: a
+  /// mismatch would read or write past the simulator's rows.
   template <class Rows, class Source>
   static void load(const Source& m, Index first, int count, Rows& rows) {
     eigen_assert(static_cast<Index>(rows.size()) == m.rows());
@@ -85,8 +90,7 @@ private:
     Lanes::store_rows(rows.data(), first, count, m);
   }
 
-  /// The VJPs block by block over the columns of `lambda` (x's and u's as many); an output
-  /// without a matrix is skipped. One machine copy (SBPTT_ONE_COPY) for `vjp` and `vjp_pair`,
+  /// An output without a matrix is skipped. One machine copy (SBPTT_ONE_COPY) for `vjp` and `vjp_pair`,
   /// so that the pair's halves are the single calls' bits.
   SBPTT_ONE_COPY void vjp_blocks(const Columns& x, const Columns& u, const Columns& lambda,
                                  const ColumnsOut& lambda_x, const ColumnsOut& lambda_u) const {

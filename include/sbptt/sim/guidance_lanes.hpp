@@ -90,8 +90,8 @@ private:
     Lanes::store_rows(rows.data(), first, count, m);
   }
 
-  /// An output without a matrix is skipped. One machine copy (SBPTT_ONE_COPY) for `vjp` and `vjp_pair`,
-  /// so that the pair's halves are the single calls' bits.
+  /// An output without a matrix is skipped. One machine copy (SBPTT_ONE_COPY) for `vjp` and
+  /// `vjp_pair`, so that the pair's halves are the single calls' bits.
   SBPTT_ONE_COPY void vjp_blocks(const Columns& x, const Columns& u, const Columns& lambda,
                                  const ColumnsOut& lambda_x, const ColumnsOut& lambda_u) const {
     RowLanes<Sim::kStateSize> state, cotangent, propagated;

@@ -6,6 +6,7 @@
 // outside the block or past the last lane array is written.
 #include <catch2/catch.hpp>
 
+#include <span>
 #include <utility>
 #include <vector>
 
@@ -31,7 +32,9 @@ TEMPLATE_TEST_CASE("lane rows: a block of samples in and out, entry for entry",
         // One more lane array than rows, as a sentinel.
         std::vector<typename Lanes::Values> values(static_cast<std::size_t>(rows + 1));
         for (auto& v : values) v.setConstant(S(-9));
-        Lanes::load_rows(m, first, count, values.data());
+        // The first `rows` arrays, one per row of m; the one after them is the sentinel.
+        const auto arrays = std::span(values).first(static_cast<std::size_t>(rows));
+        Lanes::load_rows(m, first, count, arrays);
         REQUIRE((values.back() == S(-9)).all());
         for (Index r = 0; r < rows; ++r) {
           const auto& v = values[static_cast<std::size_t>(r)];
@@ -43,7 +46,7 @@ TEMPLATE_TEST_CASE("lane rows: a block of samples in and out, entry for entry",
         for (auto& v : values) v = random_matrix<S>(kLanes, 1, ++seed, 1.0).array();
         const Matrix<S> before = random_matrix<S>(rows, cols, ++seed, 1.0);
         Matrix<S> out = before;
-        Lanes::store_rows(values.data(), first, count, out);
+        Lanes::store_rows(arrays, first, count, out);
         for (Index r = 0; r < rows; ++r) {
           for (Index c = 0; c < cols; ++c) {
             const bool in_block = c >= first && c < first + count;

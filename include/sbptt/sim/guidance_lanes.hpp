@@ -39,10 +39,10 @@ public:
     RowLanes<2 * Sim::kAgents> acc;
     for (Index first = 0; first < x.cols(); first += Lanes::kLanes) {
       const int count = Lanes::count(x.cols(), first);
-      load(x, first, count, state);
-      load(u, first, count, control);
+      Lanes::load_rows(x, first, count, state);
+      Lanes::load_rows(u, first, count, control);
       sim_.step_values(state.data(), control.data(), acc.data(), next.data());
-      store(next, first, count, x_next);
+      Lanes::store_rows(next, first, count, x_next);
     }
   }
 
@@ -77,19 +77,6 @@ private:
   using Columns = typename Lanes::Columns;
   using ColumnsOut = typename Lanes::ColumnsOut;
 
-  /// `LaneRows`' loads and stores, checked in debug builds against the lane arrays' count: a
-  /// mismatch would read or write past the simulator's rows.
-  template <class Rows, class Source>
-  static void load(const Source& m, Index first, int count, Rows& rows) {
-    eigen_assert(static_cast<Index>(rows.size()) == m.rows());
-    Lanes::load_rows(m, first, count, rows.data());
-  }
-  template <class Rows, class Target>
-  static void store(const Rows& rows, Index first, int count, Target&& m) {
-    eigen_assert(static_cast<Index>(rows.size()) == m.rows());
-    Lanes::store_rows(rows.data(), first, count, m);
-  }
-
   /// An output without a matrix is skipped. One machine copy (SBPTT_ONE_COPY) for `vjp` and
   /// `vjp_pair`, so that the pair's halves are the single calls' bits.
   SBPTT_ONE_COPY void vjp_blocks(const Columns& x, const Columns& u, const Columns& lambda,
@@ -99,14 +86,14 @@ private:
     const Index columns = lambda.cols();
     for (Index first = 0; first < columns; first += Lanes::kLanes) {
       const int count = Lanes::count(columns, first);
-      load(x, first, count, state);
-      load(u, first, count, control);
-      load(lambda, first, count, cotangent);
+      Lanes::load_rows(x, first, count, state);
+      Lanes::load_rows(u, first, count, control);
+      Lanes::load_rows(lambda, first, count, cotangent);
       sim_.vjp_values(state.data(), control.data(), cotangent.data(),
                       lambda_x.left ? propagated.data() : nullptr,
                       lambda_u.left ? control_cotangent.data() : nullptr);
-      if (lambda_x.left) store(propagated, first, count, lambda_x);
-      if (lambda_u.left) store(control_cotangent, first, count, lambda_u);
+      if (lambda_x.left) Lanes::store_rows(propagated, first, count, lambda_x);
+      if (lambda_u.left) Lanes::store_rows(control_cotangent, first, count, lambda_u);
     }
   }
 

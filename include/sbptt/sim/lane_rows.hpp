@@ -16,6 +16,8 @@
 /// in and 28 out per block: entry by entry, about 0.15–0.2 ns an entry;
 /// docs/benchmark-runs.md, eighteenth run).
 #include <algorithm>
+#include <cstddef>
+#include <span>
 
 #include <Eigen/Core>
 
@@ -52,36 +54,40 @@ struct LaneRows {
   using Columns = SideBySide<const Matrix<Scalar>>;
   using ColumnsOut = SideBySide<Matrix<Scalar>>;
 
-  /// Every row of columns first … first + count − 1 of `m` into `rows` (m.rows() arrays), as
-  /// `load` row by row.
+  /// Every row of columns first … first + count − 1 of `m` into `rows`, one lane array per row
+  /// of `m`, as `load` row by row. Debug builds check the count of arrays: a mismatch would
+  /// read or write past the caller's arrays or the matrix's rows.
   EIGEN_ALWAYS_INLINE static void load_rows(const Columns& m, Index first, int count,
-                                            Values* rows) {
+                                            std::span<Values> rows) {
+    eigen_assert(static_cast<Index>(rows.size()) == m.rows());
 #if defined(EIGEN_VECTORIZE_AVX512)
     if constexpr (kTransposeInRegisters) {
-      return load_tiles(m, first, count, rows);
+      return load_tiles(m, first, count, rows.data());
     }
 #endif
     for (Index r = 0; r < m.rows(); ++r)
-      for (int l = 0; l < kLanes; ++l) rows[r](l) = l < count ? m.column(first + l)[r] : Scalar(0);
+      for (int l = 0; l < kLanes; ++l)
+        rows[static_cast<std::size_t>(r)](l) = l < count ? m.column(first + l)[r] : Scalar(0);
   }
   EIGEN_ALWAYS_INLINE static void load_rows(const Matrix<Scalar>& m, Index first, int count,
-                                            Values* rows) {
+                                            std::span<Values> rows) {
     load_rows(Columns{&m}, first, count, rows);
   }
 
-  /// The first `count` lanes of `rows` (m.rows() arrays) into columns first … first + count − 1
-  /// of `m`, as `store` row by row.
-  EIGEN_ALWAYS_INLINE static void store_rows(const Values* rows, Index first, int count,
+  /// The first `count` lanes of `rows` (one array per row of `m`, checked as in `load_rows`)
+  /// into columns first … first + count − 1 of `m`, as `store` row by row.
+  EIGEN_ALWAYS_INLINE static void store_rows(std::span<const Values> rows, Index first, int count,
                                              const ColumnsOut& m) {
+    eigen_assert(static_cast<Index>(rows.size()) == m.rows());
 #if defined(EIGEN_VECTORIZE_AVX512)
     if constexpr (kTransposeInRegisters) {
-      return store_tiles(rows, first, count, m);
+      return store_tiles(rows.data(), first, count, m);
     }
 #endif
     for (Index r = 0; r < m.rows(); ++r)
-      for (int l = 0; l < count; ++l) m.column(first + l)[r] = rows[r](l);
+      for (int l = 0; l < count; ++l) m.column(first + l)[r] = rows[static_cast<std::size_t>(r)](l);
   }
-  EIGEN_ALWAYS_INLINE static void store_rows(const Values* rows, Index first, int count,
+  EIGEN_ALWAYS_INLINE static void store_rows(std::span<const Values> rows, Index first, int count,
                                              Matrix<Scalar>& m) {
     store_rows(rows, first, count, ColumnsOut{&m});
   }

@@ -67,7 +67,7 @@ public:
   static void load(const Matrix<Scalar>& x, Index first, int count, Field& f) {
     f.clear_walls();
     Rows rows;
-    LaneRows<Scalar>::load_rows(x, first, count, rows.data());
+    LaneRows<Scalar>::load_rows(x, first, count, rows);
     for (int j = 0; j < Nx; ++j) {
       std::copy_n(rows[2 * j].data(), kLanes, f.re[j + 1]);
       std::copy_n(rows[2 * j + 1].data(), kLanes, f.im[j + 1]);
@@ -79,7 +79,7 @@ public:
       std::copy_n(f.re[j + 1], kLanes, rows[2 * j].data());
       std::copy_n(f.im[j + 1], kLanes, rows[2 * j + 1].data());
     }
-    LaneRows<Scalar>::store_rows(rows.data(), first, count, x);
+    LaneRows<Scalar>::store_rows(rows, first, count, x);
   }
   static LaneValues load_controls(const Matrix<Scalar>& u, Index first, int count) {
     LaneValues out{};

@@ -29,10 +29,10 @@ TEMPLATE_TEST_CASE("lane rows: a block of samples in and out, entry for entry",
         INFO("rows " << rows << " count " << count << " first " << first << " after " << after);
         const Index cols = first + count + after;
         const Matrix<S> m = random_matrix<S>(rows, cols, ++seed, 1.0);
-        // One more lane array than rows, as a sentinel.
+        // One lane array per row of m and one more after them as a sentinel; the functions
+        // get only the first `rows`.
         std::vector<typename Lanes::Values> values(static_cast<std::size_t>(rows + 1));
         for (auto& v : values) v.setConstant(S(-9));
-        // The first `rows` arrays, one per row of m; the one after them is the sentinel.
         const auto arrays = std::span(values).first(static_cast<std::size_t>(rows));
         Lanes::load_rows(m, first, count, arrays);
         REQUIRE((values.back() == S(-9)).all());

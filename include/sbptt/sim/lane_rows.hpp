@@ -16,7 +16,6 @@
 /// in and 28 out per block: entry by entry, about 0.15–0.2 ns an entry;
 /// docs/benchmark-runs.md, eighteenth run).
 #include <algorithm>
-#include <cstddef>
 #include <span>
 
 #include <Eigen/Core>
@@ -55,19 +54,21 @@ struct LaneRows {
   using ColumnsOut = SideBySide<Matrix<Scalar>>;
 
   /// Every row of columns first … first + count − 1 of `m` into `rows`, one lane array per row
-  /// of `m`, as `load` row by row. Debug builds check the count of arrays: a mismatch would
-  /// read or write past the caller's arrays or the matrix's rows.
+  /// of `m`, as `load` row by row. Debug builds check that there is one array per row: with too
+  /// few the loads write past the caller's arrays (the stores read past them), with too many
+  /// the arrays past m.rows() keep stale values that the caller's arithmetic would read.
   EIGEN_ALWAYS_INLINE static void load_rows(const Columns& m, Index first, int count,
                                             std::span<Values> rows) {
     eigen_assert(static_cast<Index>(rows.size()) == m.rows());
+    // By pointer from here: a span's operator[] is bounds-checked under _GLIBCXX_ASSERTIONS.
+    Values* const out = rows.data();
 #if defined(EIGEN_VECTORIZE_AVX512)
     if constexpr (kTransposeInRegisters) {
-      return load_tiles(m, first, count, rows.data());
+      return load_tiles(m, first, count, out);
     }
 #endif
     for (Index r = 0; r < m.rows(); ++r)
-      for (int l = 0; l < kLanes; ++l)
-        rows[static_cast<std::size_t>(r)](l) = l < count ? m.column(first + l)[r] : Scalar(0);
+      for (int l = 0; l < kLanes; ++l) out[r](l) = l < count ? m.column(first + l)[r] : Scalar(0);
   }
   EIGEN_ALWAYS_INLINE static void load_rows(const Matrix<Scalar>& m, Index first, int count,
                                             std::span<Values> rows) {
@@ -79,13 +80,14 @@ struct LaneRows {
   EIGEN_ALWAYS_INLINE static void store_rows(std::span<const Values> rows, Index first, int count,
                                              const ColumnsOut& m) {
     eigen_assert(static_cast<Index>(rows.size()) == m.rows());
+    const Values* const in = rows.data();
 #if defined(EIGEN_VECTORIZE_AVX512)
     if constexpr (kTransposeInRegisters) {
-      return store_tiles(rows.data(), first, count, m);
+      return store_tiles(in, first, count, m);
     }
 #endif
     for (Index r = 0; r < m.rows(); ++r)
-      for (int l = 0; l < count; ++l) m.column(first + l)[r] = rows[static_cast<std::size_t>(r)](l);
+      for (int l = 0; l < count; ++l) m.column(first + l)[r] = in[r](l);
   }
   EIGEN_ALWAYS_INLINE static void store_rows(std::span<const Values> rows, Index first, int count,
                                              Matrix<Scalar>& m) {

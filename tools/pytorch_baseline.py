@@ -253,6 +253,13 @@ def blas_library() -> str:
     return ", ".join(sorted(os.path.realpath(p) for p in paths)) or "none mapped"
 
 
+def cpu_capability() -> str:
+    """The instruction set torch's own kernels run, as its build configuration reports it."""
+    lines = [line.strip(" -") for line in torch.__config__.show().splitlines()
+             if "CPU capability" in line]
+    return lines[0] if lines else "CPU capability not reported"
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--task", choices=tuple(TASKS), default="cartpole")
@@ -276,7 +283,7 @@ def main() -> int:
     gate = torch.ones((), dtype=dtype)
     print(f"pytorch {torch.__version__}, {torch.get_num_threads()} thread, {args.dtype}, "
           f"{args.task}, method {args.method}, {SAMPLES // BATCH} updates an epoch")
-    print(f"blas: {blas_library()}")
+    print(f"blas: {blas_library()}; {cpu_capability()}")
     seconds = []
     for epoch in range(args.epochs):
         order = torch.randperm(SAMPLES, generator=torch.Generator().manual_seed(epoch))

@@ -25,7 +25,7 @@ control's step with the complex equation solved directly, and checks that its st
 
 Needs Debian's python3-torch and OpenBLAS (`apt-get install python3-torch
 libopenblas0-pthread`): without OpenBLAS, Debian's torch multiplies with the reference BLAS,
-which made the cart pole's R epoch about 1.5 times as long (docs/benchmark-runs-zen4.md,
+which made the cart pole's R epoch 1.4 times as long (docs/benchmark-runs-zen4.md,
 forty-first run). It prints the BLAS it ran with. Usage:
     /usr/bin/python3 tools/pytorch_baseline.py [--task cartpole|quantum] [--method R|C]
         [--dtype float64|float32] [--epochs N] [--check]

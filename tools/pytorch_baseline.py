@@ -11,10 +11,11 @@ Crank–Nicolson steps of a 32-point grid, the loss summed over the steps; batch
 - R: the regular gradient, the rollout under TorchScript (`torch.jit.script`).
 - C: the combined update in one forward pass, also scripted: the network reads its input
   as lerp(x̄, x, a) = x̄ + a·(x − x̄), x̄ = x detached, a value of x whose gradient the
-  backward pass multiplies by the gate a. Two backward passes over the one graph give g_R (a = 1) and g_M
-  (a = 0: the gradient stopped at the network's input), a set between them through `.data`,
-  which autograd's version check does not see. The update takes g_M where its sign agrees
-  with g_R's, 0 elsewhere (sign(0) = 0, as in include/sbptt/optim/combined_update.hpp).
+  backward pass multiplies by the gate a. Two backward passes over the one graph give g_R
+  (a = 1) and g_M (a = 0: the gradient stopped at the network's input), a set between them
+  through `.data`, which autograd's version check does not see. The update takes g_M where
+  its sign agrees with g_R's, 0 elsewhere (sign(0) = 0, as in
+  include/sbptt/optim/combined_update.hpp).
 
 The equations are those of include/sbptt/sim/cartpole.hpp and schrodinger.hpp. The numbers
 are not meant to match sbptt's bit for bit; the work is. Three untimed calls of each path

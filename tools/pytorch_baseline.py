@@ -103,16 +103,17 @@ class Quantum(torch.nn.Module):
     def __init__(self):
         super().__init__()
         self.grid, self.steps, self.continuous = 32, 128, True
-        n, dx, half_dt = self.grid, 2.0 / (self.grid + 1), 0.0625 / 2
+        n, dx, self.half_dt = self.grid, 2.0 / (self.grid + 1), 0.0625 / 2
         f64 = torch.float64
-        h0 = (2 * torch.eye(n, dtype=f64) - torch.diag(torch.ones(n - 1, dtype=f64), 1)
-              - torch.diag(torch.ones(n - 1, dtype=f64), -1)) / (dx * dx)
-        positions = torch.arange(1, n + 1, dtype=f64) * dx
+        self.h0 = (2 * torch.eye(n, dtype=f64) - torch.diag(torch.ones(n - 1, dtype=f64), 1)
+                   - torch.diag(torch.ones(n - 1, dtype=f64), -1)) / (dx * dx)
+        self.positions = torch.arange(1, n + 1, dtype=f64) * dx
         # A complex-linear map acts on a (Re, Im) pair as kron(·, [[Re, −Im], [Im, Re]]); i is
         # kron(·, J). U₁ = I + ihH = base + u·field, and U₂ = I − ihH = U₁ᵀ.
         j = torch.tensor([[0.0, -1.0], [1.0, 0.0]], dtype=f64)
-        self.register_buffer("base", torch.eye(2 * n, dtype=f64) + torch.kron(half_dt * h0, j))
-        self.register_buffer("field", torch.kron(half_dt * torch.diag(positions), j))
+        self.register_buffer("base",
+                             torch.eye(2 * n, dtype=f64) + torch.kron(self.half_dt * self.h0, j))
+        self.register_buffer("field", torch.kron(self.half_dt * torch.diag(self.positions), j))
         self.register_buffer("target", self.eigenstate(3))
 
     def eigenstate(self, level: int) -> torch.Tensor:
@@ -184,12 +185,16 @@ class Rollout(torch.nn.Module):
 TASKS = {"cartpole": CartPole, "quantum": Quantum}
 
 
+def weighted_layers(net: torch.nn.Module) -> list:
+    return [m for m in net.modules() if isinstance(m, (torch.nn.Linear, torch.nn.Conv1d))]
+
+
 def setup(task_name: str, dtype: torch.dtype):
     """The task, its network (Glorot weights, zero biases, seed 0) and its 256 training states."""
     task = TASKS[task_name]().to(dtype)
     torch.manual_seed(0)
     net = task.network()
-    layers = [m for m in net.modules() if isinstance(m, (torch.nn.Linear, torch.nn.Conv1d))]
+    layers = weighted_layers(net)
     for layer in layers:
         torch.nn.init.xavier_uniform_(layer.weight)
         torch.nn.init.zeros_(layer.bias)
@@ -226,8 +231,7 @@ def check(task_name: str) -> bool:
     keep ‖ψ‖ = 1 (Crank–Nicolson is unitary)."""
     dtype = torch.float64
     task, net, states = setup(task_name, dtype)
-    layers = [m for m in net.modules() if isinstance(m, (torch.nn.Linear, torch.nn.Conv1d))]
-    torch.nn.init.normal_(layers[-1].weight, std=0.1)
+    torch.nn.init.normal_(weighted_layers(net)[-1].weight, std=0.1)
     params = list(net.parameters())
     batch = states[:BATCH]
     rollout = torch.jit.script(Rollout(task, net))
@@ -262,16 +266,13 @@ def check(task_name: str) -> bool:
 
 def check_quantum_step(task, net, batch) -> bool:
     """The real step against the complex equation solved directly, (I + ihH) ψ' = (I − ihH) ψ
-    in complex128, for random fields u; and ‖ψ‖ after a rollout (the step is unitary)."""
-    n, dx, half_dt = task.grid, 2.0 / (task.grid + 1), 0.0625 / 2
-    j = torch.arange(1, n + 1, dtype=torch.float64)
-    h0 = (2 * torch.eye(n) - torch.diag(torch.ones(n - 1), 1)
-          - torch.diag(torch.ones(n - 1), -1)).double() / (dx * dx)
+    in complex128 with the task's H₀ and x_j, for random fields u; and ‖ψ‖ after a rollout
+    (the step is unitary)."""
     u = torch.randn(batch.shape[0], generator=torch.Generator().manual_seed(7),
                     dtype=torch.float64) * 5
-    hamiltonian = h0 + u.view(-1, 1, 1) * torch.diag(j * dx)
-    ihh = 1j * half_dt * hamiltonian.to(torch.complex128)
-    eye = torch.eye(n, dtype=torch.complex128)
+    hamiltonian = task.h0 + u.view(-1, 1, 1) * torch.diag(task.positions)
+    ihh = 1j * task.half_dt * hamiltonian.to(torch.complex128)
+    eye = torch.eye(task.grid, dtype=torch.complex128)
     psi = torch.complex(batch[:, 0::2], batch[:, 1::2]).unsqueeze(2)
     expected = torch.linalg.solve(eye + ihh, (eye - ihh) @ psi).squeeze(2)
     with torch.no_grad():

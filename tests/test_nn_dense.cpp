@@ -212,15 +212,45 @@ TEST_CASE("dense networks reject malformed layers and inputs", "[nn][dense]") {
                       Contains("params() has 5 entries"));
 }
 
+TEST_CASE("the double tanh's 2^k equals std::ldexp(1, k)", "[nn][activation]") {
+  // Every k for which 2^k is a normal double, through each form the tanh can use.
+  auto check = [](auto packet, const char* form, auto power_of_two) {
+    using Packet = decltype(packet);
+    INFO(form);
+    for (int k = -1022; k <= 1023; ++k) {
+      const double biased = k + 1023 + 6755399441055744.0;
+      const Packet got = power_of_two(Eigen::internal::pset1<Packet>(biased),
+                                      Eigen::internal::pset1<Packet>(double(k)));
+      REQUIRE(Eigen::internal::pfirst(got) == std::ldexp(1.0, k));
+    }
+  };
+  auto chosen = [](const auto& biased, const auto& k) {
+    return sbptt::detail::power_of_two(biased, k);
+  };
+  auto portable = [](const auto& biased, const auto& k) {
+    return sbptt::detail::power_of_two_portable(biased, k);
+  };
+  using Widest = typename Eigen::internal::packet_traits<double>::type;
+  check(Widest{}, "this build's widest register", chosen);
+  check(Widest{}, "the portable form, widest register", portable);
+  check(double{}, "a lone double", chosen);
+#if defined(EIGEN_VECTORIZE_SSE2)
+  check(Eigen::internal::Packet2d{}, "2 lanes", chosen);
+#endif
+}
+
 TEST_CASE("the vectorised double tanh equals std::tanh to round-off", "[nn][activation]") {
-  // Dense sweep across both branches (|x| ≤ 0.625 rational, beyond 1 − 2/(e^{2x}+1)), the
-  // branch point itself, tiny and huge arguments, and the non-finite ones. Each way of
-  // computing it, whichever of them this build's activate_in_place uses: in this build's
-  // widest register and (on x86) in SSE2's 2 lanes, and entry by entry.
+  // Dense sweep of [−20, 20], where k = round(2|x| / ln 2) takes every value it can; the
+  // arguments where k steps from 0 to 1 (2|x| = ln2/2, where 2^k − 1 and 2^k (e^r − 1) cancel
+  // most), where the clamp 2|x| ≤ 40 starts, tiny and huge arguments, and the non-finite ones.
+  // In this build's widest register, (on x86) in SSE2's 2 lanes, and as a lone double (a build
+  // without SIMD).
   std::vector<double> xs;
   for (int i = -40000; i <= 40000; ++i) xs.push_back(i * 5e-4);
-  for (double x : {0.625, std::nextafter(0.625, 1.0), 1e-300, 5e-324, 0.0, -0.0, 19.0, 20.0,
-                   710.0, 1e300, std::numeric_limits<double>::infinity(),
+  const double k_steps = std::log(2.0) / 4;
+  for (double x : {k_steps, std::nextafter(k_steps, 0.0), std::nextafter(k_steps, 1.0), 1e-300,
+                   5e-324, 0.0, -0.0, 19.0, 20.0, 20.5, 710.0, 1e300,
+                   std::numeric_limits<double>::infinity(),
                    std::numeric_limits<double>::quiet_NaN()}) {
     xs.push_back(x);
     xs.push_back(-x);
@@ -241,8 +271,7 @@ TEST_CASE("the vectorised double tanh equals std::tanh to round-off", "[nn][acti
   std::vector<std::pair<const char*, Eigen::ArrayXd>> ways;
   ways.emplace_back("activate_in_place", x);
   sbptt::activate_in_place(Activation::Tanh, ways.back().second);
-  ways.emplace_back("tanh_entrywise_double", x);
-  sbptt::detail::tanh_entrywise_double(ways.back().second);
+  ways.emplace_back("tanh_packet_double, a lone double", in_registers(double{}));
   ways.emplace_back("tanh_packet_double, this build's widest register",
                     in_registers(typename Eigen::internal::packet_traits<double>::type{}));
 #if defined(EIGEN_VECTORIZE_SSE2)

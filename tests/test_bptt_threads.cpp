@@ -287,10 +287,14 @@ TEST_CASE("threads: bad settings are rejected with a clear message", "[bptt][thr
 TEST_CASE("threads: a sweep that throws while a second thread works on its steps stops both "
           "threads, and the engine sweeps correctly afterwards", "[bptt][threads]") {
   /// The cart pole, whose VJP throws once `countdown` further calls have been made (never
-  /// while it is negative).
+  /// while it is negative). Sample by sample: CartPole<double>'s batched calls would bypass
+  /// the planted `vjp`, so they are hidden, and the engine takes the per-sample path.
   struct Failing : CartPole<double, 2> {
     int* countdown;
     explicit Failing(int* c) : countdown(c) {}
+    void step_batch(const Matrix<double>&, const Matrix<double>&, Matrix<double>&) const = delete;
+    void vjp_batch(const Matrix<double>&, const Matrix<double>&, const Matrix<double>&,
+                   Matrix<double>*, Matrix<double>*) const = delete;
     void vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
              Control* lambda_u) const {
       if (*countdown >= 0 && (*countdown)-- == 0) throw std::runtime_error("planted VJP failure");

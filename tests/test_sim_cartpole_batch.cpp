@@ -1,13 +1,14 @@
-// CartPole's batched step and vjp (float samples in SIMD lanes): against the per-sample step and
-// vjp, against the analytic Jacobians in double (themselves checked against finite differences
-// in test_sim_cartpole.cpp), against central differences of the batched step itself, and
-// independence from the other columns, for the reference and the physical model; the lane
-// layouts of the reference model against each other.
+// CartPole's batched step and vjp (float and double samples in SIMD lanes): against the
+// per-sample step and vjp, the float ones against the analytic Jacobians in double (themselves
+// checked against finite differences in test_sim_cartpole.cpp) and against central differences
+// of the batched step itself; independence from the other columns, for the reference and the
+// physical model; the lane layouts of the reference model against each other.
 #include <catch2/catch.hpp>
 
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <type_traits>
 
 #include "sbptt/core/rng.hpp"
 #include "sbptt/sim/cartpole.hpp"
@@ -21,23 +22,25 @@ using sbptt::CartPoleOptions;
 using sbptt::Index;
 using sbptt::Matrix;
 
+template <class Scalar = float>
 struct Batch {
-  Matrix<float> x, u, lambda;
+  Matrix<Scalar> x, u, lambda;
 };
 
 // States of the paper's distribution spread to any angle (poles upright, hanging and spun
 // past 2π), forces in ±20 N, cotangents.
-Batch random_batch(Index state_dim, Index size, sbptt::Rng& rng) {
-  Batch b{Matrix<float>(state_dim, size), Matrix<float>(1, size),
-          Matrix<float>(state_dim, size)};
+template <class Scalar = float>
+Batch<Scalar> random_batch(Index state_dim, Index size, sbptt::Rng& rng) {
+  Batch<Scalar> b{Matrix<Scalar>(state_dim, size), Matrix<Scalar>(1, size),
+                  Matrix<Scalar>(state_dim, size)};
   for (Index c = 0; c < size; ++c) {
     for (Index i = 0; i < state_dim; ++i) {
       const bool angle = i >= 2 && i % 2 == 0;
-      b.x(i, c) = static_cast<float>(angle ? rng.uniform(-3.0, 3.0) * std::numbers::pi
-                                           : rng.uniform(-2.0, 2.0));
-      b.lambda(i, c) = static_cast<float>(rng.normal());
+      b.x(i, c) = static_cast<Scalar>(angle ? rng.uniform(-3.0, 3.0) * std::numbers::pi
+                                            : rng.uniform(-2.0, 2.0));
+      b.lambda(i, c) = static_cast<Scalar>(rng.normal());
     }
-    b.u(0, c) = static_cast<float>(rng.uniform(-20.0, 20.0));
+    b.u(0, c) = static_cast<Scalar>(rng.uniform(-20.0, 20.0));
   }
   return b;
 }
@@ -48,12 +51,14 @@ CartPoleOptions physical() {
   return options;
 }
 
-// Both are float: a few roundings of the sine and cosine apart.
+// Both in the simulator's scalar: a few roundings of the sine and cosine apart.
 template <class Sim>
 void check_against_per_sample(const Sim& sim, Index size, sbptt::Rng& rng) {
-  const Batch b = random_batch(sim.state_dim(), size, rng);
+  using Scalar = typename Sim::Scalar;
+  const auto b = random_batch<Scalar>(sim.state_dim(), size, rng);
   INFO(sim.poles() << " poles");
-  sbptt::testing::check_matches_per_sample(sim, b.x, b.u, b.lambda, 2e-6);
+  const double tolerance = std::is_same_v<Scalar, float> ? 2e-6 : 4e-15;
+  sbptt::testing::check_matches_per_sample(sim, b.x, b.u, b.lambda, tolerance);
 }
 
 // Aᵀλ and Bᵀλ of float vjp_batch against the analytic Jacobians of the double model at the same
@@ -62,7 +67,7 @@ template <int Poles>
 void check_against_double_jacobians(const CartPoleOptions& options, sbptt::Rng& rng) {
   const CartPole<float, Poles> sim(options);
   const CartPole<double, Poles> reference(options);
-  const Batch b = random_batch(sim.state_dim(), 19, rng);
+  const Batch<float> b = random_batch(sim.state_dim(), 19, rng);
   Matrix<float> lambda_x, lambda_u;
   sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
   for (Index c = 0; c < b.x.cols(); ++c) {
@@ -88,8 +93,12 @@ TEST_CASE("cartpole batch: step_batch and vjp_batch equal step and vjp per colum
     check_against_per_sample(CartPole<float, 4>(), size, rng);
     check_against_per_sample(CartPole<float, Eigen::Dynamic>(3), size, rng);
     check_against_per_sample(CartPole<float, 2>(physical()), size, rng);
+    check_against_per_sample(CartPole<double, 4>(), size, rng);
+    check_against_per_sample(CartPole<double, Eigen::Dynamic>(3), size, rng);
+    check_against_per_sample(CartPole<double, 2>(physical()), size, rng);
   }
   check_against_per_sample(CartPole<float, 1>(), 5, rng);
+  check_against_per_sample(CartPole<double, 1>(), 5, rng);
 }
 
 TEST_CASE("cartpole batch: the per-column comparison reports a NaN column as NaN",
@@ -103,7 +112,7 @@ TEST_CASE("cartpole batch: the per-column comparison reports a NaN column as NaN
     }
   };
   sbptt::Rng rng(5);
-  const Batch b = random_batch(NanColumn().state_dim(), 8, rng);
+  const Batch<float> b = random_batch(NanColumn().state_dim(), 8, rng);
   const auto errors = sbptt::testing::per_sample_errors(NanColumn(), b.x, b.u, b.lambda);
   CHECK(std::isnan(errors.step));
   CHECK(errors.state < 2e-6);
@@ -126,8 +135,8 @@ TEST_CASE("cartpole batch: vjp_batch matches central differences of step_batch",
     const CartPole<float, 3> sim(options);
     sbptt::Rng rng(43);
     const Index size = 21;
-    const Batch b = random_batch(sim.state_dim(), size, rng);
-    const Batch direction = random_batch(sim.state_dim(), size, rng);
+    const Batch<float> b = random_batch(sim.state_dim(), size, rng);
+    const Batch<float> direction = random_batch(sim.state_dim(), size, rng);
     Matrix<float> lambda_x, lambda_u, plus, minus;
     sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
     const float eps = 1e-2F;
@@ -147,43 +156,47 @@ TEST_CASE("cartpole batch: vjp_batch matches central differences of step_batch",
   }
 }
 
-TEST_CASE("cartpole batch: a column's result does not depend on the other columns",
-          "[sim][cartpole]") {
-  const CartPole<float, 4> sim;
+TEMPLATE_TEST_CASE("cartpole batch: a column's result does not depend on the other columns",
+                   "[sim][cartpole]", float, double) {
+  const CartPole<TestType, 4> sim;
   sbptt::Rng rng(44);
-  const Batch b = random_batch(sim.state_dim(), 21, rng);
+  const auto b = random_batch<TestType>(sim.state_dim(), 21, rng);
   sbptt::testing::check_columns_independent(sim, b.x, b.u, b.lambda);
-  sbptt::testing::check_columns_independent(CartPole<float, 4>(physical()), b.x, b.u, b.lambda);
-  Matrix<float> lambda_x, lambda_u, only_u;  // lambda_x may be skipped
+  sbptt::testing::check_columns_independent(CartPole<TestType, 4>(physical()), b.x, b.u,
+                                            b.lambda);
+  Matrix<TestType> lambda_x, lambda_u, only_u;  // lambda_x may be skipped
   sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
   sim.vjp_batch(b.x, b.u, b.lambda, nullptr, &only_u);
   CHECK(only_u == lambda_u);
 }
 
-TEST_CASE("cartpole batch: a lane per pole and sample gives the lane per sample's numbers",
-          "[sim][cartpole]") {
-  // Fewer samples than a block take a lane per pole and sample when that needs fewer passes
-  // (4 samples of 4 poles: one); a full block of 16 keeps a lane per sample. Samples taken from
-  // both ends of a full block must give, bit for bit, what they give in it, whether they form
-  // a batch of their own or follow a full block in a longer batch (so that the short block
-  // starts at column 16). Pole counts that fit 16, 8, 5, 4, 3, 2 and 1 samples in a block, and
-  // one (17) that fits none; with 1 pole the lane per sample is always taken.
-  for (const Index poles : {1, 2, 3, 4, 5, 8, 12, 16, 17}) {
-    const CartPole<float, Eigen::Dynamic> sim(poles);
+TEMPLATE_TEST_CASE("cartpole batch: a lane per pole and sample gives the lane per sample's "
+                   "numbers", "[sim][cartpole]", float, double) {
+  // Fewer samples than a block (16 floats, 8 doubles) take a lane per pole and sample when that
+  // needs fewer passes (4 samples of 4 poles in floats: one); a full block keeps a lane per
+  // sample. Samples taken from both ends of a full block must give, bit for bit, what they
+  // give in it, whether they form a batch of their own or follow a full block in a longer
+  // batch (so that the short block starts at the second block). Pole counts that fit from 16
+  // samples to 1 in a block, and ones that fit none; with 1 pole the lane per sample is
+  // always taken.
+  constexpr Index block = sbptt::detail::LaneRows<TestType>::kLanes;
+  for (const Index poles : {1, 2, 3, 4, 5, 8, 9, 12, 16, 17}) {
+    const CartPole<TestType, Eigen::Dynamic> sim(poles);
     sbptt::Rng rng(45);
-    const Batch b = random_batch(sim.state_dim(), 16, rng);
-    Matrix<float> next, lambda_x, lambda_u;
+    const auto b = random_batch<TestType>(sim.state_dim(), block, rng);
+    Matrix<TestType> next, lambda_x, lambda_u;
     sim.step_batch(b.x, b.u, next);
     sim.vjp_batch(b.x, b.u, b.lambda, &lambda_x, &lambda_u);
     for (const Index count : {1, 2, 3, 4, 5, 7, 8, 9, 12, 15}) {
-      for (const Index first : {Index{0}, 16 - count}) {
-        for (const Index behind : {Index{0}, Index{16}}) {  // columns before the samples
-          Matrix<float> x(sim.state_dim(), behind + count), u(1, behind + count);
-          Matrix<float> lambda(sim.state_dim(), behind + count);
+      if (count >= block) continue;
+      for (const Index first : {Index{0}, block - count}) {
+        for (const Index behind : {Index{0}, block}) {  // columns before the samples
+          Matrix<TestType> x(sim.state_dim(), behind + count), u(1, behind + count);
+          Matrix<TestType> lambda(sim.state_dim(), behind + count);
           x << b.x.leftCols(behind), b.x.middleCols(first, count);
           u << b.u.leftCols(behind), b.u.middleCols(first, count);
           lambda << b.lambda.leftCols(behind), b.lambda.middleCols(first, count);
-          Matrix<float> part_next, part_x, part_u;
+          Matrix<TestType> part_next, part_x, part_u;
           sim.step_batch(x, u, part_next);
           sim.vjp_batch(x, u, lambda, &part_x, &part_u);
           INFO(poles << " poles, samples " << first << " … " << first + count - 1 << " after "

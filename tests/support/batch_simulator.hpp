@@ -8,8 +8,9 @@
 namespace sbptt::testing {
 
 /// Bit for bit, a column's step_batch and vjp_batch results do not depend on the other
-/// columns: columns 0, 5, 15, 16 and 20 of the batch (x, u, lambda with 21 columns: the first,
-/// a middle and the last lane of a full 16-lane block, then of a partial one) against the same
+/// columns: columns 0, 5, 15, 16 and 20 of the batch (x, u, lambda with 21 columns: in floats
+/// the first, a middle and the last lane of a full 16-lane block, then of a partial one; in
+/// doubles lanes of two full 8-lane blocks and of a partial one) against the same
 /// sample alone among zero columns, at another place. This is what keeps training independent
 /// of the batch's composition and the thread count, and what lets the engine hand both sweeps
 /// of the combined update to one call. Also: x_next may be x itself.

@@ -34,8 +34,8 @@
 /// Hence A = E + G ∂a/∂x, B = G ∂a/∂F, and Aᵀλ = Eᵀλ + (∂a/∂x)ᵀ Gᵀλ, which needs only the
 /// per-pole partials of θ̈_i and ẍ: O(P) work, and no N × N matrix.
 ///
-/// The equations live in cartpole_reference.hpp and cartpole_physical.hpp, the batched float
-/// path in cartpole_lanes.hpp; this header holds the simulator, its task's loss and its
+/// The equations live in cartpole_reference.hpp and cartpole_physical.hpp, the batched path
+/// in cartpole_lanes.hpp; this header holds the simulator, its task's loss and its
 /// initial states.
 #include <cmath>
 #include <numbers>
@@ -228,17 +228,16 @@ public:
   }
 
   /// `step` for every column of x (state_dim × B) and u (1 × B) into x_next (resized to
-  /// state_dim × B; it may be x itself). Float only: the samples run side by side in SIMD lanes
-  /// (lane_rows.hpp) through the same pole equations as `step`, with Eigen's vectorised sine
-  /// and cosine, which round differently from std::sin and std::cos, so the two agree to
-  /// rounding, not bit for bit. A column's result does not depend on the other columns. A
-  /// block of fewer samples than lanes takes a lane per pole and sample where that needs fewer
-  /// passes than one per pole, with the same numbers (cartpole_lanes.hpp). The physical model
-  /// runs `step`'s equations column by column. (In double Eigen has no vectorised sine: lanes
-  /// measured slower than `step` per sample, 797 against 467 ns for 8 samples of 4 poles, so
-  /// double keeps the per-sample path.)
+  /// state_dim × B; it may be x itself). Float and double only (other number types, such as
+  /// automatic differentiation's, step sample by sample): the samples run side by side in SIMD
+  /// lanes (lane_rows.hpp) through the same pole equations as `step`, with a vectorised sine
+  /// and cosine (core/sine_cosine.hpp; Eigen's for float), which round differently from
+  /// std::sin and std::cos, so the two agree to rounding, not bit for bit. A column's result
+  /// does not depend on the other columns. A block of fewer samples than lanes takes a lane per
+  /// pole and sample where that needs fewer passes than one per pole, with the same numbers
+  /// (cartpole_lanes.hpp). The physical model runs `step`'s equations column by column.
   void step_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, Matrix<Scalar>& x_next) const
-    requires std::is_same_v<Scalar, float>
+    requires FloatOrDouble<Scalar>
   {
     using Lanes = detail::LaneRows<Scalar>;
     check_batch(x, u, "step_batch");
@@ -259,7 +258,7 @@ public:
   /// lambda. As `step_batch`: SIMD lanes, equal to `vjp` to rounding.
   void vjp_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, const Matrix<Scalar>& lambda,
                  Matrix<Scalar>* lambda_x, Matrix<Scalar>* lambda_u) const
-    requires std::is_same_v<Scalar, float>
+    requires FloatOrDouble<Scalar>
   {
     using Lanes = detail::LaneRows<Scalar>;
     check_batch(x, u, "vjp_batch");

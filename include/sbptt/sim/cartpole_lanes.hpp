@@ -1,16 +1,18 @@
 #pragma once
 /// \file The reference cart pole (cartpole_reference.hpp) over a block of samples in SIMD lanes,
-/// for `CartPole::step_batch` and `vjp_batch` in float.
+/// for `CartPole::step_batch` and `vjp_batch` in float and double.
 ///
 /// Equations and state layout (x, ẋ, θ_1, θ̇_1, …, θ_P, θ̇_P; control F): cartpole_reference.hpp.
 /// A step is P pole updates, each from its own θ_i, θ̇_i and F, and one cart update from the
 /// sum of the poles' terms, Σ_i q_i; the VJP likewise sums the poles' terms of Bᵀλ.
 ///
 /// Two layouts of a block (lane_rows.hpp), the same numbers in both:
-/// - a lane per sample: one pass of the pole equations per pole, over up to 16 samples;
-/// - a lane per pole and sample (lane b·P + i): one pass for 16 / P samples, taken where it
-///   needs fewer passes than P (`pole_lanes_pay`): a thread's part of the paper's batch, 4
-///   samples of 4 poles, in one pass instead of four; the batch of 8 in two.
+/// - a lane per sample: one pass of the pole equations per pole, over up to L samples (the
+///   lanes of a block: 16 floats, 8 doubles);
+/// - a lane per pole and sample (lane b·P + i): one pass for L / P samples, taken where it
+///   needs fewer passes than P (`pole_lanes_pay`): in float, a thread's part of the paper's
+///   batch, 4 samples of 4 poles, in one pass instead of four, the batch of 8 in two; in
+///   double, the 4 samples in two passes.
 /// Every lane runs the same arithmetic in both, and the sums over the poles are taken per
 /// sample in pole order in both, so the two give the same numbers bit for bit
 /// (tests/test_sim_cartpole_batch.cpp).

@@ -14,7 +14,7 @@
 /// State layout (cartpole.hpp): x, ẋ, θ_1, θ̇_1, …, θ_P, θ̇_P; control: F. Each pole enters the
 /// cart only through q_i, so a step is P independent pole updates and one cart update from
 /// their sum, and the VJP is O(P).
-#include <cmath>
+#include "sbptt/core/sine_cosine.hpp"
 
 namespace sbptt::detail {
 
@@ -40,9 +40,8 @@ struct CartPoleReference {
   /// θ̈ of one pole and its cart term q, with partials (quotient rule on N / D).
   template <class V>
   [[nodiscard]] PoleTerms<V> pole_terms(const V& theta, const V& omega, const V& force) const {
-    using std::cos, std::sin;
-    const V s = sin(theta);
-    const V c = cos(theta);
+    V s, c;
+    sine_cosine(theta, s, c);
     const V w2 = omega * omega;
     // A = (F + m l θ̇² s)/M; ml_over_m = m l / M.
     const V push = inv_total_mass * force + ml_over_m * w2 * s;

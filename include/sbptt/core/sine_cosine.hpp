@@ -15,7 +15,7 @@
 /// π/2 (with three parts, the missing 8.5e-32·|n| made sin(50π) 43 ulp off).
 /// Lanes with |x| > 10^6 (|n| ≥ 2^20 would follow) take std::sin and std::cos, each lane by
 /// itself, so that no lane's result depends on the others; ±0 keeps its sign in sin, and NaN
-/// and ±∞ give NaN. Within a few units in the last place of std::sin and std::cos
+/// and ±∞ give NaN. Within 1 ulp of std::sin and std::cos over the test's arguments
 /// (tests/test_core_sine_cosine.cpp).
 #include <cmath>
 

@@ -170,6 +170,13 @@ TEMPLATE_TEST_CASE("threads: cart pole results are bitwise identical for 1, 2 an
   const Matrix<S> test = cartpole_initial_states(sim, rng, 70);   // chunks of 32: 32,32,6
   check_thread_independence(sim, seeded_mlp<S>(sim.state_dim(), 1, 7),
                             cartpole_objective<S, 2>(), 30, train, test, 5);
+  // The physical model steps its batch column by column in scalar code: the pattern that gave
+  // other last bits per thread count where a path had its own inlined copy (docs/design.md).
+  sbptt::CartPoleOptions options;
+  options.model = sbptt::CartPoleModel::Physical;
+  const CartPole<S, 2> coupled(options);
+  check_thread_independence(coupled, seeded_mlp<S>(coupled.state_dim(), 1, 7),
+                            cartpole_objective<S, 2>(), 30, train, test, 5);
 }
 
 // In float guidance is a PairedBatchSimulator: on one thread the pair's sweeps then share one

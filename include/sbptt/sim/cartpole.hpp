@@ -46,6 +46,7 @@
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/core/types.hpp"
+#include "sbptt/core/unroll.hpp"
 #include "sbptt/sim/cartpole_lanes.hpp"
 #include "sbptt/sim/cartpole_physical.hpp"
 #include "sbptt/sim/cartpole_reference.hpp"
@@ -236,7 +237,10 @@ public:
   /// does not depend on the other columns. A block of fewer samples than lanes takes a lane per
   /// pole and sample where that needs fewer passes than one per pole, with the same numbers
   /// (cartpole_lanes.hpp). The physical model runs `step`'s equations column by column.
-  void step_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, Matrix<Scalar>& x_next) const
+  /// One machine copy (SBPTT_ONE_COPY) for the engine's paths that step a batch: the forward
+  /// pass, its parts on several threads and the evaluation (docs/design.md).
+  SBPTT_ONE_COPY void step_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u,
+                                 Matrix<Scalar>& x_next) const
     requires FloatOrDouble<Scalar>
   {
     using Lanes = detail::LaneRows<Scalar>;
@@ -255,9 +259,10 @@ public:
 
   /// `vjp` for every column of x (state_dim × B), u (1 × B) and lambda (state_dim × B):
   /// lambda_x (if not null) resized to state_dim × B, lambda_u to 1 × B; it must not be
-  /// lambda. As `step_batch`: SIMD lanes, equal to `vjp` to rounding.
-  void vjp_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u, const Matrix<Scalar>& lambda,
-                 Matrix<Scalar>* lambda_x, Matrix<Scalar>* lambda_u) const
+  /// lambda. As `step_batch`: SIMD lanes, equal to `vjp` to rounding, one machine copy.
+  SBPTT_ONE_COPY void vjp_batch(const Matrix<Scalar>& x, const Matrix<Scalar>& u,
+                                const Matrix<Scalar>& lambda, Matrix<Scalar>* lambda_x,
+                                Matrix<Scalar>* lambda_u) const
     requires FloatOrDouble<Scalar>
   {
     using Lanes = detail::LaneRows<Scalar>;

@@ -239,6 +239,7 @@ TEST_CASE("the double tanh's 2^k equals std::ldexp(1, k)", "[nn][activation]") {
   using Widest = typename Eigen::internal::packet_traits<double>::type;
   check(Widest{}, "this build's widest register", chosen);
   check(Widest{}, "the portable form, widest register", portable);
+  check(double{}, "a lone double", chosen);
 #if defined(EIGEN_VECTORIZE_SSE2)
   check(Eigen::internal::Packet2d{}, "2 lanes", chosen);
 #endif

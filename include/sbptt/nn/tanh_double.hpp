@@ -19,8 +19,11 @@
 /// no `select`; the same code runs for 2, 4 or 8 lanes and for a lone double (a build without
 /// SIMD). It stays within 1e-15 relative of std::tanh (tests/test_nn_dense.cpp; 6.3e-16 at
 /// worst at a million random arguments, where std::tanh is itself up to 3e-16 off a
-/// long-double tanh). It relies on IEEE
-/// rounding (x + 1.5·2^52 − 1.5·2^52 rounds x): not for -ffast-math.
+/// long-double tanh). It relies on IEEE rounding (x + 1.5·2^52 − 1.5·2^52 rounds x): not for
+/// -ffast-math.
+#include <bit>
+#include <cstdint>
+
 #include <Eigen/Core>
 
 #include "sbptt/core/unroll.hpp"
@@ -29,8 +32,9 @@ namespace sbptt::detail {
 
 /// `power_of_two(biased, k)` = 2^k for integers k ∈ [−1022, 1023] (in doubles), where `biased`
 /// = k + 1023 + 1.5·2^52 exactly: the low bits of biased's mantissa are k + 1023, and a 64-bit
-/// shift by 52 moves them into the exponent field. This is the portable form, Eigen's `pldexp`;
-/// the overloads below do the shift where the instruction set has it.
+/// shift by 52 moves them into the exponent field. This is the portable form, Eigen's `pldexp`
+/// (for registers of the instruction sets the overloads below do not cover); the overloads do
+/// the shift.
 template <class Packet>
 [[nodiscard]] Packet power_of_two_portable(const Packet& /*biased*/, const Packet& k) {
   return Eigen::internal::pldexp(Eigen::internal::pset1<Packet>(1.0), k);
@@ -43,6 +47,12 @@ template <class Packet>
 
 // Declared before `tanh_packet_double`: Eigen's packets are built-in vector types, which have
 // no namespace in which argument-dependent lookup could find a later overload.
+
+/// A lone double (a build without SIMD): the same shift. Eigen's scalar `pldexp` converts k to
+/// int, which is undefined behaviour for the NaN that a NaN argument of the tanh makes of k.
+[[nodiscard]] inline double power_of_two(const double& biased, const double& /*k*/) {
+  return std::bit_cast<double>(std::bit_cast<std::uint64_t>(biased) << 52);
+}
 #if defined(EIGEN_VECTORIZE_AVX512)
 [[nodiscard]] inline Eigen::internal::Packet8d power_of_two(
     const Eigen::internal::Packet8d& biased, const Eigen::internal::Packet8d& /*k*/) {

@@ -61,7 +61,7 @@ void check_registers(const char* form) {
     Eigen::internal::pstoreu(sines, s);
     Eigen::internal::pstoreu(cosines, c);
     for (int l = 0; l < lanes; ++l) {
-      const double x = xs[i + l];
+      const double x = xs[i + static_cast<std::size_t>(l)];
       INFO("x = " << x);
       if (!std::isfinite(x)) {
         REQUIRE(std::isnan(sines[l]));

@@ -17,9 +17,8 @@
 /// itself, so that no lane's result depends on the others; ±0 keeps its sign in sin, and NaN
 /// and ±∞ give NaN. Within 2 ulp of std::sin and std::cos over the test's grid and random
 /// arguments, with and without fused multiply-adds (tests/test_core_sine_cosine.cpp; the three
-/// roundings of r can add up to about 1.5 ulp of a small sin x). Like
-/// the tanh, it relies on IEEE rounding (x + 1.5·2^52 − 1.5·2^52 rounds x): not for
-/// -ffast-math.
+/// roundings of r can add up to about 1.5 ulp of a small sin x). Like the tanh, it relies on
+/// IEEE rounding (x + 1.5·2^52 − 1.5·2^52 rounds x): not for -ffast-math.
 #include <cmath>
 
 #include <Eigen/Core>
@@ -35,10 +34,10 @@ SBPTT_ALWAYS_INLINE inline void sine_cosine_packet_double(const Packet& x, Packe
   using namespace Eigen::internal;
   constexpr double round_to_integer = 6755399441055744.0;  // 1.5·2^52: x + it rounds x
   constexpr double two_over_pi = 6.36619772367581382433e-01;
-  constexpr double half_pi_1 = 1.57079632673412561417e+00;  // 33 bits
-  constexpr double half_pi_2 = 6.07710050630396597660e-11;  // the next 33 bits
-  constexpr double half_pi_3 = 2.02226624871116645580e-21;  // the next 53 bits
-  constexpr double half_pi_4 = 8.47842766036889956997e-32;  // the rest
+  constexpr double half_pi_1 = 1.57079632673412561417e+00;  // fdlibm's pio2_1, pio2_2,
+  constexpr double half_pi_2 = 6.07710050630396597660e-11;  // pio2_3 and pio2_3t
+  constexpr double half_pi_3 = 2.02226624871116645580e-21;
+  constexpr double half_pi_4 = 8.47842766036889956997e-32;
   constexpr double largest_reduced = 1e6;
   constexpr double sine_series[] = {1.58962301576546568060e-10, -2.50507477628578072866e-8,
                                     2.75573136213857245213e-6,  -1.98412698295895385996e-4,
@@ -79,9 +78,8 @@ SBPTT_ALWAYS_INLINE inline void sine_cosine_packet_double(const Packet& x, Packe
   cosine = pxor(pselect(odd, s, c), negate_cosine);
   sine = pselect(pcmp_eq(x, pzero(x)), x, sine);  // sin(±0) = ±0
 
-  const Packet reduced = pcmp_le(pabs(x), pset1<Packet>(largest_reduced));
-  const Packet not_nan = pcmp_eq(x, x);
-  if (predux_any(pandnot(not_nan, reduced))) {
+  // False for NaN, which the reduction already carries through.
+  if (predux_any(pcmp_lt(pset1<Packet>(largest_reduced), pabs(x)))) {
     constexpr int lanes = unpacket_traits<Packet>::size;
     double xs[lanes], sines[lanes], cosines[lanes];
     pstoreu(xs, x);

@@ -18,11 +18,12 @@
 /// and ±∞ give NaN. Within 2 ulp of std::sin and std::cos over the test's grid and random
 /// arguments, with and without fused multiply-adds (tests/test_core_sine_cosine.cpp; the three
 /// roundings of r can add up to about 1.5 ulp of a small sin x). Like the tanh, it relies on
-/// IEEE rounding (x + 1.5·2^52 − 1.5·2^52 rounds x): not for -ffast-math.
+/// rounding by adding 1.5·2^52 (core/round_to_integer.hpp): not for -ffast-math.
 #include <cmath>
 
 #include <Eigen/Core>
 
+#include "sbptt/core/round_to_integer.hpp"
 #include "sbptt/core/unroll.hpp"
 
 namespace sbptt::detail {
@@ -32,7 +33,6 @@ template <class Packet>
 SBPTT_ALWAYS_INLINE inline void sine_cosine_packet_double(const Packet& x, Packet& sine,
                                                           Packet& cosine) {
   using namespace Eigen::internal;
-  constexpr double round_to_integer = 6755399441055744.0;  // 1.5·2^52: x + it rounds x
   constexpr double two_over_pi = 6.36619772367581382433e-01;
   constexpr double half_pi_1 = 1.57079632673412561417e+00;  // fdlibm's pio2_1, pio2_2,
   constexpr double half_pi_2 = 6.07710050630396597660e-11;  // pio2_3 and pio2_3t
@@ -45,7 +45,7 @@ SBPTT_ALWAYS_INLINE inline void sine_cosine_packet_double(const Packet& x, Packe
   constexpr double cosine_series[] = {-1.13585365213876817300e-11, 2.08757008419747316778e-9,
                                       -2.75573141792967388112e-7,  2.48015872888517045348e-5,
                                       -1.38888888888730564116e-3,  4.16666666666665929218e-2};
-  const Packet magic = pset1<Packet>(round_to_integer);
+  const Packet magic = pset1<Packet>(round_to_integer_shift);
   const Packet n = psub(pmadd(x, pset1<Packet>(two_over_pi), magic), magic);
   Packet r = psub(x, pmul(n, pset1<Packet>(half_pi_1)));
   r = psub(r, pmul(n, pset1<Packet>(half_pi_2)));

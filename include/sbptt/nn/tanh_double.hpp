@@ -19,13 +19,14 @@
 /// no `select`; the same code runs for 2, 4 or 8 lanes and for a lone double (a build without
 /// SIMD). It stays within 1e-15 relative of std::tanh (tests/test_nn_dense.cpp; 6.3e-16 at
 /// worst at a million random arguments, where std::tanh is itself up to 3e-16 off a
-/// long-double tanh). It relies on IEEE rounding (x + 1.5·2^52 − 1.5·2^52 rounds x): not for
+/// long-double tanh). It rounds by adding 1.5·2^52 (core/round_to_integer.hpp): not for
 /// -ffast-math.
 #include <bit>
 #include <cstdint>
 
 #include <Eigen/Core>
 
+#include "sbptt/core/round_to_integer.hpp"
 #include "sbptt/core/unroll.hpp"
 
 namespace sbptt::detail {
@@ -77,8 +78,6 @@ template <class Packet>
 template <class Packet>
 [[nodiscard]] SBPTT_ALWAYS_INLINE inline Packet tanh_packet_double(const Packet& x) {
   using namespace Eigen::internal;
-  // Adding 1.5·2^52 rounds to an integer (to nearest) and leaves it in the low mantissa bits.
-  constexpr double round_to_integer = 6755399441055744.0;
   constexpr double ln2_head = 0.693145751953125;  // 16 bits: k·ln2_head is exact
   constexpr double ln2_tail = 1.42860682030941723212e-6;
   constexpr double log2_e = 1.4426950408889634074;
@@ -92,8 +91,9 @@ template <class Packet>
   const Packet a = pabs(x);
   // NaN stays NaN through this min (Eigen's pmin returns its first argument then).
   const Packet t = pmin(padd(a, a), pset1<Packet>(40.0));
-  const Packet shifted = pmadd(t, pset1<Packet>(log2_e), pset1<Packet>(round_to_integer));
-  const Packet k = psub(shifted, pset1<Packet>(round_to_integer));
+  const Packet rounding = pset1<Packet>(round_to_integer_shift);
+  const Packet shifted = pmadd(t, pset1<Packet>(log2_e), rounding);
+  const Packet k = psub(shifted, rounding);
   const Packet r =
       pmadd(k, pset1<Packet>(-ln2_tail), pmadd(k, pset1<Packet>(-ln2_head), t));
   Packet sum = pset1<Packet>(series[0]);

@@ -31,6 +31,7 @@
 /// the batch's size.
 #include <algorithm>
 #include <array>
+#include <cstddef>
 
 #include "sbptt/core/types.hpp"
 #include "sbptt/sim/lane_rows.hpp"
@@ -69,15 +70,17 @@ public:
     Rows rows;
     LaneRows<Scalar>::load_rows(x, first, count, rows);
     for (int j = 0; j < Nx; ++j) {
-      std::copy_n(rows[2 * j].data(), kLanes, f.re[j + 1]);
-      std::copy_n(rows[2 * j + 1].data(), kLanes, f.im[j + 1]);
+      const auto re = static_cast<std::size_t>(2 * j);  // Re of point j; Im follows it
+      std::copy_n(rows[re].data(), kLanes, f.re[j + 1]);
+      std::copy_n(rows[re + 1].data(), kLanes, f.im[j + 1]);
     }
   }
   static void store(const Field& f, Index first, int count, Matrix<Scalar>& x) {
     Rows rows;
     for (int j = 0; j < Nx; ++j) {
-      std::copy_n(f.re[j + 1], kLanes, rows[2 * j].data());
-      std::copy_n(f.im[j + 1], kLanes, rows[2 * j + 1].data());
+      const auto re = static_cast<std::size_t>(2 * j);
+      std::copy_n(f.re[j + 1], kLanes, rows[re].data());
+      std::copy_n(f.im[j + 1], kLanes, rows[re + 1].data());
     }
     LaneRows<Scalar>::store_rows(rows, first, count, x);
   }

@@ -3,11 +3,11 @@
 ///
 ///     (x + 1.5·2^52) − 1.5·2^52 = round(x)   (to nearest, ties to even),
 ///
-/// because the sum's exponent is 52, so its last mantissa bit is worth 1, and its low mantissa
-/// bits hold round(x) (two's complement, biased by 2^51). The double kernels use it where the
-/// integer is wanted in both forms: the tanh (nn/tanh_double.hpp) shifts the biased bits into
-/// 2^k, the sine and cosine (core/sine_cosine.hpp) reduce by n π/2. It relies on IEEE rounding,
-/// so neither is for -ffast-math.
+/// because the sum's exponent is 52, so its last mantissa bit is worth 1: its mantissa field
+/// holds 2^51 + round(x). The tanh (nn/tanh_double.hpp) uses both forms, k as a double and the
+/// sum's low bits shifted into the exponent field of 2^k; the sine and cosine
+/// (core/sine_cosine.hpp) use n of the reduction by n π/2. It relies on IEEE rounding, so
+/// neither kernel is for -ffast-math.
 
 namespace sbptt::detail {
 

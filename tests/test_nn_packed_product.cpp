@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <tuple>
 #include <vector>
@@ -129,7 +130,7 @@ TEMPLATE_TEST_CASE("every entry of the product is its bias plus the terms in col
       a.pack(w.data(), transpose ? cols : rows, transpose ? rows : cols, transpose, b.data());
       for (const Index n :
            {Index{1}, Index{2}, Index{3}, Index{4}, Index{7}, Index{8}, Index{13}}) {
-        const Matrix<S> x = random_matrix<S>(cols, n, 17 + n, 1.0);
+        const Matrix<S> x = random_matrix<S>(cols, n, static_cast<std::uint64_t>(17 + n), 1.0);
         // NaN until written: an entry that no block computes cannot pass.
         Matrix<S> y = Matrix<S>::Constant(rows, n, std::numeric_limits<S>::quiet_NaN());
         a.multiply(x.data(), cols, n, y.data(), rows);
@@ -159,7 +160,8 @@ TEMPLATE_TEST_CASE("a short matrix's entries are the file comment's dot products
   const Index lanes = PackedMatrix<S>::kLanes;
   for (Index rows = 1; 4 * rows <= lanes; ++rows) {
     for (const Index cols : {Index{5}, Index{37}, Index{100}}) {
-      const Matrix<S> w = random_matrix<S>(rows * cols, 1, 21 + cols, 1.0);
+      const Matrix<S> w =
+          random_matrix<S>(rows * cols, 1, static_cast<std::uint64_t>(21 + cols), 1.0);
       const Matrix<S> b = random_matrix<S>(rows, 1, 22, 1.0);
       PackedMatrix<S> a;
       a.pack(w.data(), rows, cols, false, b.data());

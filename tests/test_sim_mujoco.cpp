@@ -6,6 +6,7 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -210,9 +211,10 @@ TEST_CASE("mujoco: threads never share an mjData and never change a bit", "[sim]
     Matrix<double> a, b;
   };
   auto compute = [&](int i, Result& r) {
-    mj.step(states[i], controls[i], r.next);
-    mj.jacobians(states[i], controls[i], r.a, r.b);
-    mj.vjp(states[i], controls[i], states[(i + 1) % kCalls], &r.lambda_x, &r.lambda_u);
+    const auto n = static_cast<std::size_t>(i), after = static_cast<std::size_t>((i + 1) % kCalls);
+    mj.step(states[n], controls[n], r.next);
+    mj.jacobians(states[n], controls[n], r.a, r.b);
+    mj.vjp(states[n], controls[n], states[after], &r.lambda_x, &r.lambda_u);
   };
   std::vector<Result> serial(kCalls), parallel(kCalls);
   for (int i = 0; i < kCalls; ++i) compute(i, serial[static_cast<std::size_t>(i)]);
@@ -225,10 +227,12 @@ TEST_CASE("mujoco: threads never share an mjData and never change a bit", "[sim]
       for (int k = 0; k < kCalls; ++k) {
         const int i = (t == 1) ? kCalls - 1 - k : (k * 7 + t) % kCalls;
         if (i % 3 != t) continue;
-        Result& r = parallel[static_cast<std::size_t>(i)];
-        (t == 2 ? copy : mj).step(states[i], controls[i], r.next);
-        (t == 2 ? copy : mj).jacobians(states[i], controls[i], r.a, r.b);
-        mj.vjp(states[i], controls[i], states[(i + 1) % kCalls], &r.lambda_x, &r.lambda_u);
+        const auto n = static_cast<std::size_t>(i);
+        const auto after = static_cast<std::size_t>((i + 1) % kCalls);
+        Result& r = parallel[n];
+        (t == 2 ? copy : mj).step(states[n], controls[n], r.next);
+        (t == 2 ? copy : mj).jacobians(states[n], controls[n], r.a, r.b);
+        mj.vjp(states[n], controls[n], states[after], &r.lambda_x, &r.lambda_u);
       }
     });
   }

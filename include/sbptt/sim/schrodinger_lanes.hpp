@@ -70,7 +70,7 @@ public:
     Rows rows;
     LaneRows<Scalar>::load_rows(x, first, count, rows);
     for (int j = 0; j < Nx; ++j) {
-      const auto re = static_cast<std::size_t>(2 * j);  // Re of point j; Im follows it
+      const std::size_t re = 2 * static_cast<std::size_t>(j);  // Re of point j; Im follows it
       std::copy_n(rows[re].data(), kLanes, f.re[j + 1]);
       std::copy_n(rows[re + 1].data(), kLanes, f.im[j + 1]);
     }
@@ -78,7 +78,7 @@ public:
   static void store(const Field& f, Index first, int count, Matrix<Scalar>& x) {
     Rows rows;
     for (int j = 0; j < Nx; ++j) {
-      const auto re = static_cast<std::size_t>(2 * j);
+      const std::size_t re = 2 * static_cast<std::size_t>(j);
       std::copy_n(f.re[j + 1], kLanes, rows[re].data());
       std::copy_n(f.im[j + 1], kLanes, rows[re + 1].data());
     }

@@ -210,14 +210,15 @@ TEST_CASE("mujoco: threads never share an mjData and never change a bit", "[sim]
     Vector<double> next, lambda_x, lambda_u;
     Matrix<double> a, b;
   };
-  auto compute = [&](int i, Result& r) {
+  // Step and Jacobians by `stepper`, the VJP always by `mj`.
+  auto compute_with = [&](const MujocoSimulator<double>& stepper, int i, Result& r) {
     const auto n = static_cast<std::size_t>(i), after = static_cast<std::size_t>((i + 1) % kCalls);
-    mj.step(states[n], controls[n], r.next);
-    mj.jacobians(states[n], controls[n], r.a, r.b);
+    stepper.step(states[n], controls[n], r.next);
+    stepper.jacobians(states[n], controls[n], r.a, r.b);
     mj.vjp(states[n], controls[n], states[after], &r.lambda_x, &r.lambda_u);
   };
   std::vector<Result> serial(kCalls), parallel(kCalls);
-  for (int i = 0; i < kCalls; ++i) compute(i, serial[static_cast<std::size_t>(i)]);
+  for (int i = 0; i < kCalls; ++i) compute_with(mj, i, serial[static_cast<std::size_t>(i)]);
   // Three threads interleave calls in different orders over one shared simulator (and a copy,
   // which shares the pool), so the mjData that serves a call has served other states before.
   const MujocoSimulator<double> copy = mj;  // NOLINT(performance-unnecessary-copy-initialization)
@@ -227,12 +228,7 @@ TEST_CASE("mujoco: threads never share an mjData and never change a bit", "[sim]
       for (int k = 0; k < kCalls; ++k) {
         const int i = (t == 1) ? kCalls - 1 - k : (k * 7 + t) % kCalls;
         if (i % 3 != t) continue;
-        const auto n = static_cast<std::size_t>(i);
-        const auto after = static_cast<std::size_t>((i + 1) % kCalls);
-        Result& r = parallel[n];
-        (t == 2 ? copy : mj).step(states[n], controls[n], r.next);
-        (t == 2 ? copy : mj).jacobians(states[n], controls[n], r.a, r.b);
-        mj.vjp(states[n], controls[n], states[after], &r.lambda_x, &r.lambda_u);
+        compute_with(t == 2 ? copy : mj, i, parallel[static_cast<std::size_t>(i)]);
       }
     });
   }

@@ -45,8 +45,8 @@ SBPTT_ALWAYS_INLINE inline void sine_cosine_packet_double(const Packet& x, Packe
   constexpr double cosine_series[] = {-1.13585365213876817300e-11, 2.08757008419747316778e-9,
                                       -2.75573141792967388112e-7,  2.48015872888517045348e-5,
                                       -1.38888888888730564116e-3,  4.16666666666665929218e-2};
-  const Packet magic = pset1<Packet>(round_to_integer_shift);
-  const Packet n = psub(pmadd(x, pset1<Packet>(two_over_pi), magic), magic);
+  const Packet rounding = pset1<Packet>(round_to_integer_shift);
+  const Packet n = psub(pmadd(x, pset1<Packet>(two_over_pi), rounding), rounding);
   Packet r = psub(x, pmul(n, pset1<Packet>(half_pi_1)));
   r = psub(r, pmul(n, pset1<Packet>(half_pi_2)));
   r = psub(r, pmul(n, pset1<Packet>(half_pi_3)));

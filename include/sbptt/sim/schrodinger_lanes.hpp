@@ -69,18 +69,16 @@ public:
     f.clear_walls();
     Rows rows;
     LaneRows<Scalar>::load_rows(x, first, count, rows);
-    for (int j = 0; j < Nx; ++j) {
-      const std::size_t re = 2 * static_cast<std::size_t>(j);  // Re of point j; Im follows it
-      std::copy_n(rows[re].data(), kLanes, f.re[j + 1]);
-      std::copy_n(rows[re + 1].data(), kLanes, f.im[j + 1]);
+    for (std::size_t j = 0; 2 * j < rows.size(); ++j) {
+      std::copy_n(rows[2 * j].data(), kLanes, f.re[j + 1]);
+      std::copy_n(rows[2 * j + 1].data(), kLanes, f.im[j + 1]);
     }
   }
   static void store(const Field& f, Index first, int count, Matrix<Scalar>& x) {
     Rows rows;
-    for (int j = 0; j < Nx; ++j) {
-      const std::size_t re = 2 * static_cast<std::size_t>(j);
-      std::copy_n(f.re[j + 1], kLanes, rows[re].data());
-      std::copy_n(f.im[j + 1], kLanes, rows[re + 1].data());
+    for (std::size_t j = 0; 2 * j < rows.size(); ++j) {
+      std::copy_n(f.re[j + 1], kLanes, rows[2 * j].data());
+      std::copy_n(f.im[j + 1], kLanes, rows[2 * j + 1].data());
     }
     LaneRows<Scalar>::store_rows(rows, first, count, x);
   }

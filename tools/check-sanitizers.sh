@@ -18,7 +18,8 @@
 # them in about a third of the time (SBPTT_UNOPTIMIZED_TESTS; the measured choice is in
 # docs/testing.md); the others and the examples, which the tests run at length, stay at -O1.
 # The programs of [slow] cases alone are not built (SBPTT_SLOW_TESTS=OFF): only the default
-# suite runs here.
+# suite runs here. The network kernels are compiled once for all programs
+# (SBPTT_SEPARATE_KERNELS), not once in each.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build=${SBPTT_BUILD_DIR:-build-asan}
@@ -37,6 +38,7 @@ cmake -S . -B "$build" -DCMAKE_CXX_COMPILER="$cxx" \
   -DSBPTT_GROUPED_TESTS=ON \
   -DSBPTT_SLOW_TESTS=OFF \
   -DSBPTT_UNOPTIMIZED_TESTS="$unoptimized" \
+  -DSBPTT_SEPARATE_KERNELS=ON \
   -DSBPTT_BUILD_EXAMPLES=ON >/dev/null
 cmake --build "$build" -j "$jobs"
 

@@ -40,8 +40,11 @@ jobs=${SBPTT_JOBS:-$(nproc)}
 build=${SBPTT_BUILD_DIR:-build-tidy}
 
 # Configure only (nothing is compiled): the compilation database gives the real flags.
+# With SBPTT_SEPARATE_KERNELS the examples see the network kernels' explicit instantiation
+# declarations, and the kernels are analysed once, in their own translation unit
+# (cmake/kernel_instances.cpp), instead of once in every example.
 cmake -S . -B "$build" -DCMAKE_EXPORT_COMPILE_COMMANDS=ON -DSBPTT_BUILD_TESTS=ON \
-  -DSBPTT_BUILD_EXAMPLES=ON >/dev/null
+  -DSBPTT_BUILD_EXAMPLES=ON -DSBPTT_SEPARATE_KERNELS=ON >/dev/null
 build=$(cd "$build" && pwd)
 
 # A second database: the example (and with --all the test) sources of the CMake database, then
@@ -51,8 +54,10 @@ import json, pathlib, shlex, sys
 root, build = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])
 with_tests = sys.argv[3] == "1"
 entries = json.loads((build / "compile_commands.json").read_text())
-def part(entry):  # "tests", "examples" or None, from the source's place in the tree
+def part(entry):  # "tests", "examples" (the kernels too) or None, from the source's place
     path = pathlib.Path(entry["file"]).resolve()
+    if path == root / "cmake" / "kernel_instances.cpp":
+        return "examples"
     for name in ("tests", "examples"):
         if (root / name) in path.parents and (root / name / "fuzz") not in path.parents:
             return name

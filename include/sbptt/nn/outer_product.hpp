@@ -404,4 +404,16 @@ void add_weight_and_bias_products(Scalar* grad, Index rows, Index cols, const Sc
   detail::add_sample_sums(grad + rows * cols, rows, d, n, scale);
 }
 
+#if defined(SBPTT_SEPARATE_KERNELS)
+// Instantiated once, in cmake/kernel_instances.cpp (docs/testing.md).
+extern template void add_outer_products(float*, Index, Index, const float*, const float*, Index,
+                                        const float*);
+extern template void add_outer_products(double*, Index, Index, const double*, const double*,
+                                        Index, const double*);
+namespace detail {
+extern template void add_sample_sums(float*, Index, const float*, Index, const float*);
+extern template void add_sample_sums(double*, Index, const double*, Index, const double*);
+}  // namespace detail
+#endif
+
 }  // namespace sbptt

@@ -97,80 +97,7 @@ public:
 
   /// Y = A X + b: `x` is cols() × n column-major with leading dimension `ldx`, `y` rows() × n
   /// column-major with leading dimension `ldy` (overwritten; it must not overlap `x`).
-  void multiply(const Scalar* x, Index ldx, Index n, Scalar* y, Index ldy) const {
-    if (by_rows()) {
-      detail::with_count<kMaxShortRows>(rows_, [&](auto rows) {
-        constexpr int r = decltype(rows)::value;
-        constexpr int columns = kDotsInFlight / r;
-        Index j = 0;
-        for (; j + columns <= n; j += columns)
-          row_dots<r, columns>(x + j * ldx, ldx, y + j * ldy, ldy);
-        detail::with_count<columns - 1>(n - j, [&](auto left) {
-          row_dots<r, decltype(left)::value>(x + j * ldx, ldx, y + j * ldy, ldy);
-        });
-      });
-      return;
-    }
-    const Index panels = (rows_ + kLanes - 1) / kLanes;
-    const Index full_panels = rows_ / kLanes;
-    // With 4-column blocks, the panels left after the pairs (an odd count, or a partial last
-    // panel) go 8 columns at a time first: alone at 4 columns they keep only 4 multiply-adds
-    // in flight, so the last panel of a 100-row matrix cost as much as a pair.
-    Index unpaired_done = 0;  // columns of the unpaired panels done 8 at a time
-    if constexpr (kColumnBlock == 4) {
-      const Index unpaired_from = full_panels - full_panels % 2;  // where the pairs stop
-      for (; unpaired_done + 8 <= n; unpaired_done += 8)
-        for (Index p = unpaired_from; p < panels; ++p)
-          block_at<1, 8>(p, x + unpaired_done * ldx, ldx, y + unpaired_done * ldy, ldy);
-    }
-    Index j = 0;
-    auto blocks_of = [&](auto columns) {
-      constexpr int width = decltype(columns)::value;
-      for (; j + width <= n; j += width) {
-        Index p = 0;
-        // An odd last panel goes with the two before it where three panels' accumulators,
-        // weights and a broadcast leave a register spare: a lone panel keeps only `width`
-        // multiply-adds in flight. At 4 columns pairs stop at the last whole panel: pairing a
-        // partial one too made GCC 12's code 10% slower, 443–449 against 396–410 ns for
-        // 100 × 100 (docs/benchmark-runs.md, fifteenth run). At 8 columns a partial panel pairs
-        // too: the quantum CNN's 60 rows (4 panels, the last of 12 rows) went as a pair and two
-        // lone panels, 60 × 180 × 56 in float 8425 ns against 7860 paired
-        // (docs/benchmark-runs-intel.md, twenty-third run; measured with AVX-512 only, the one
-        // x86 target with 8-column blocks).
-        constexpr bool last_three = 3 * width + 4 < EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS;
-        const Index before_three =
-            last_three && panels >= 3 && panels % 2 == 1 ? panels - 3 : panels;
-        const Index paired = width >= 8 ? before_three : std::min(before_three, full_panels);
-        // Four panels a block where their accumulators, weights and a broadcast fit, with no
-        // register spare (half blocks with AVX-512): each broadcast of X then feeds twice the
-        // multiply-adds (100 × 100 × 4 in float: 354.5–358.5 ns against 379.6–392.6;
-        // docs/benchmark-runs.md, twenty-second run).
-        if constexpr (4 * width + 4 + 1 <= EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS) {
-          for (; p + 4 <= full_panels && p + 4 <= paired; p += 4)
-            block_at<4, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
-        }
-        for (; p + 2 <= paired; p += 2)
-          block_at<2, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
-        if (last_three && p + 3 == panels) {
-          block_at<3, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
-          p += 3;
-        }
-        if (j + width <= unpaired_done) continue;
-        for (; p < panels; ++p) block_at<1, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
-      }
-    };
-    blocks_of(std::integral_constant<int, kColumnBlock>{});
-    // Half a block: a batch split over two threads (the paper's 8 samples, 4 each) still keeps
-    // 8 multiply-adds in flight instead of one chain per column.
-    if constexpr (kColumnBlock > 4) blocks_of(std::integral_constant<int, 4>{});
-    // The last 1 to 3 columns (a batch cut over 3 or more threads has such parts) in blocks of
-    // more panels, for the same reason: one panel a block would leave one chain per column.
-    if (j + 2 <= n) {
-      narrow_columns<2>(panels, x + j * ldx, ldx, y + j * ldy, ldy);
-      j += 2;
-    }
-    if (j < n) narrow_columns<1>(panels, x + j * ldx, ldx, y + j * ldy, ldy);
-  }
+  void multiply(const Scalar* x, Index ldx, Index n, Scalar* y, Index ldy) const;
 
 private:
   // Accumulators of a 2-panel block, plus the two weight registers and a broadcast, must fit
@@ -387,5 +314,93 @@ private:
   Vector<Scalar> data_;
   Vector<Scalar> bias_;
 };
+
+// Defined apart from the class, so that it is not inline: with SBPTT_SEPARATE_KERNELS an
+// explicit instantiation declaration (end of this file) then keeps every translation unit but
+// one from instantiating it and the kernels it calls.
+template <class Scalar>
+void PackedMatrix<Scalar>::multiply(const Scalar* x, Index ldx, Index n, Scalar* y,
+                                    Index ldy) const {
+  if (by_rows()) {
+    detail::with_count<kMaxShortRows>(rows_, [&](auto rows) {
+      constexpr int r = decltype(rows)::value;
+      constexpr int columns = kDotsInFlight / r;
+      Index j = 0;
+      for (; j + columns <= n; j += columns)
+        row_dots<r, columns>(x + j * ldx, ldx, y + j * ldy, ldy);
+      detail::with_count<columns - 1>(n - j, [&](auto left) {
+        row_dots<r, decltype(left)::value>(x + j * ldx, ldx, y + j * ldy, ldy);
+      });
+    });
+    return;
+  }
+  const Index panels = (rows_ + kLanes - 1) / kLanes;
+  const Index full_panels = rows_ / kLanes;
+  // With 4-column blocks, the panels left after the pairs (an odd count, or a partial last
+  // panel) go 8 columns at a time first: alone at 4 columns they keep only 4 multiply-adds
+  // in flight, so the last panel of a 100-row matrix cost as much as a pair.
+  Index unpaired_done = 0;  // columns of the unpaired panels done 8 at a time
+  if constexpr (kColumnBlock == 4) {
+    const Index unpaired_from = full_panels - full_panels % 2;  // where the pairs stop
+    for (; unpaired_done + 8 <= n; unpaired_done += 8)
+      for (Index p = unpaired_from; p < panels; ++p)
+        block_at<1, 8>(p, x + unpaired_done * ldx, ldx, y + unpaired_done * ldy, ldy);
+  }
+  Index j = 0;
+  auto blocks_of = [&](auto columns) {
+    constexpr int width = decltype(columns)::value;
+    for (; j + width <= n; j += width) {
+      Index p = 0;
+      // An odd last panel goes with the two before it where three panels' accumulators,
+      // weights and a broadcast leave a register spare: a lone panel keeps only `width`
+      // multiply-adds in flight. At 4 columns pairs stop at the last whole panel: pairing a
+      // partial one too made GCC 12's code 10% slower, 443–449 against 396–410 ns for
+      // 100 × 100 (docs/benchmark-runs.md, fifteenth run). At 8 columns a partial panel pairs
+      // too: the quantum CNN's 60 rows (4 panels, the last of 12 rows) went as a pair and two
+      // lone panels, 60 × 180 × 56 in float 8425 ns against 7860 paired
+      // (docs/benchmark-runs-intel.md, twenty-third run; measured with AVX-512 only, the one
+      // x86 target with 8-column blocks).
+      constexpr bool last_three = 3 * width + 4 < EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS;
+      const Index before_three =
+          last_three && panels >= 3 && panels % 2 == 1 ? panels - 3 : panels;
+      const Index paired = width >= 8 ? before_three : std::min(before_three, full_panels);
+      // Four panels a block where their accumulators, weights and a broadcast fit, with no
+      // register spare (half blocks with AVX-512): each broadcast of X then feeds twice the
+      // multiply-adds (100 × 100 × 4 in float: 354.5–358.5 ns against 379.6–392.6;
+      // docs/benchmark-runs.md, twenty-second run).
+      if constexpr (4 * width + 4 + 1 <= EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS) {
+        for (; p + 4 <= full_panels && p + 4 <= paired; p += 4)
+          block_at<4, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+      }
+      for (; p + 2 <= paired; p += 2)
+        block_at<2, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+      if (last_three && p + 3 == panels) {
+        block_at<3, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+        p += 3;
+      }
+      if (j + width <= unpaired_done) continue;
+      for (; p < panels; ++p) block_at<1, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+    }
+  };
+  blocks_of(std::integral_constant<int, kColumnBlock>{});
+  // Half a block: a batch split over two threads (the paper's 8 samples, 4 each) still keeps
+  // 8 multiply-adds in flight instead of one chain per column.
+  if constexpr (kColumnBlock > 4) blocks_of(std::integral_constant<int, 4>{});
+  // The last 1 to 3 columns (a batch cut over 3 or more threads has such parts) in blocks of
+  // more panels, for the same reason: one panel a block would leave one chain per column.
+  if (j + 2 <= n) {
+    narrow_columns<2>(panels, x + j * ldx, ldx, y + j * ldy, ldy);
+    j += 2;
+  }
+  if (j < n) narrow_columns<1>(panels, x + j * ldx, ldx, y + j * ldy, ldy);
+}
+
+#if defined(SBPTT_SEPARATE_KERNELS)
+// Instantiated once, in cmake/kernel_instances.cpp (docs/testing.md).
+extern template void PackedMatrix<float>::multiply(const float*, Index, Index, float*,
+                                                   Index) const;
+extern template void PackedMatrix<double>::multiply(const double*, Index, Index, double*,
+                                                    Index) const;
+#endif
 
 }  // namespace sbptt

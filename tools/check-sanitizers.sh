@@ -18,8 +18,8 @@
 # them in about a third of the time (SBPTT_UNOPTIMIZED_TESTS; the measured choice is in
 # docs/testing.md); the others and the examples, which the tests run at length, stay at -O1.
 # The programs of [slow] cases alone are not built (SBPTT_SLOW_TESTS=OFF): only the default
-# suite runs here. The network kernels are compiled once for all programs
-# (SBPTT_SEPARATE_KERNELS), not once in each.
+# suite runs here. The network kernels are compiled once (SBPTT_SEPARATE_KERNELS), not once in
+# each program (but the test files that #define a macro before the headers).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build=${SBPTT_BUILD_DIR:-build-asan}

@@ -43,7 +43,8 @@ inline std::string ratio_at_peak(const Row& c, const Row* r) {
 }
 
 /// The speed targets (docs/benchmarks.md), measured in this run: one line each, met or MISSED.
-/// A ratio shows three decimals, so that one printed as the target is never MISSED.
+/// Verdicts are on the unrounded figures: a ratio printed as 1.300 (three decimals) is MISSED
+/// when it is above 1.3 in a later decimal.
 inline void summarize(const std::vector<Row>& rows, Index threads) {
   std::printf("\ntargets (%s code; 1 thread unless stated):\n", sbptt::instruction_set());
   const auto verdict = [](bool met) { return met ? "met" : "MISSED"; };

@@ -44,7 +44,7 @@ void save_parameters(const std::filesystem::path& path, const Vector<Scalar>& th
 }
 
 /// Reads a parameters file that must hold exactly `expected` numbers, one per line (blank lines
-/// at the end are ignored, as in states files).
+/// at the end are ignored; one between numbers is refused, unlike in states files).
 /// \return the flat parameter vector, `expected` entries
 /// Throws `IoError` if `path` cannot be read (with the system's reason), `ParseError` for a
 /// malformed line or a wrong count ("expected N numbers, got M"). Reading is bounded: a line

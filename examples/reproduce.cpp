@@ -51,6 +51,7 @@ int main(int argc, char** argv) {
     if (!options.python.empty() && !can_execute(options.python))
       throw InvalidArgument(concat("--python '", options.python, "' is no executable program; "
                                    "expected a path or a name on PATH"));
+    if (options.emit == "slurm") require_slurm_folder(options);
     plan = make_plan(options);
     if (plan.empty())
       throw InvalidArgument(concat("the selection leaves no run of profile ", options.profile));
@@ -64,6 +65,14 @@ int main(int argc, char** argv) {
   const fs::path own_dir = self.parent_path();
   const fs::path bin_dir = options.bin_dir.empty() ? own_dir : fs::path(options.bin_dir);
   try {
+    const fs::path runs = fs::path(options.out) / "runs";
+    if (const auto mismatched = runs_of_other_settings(runs, plan); !mismatched.empty()) {
+      std::cerr << "reproduce: " << mismatched.size() << " finished run(s) in " << runs
+                << " were made with other settings than planned now (e.g. " << mismatched[0]
+                << ": see its .run file); rerun with the old settings, choose another --out, "
+                   "or remove runs/<name>.* to redo them\n";
+      return 1;
+    }
     if (options.dry_run) {
       print_plan(options, plan, bin_dir);
       return 0;

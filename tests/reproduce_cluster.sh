@@ -5,7 +5,8 @@
 #   (a) locally with --jobs 2,
 #   (b) through GNU parallel (--emit parallel | parallel --jobs 2, then --merge),
 #   (c) as a Slurm job array with its dependent merge job, on a single-node Slurm cluster
-#       started by tools/slurm-local.sh (and stopped on any exit, failures included),
+#       started by tools/slurm-local.sh (and stopped on any exit, failures included), in an
+#       output folder whose name holds blanks and quotes,
 #   (d) as 3 shards at once, then --merge;
 # every summary.csv must have the same loss columns. Then (e) an array task cancelled with
 # scancel while its run is under way, and the array resubmitted: the run resumes from its
@@ -59,15 +60,17 @@ wait_for_jobs() {  # until squeue lists none of the jobs, at most $1 s
   squeue >&2
   fail "Slurm jobs still queued after $1 s"
 }
-"$R" "${grid[@]}" --jobs 2 --out "$work/slurm" --emit slurm > "$work/slurm.emit"
+# A folder whose name sbatch must read through its own quoting rules in #SBATCH lines.
+slurm_out="$work/slurm runs, Bob's \"x\""
+"$R" "${grid[@]}" --jobs 2 --out "$slurm_out" --emit slurm > "$work/slurm.emit"
 submit=$(grep '^job=\$(sbatch' "$work/slurm.emit") || fail "--emit slurm printed no sbatch line"
-(cd "$work" && bash -c "$submit") > /dev/null
+(cd "$work" && bash -c "$submit") > /dev/null || fail "sbatch refused the emitted scripts"
 wait_for_jobs 180
 grep -q "8 of 8 planned runs done, 0 running (lock held), 0 missing" \
-  "$work/slurm/slurm/logs/merge.log" || fail "the merge job did not find all 8 runs done"
-[ "$(ls "$work/slurm/slurm/logs" | grep -c '^run_.*\.log$')" = 8 ] || fail "not a log per task"
-losses "$work/slurm" | cmp -s - "$work/reference" || fail "Slurm: other losses"
-ok "Slurm job array + merge job: the local losses, a log per task"
+  "$slurm_out/slurm/logs/merge.log" || fail "the merge job did not find all 8 runs done"
+[ "$(ls "$slurm_out/slurm/logs" | grep -c '^run_.*\.log$')" = 8 ] || fail "not a log per task"
+losses "$slurm_out" | cmp -s - "$work/reference" || fail "Slurm: other losses"
+ok "Slurm job array + merge job in a folder with blanks and quotes: the local losses, a log per task"
 
 # (d) three shards at once
 for k in 1 2 3; do

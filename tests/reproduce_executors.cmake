@@ -141,7 +141,7 @@ check("the array lists the 2 unfinished runs (${listed})"
 check("the array: 2 tasks, 3 at once, 2 CPUs, a time limit, a log per task"
       array MATCHES "#SBATCH --array=0-1%3\n" AND array MATCHES "#SBATCH --cpus-per-task=2\n"
       AND array MATCHES "#SBATCH --time=[1-9][0-9]*\n"
-      AND array MATCHES "#SBATCH --output=[^\n]*/slurm/logs/run_%a.log\n"
+      AND array MATCHES "#SBATCH --output=\"[^\n]*/slurm/logs/run_%a.log\"\n"
       AND array MATCHES "--run \"\\$run\"")
 file(READ "${P}/slurm/merge.sh" merge)
 check("the merge job runs --merge" merge MATCHES "reproduce [^\n]* --merge\n")

@@ -11,7 +11,8 @@
 #      planned ones, and that its summary.csv equals the undamaged sweep's (timing aside);
 #   2. checks that --epochs and --samples above the task programs' limit, a --python that
 #      does not exist and an --out that is a file or lies under one are refused with exit 2
-#      before any work;
+#      before any work, an --out that sbatch would misread with --emit slurm too, and
+#      finished runs of other settings with exit 1 in every mode;
 #   3. interrupts the runner while it plots (a fake python and plot script that leave a
 #      temporary PNG behind): exit 130, no "no plots" message, no plots/.tmp.* left;
 #   4. (when strace is installed) traces a sweep: every file the runner renames into place was
@@ -133,6 +134,38 @@ foreach(out "${WORK_DIR}/a_file" "${WORK_DIR}/a_file/results")
 endforeach()
 file(READ "${WORK_DIR}/a_file" kept)
 check("--out <a file>: the file is unchanged" kept STREQUAL "kept\n")
+
+# A folder that sbatch would read as a pattern ('%') or an escape: refused for --emit slurm
+# before any work (blanks and quotes are quoted; reproduce_cluster.sh submits such a folder).
+foreach(name "50%done" "a\\b")
+  string(REPLACE "\\" "\\\\" pattern "${name}")
+  execute_process(COMMAND "${REPRODUCE}" ${grid} --emit slurm --out "${WORK_DIR}/${name}"
+                  TIMEOUT 20 RESULT_VARIABLE rc OUTPUT_VARIABLE text ERROR_VARIABLE err)
+  check("--emit slurm --out ${name}: exit 2 naming --out and what sbatch would make of it (${err})"
+        rc EQUAL 2 AND err MATCHES "--out '[^']*${pattern}' with --emit slurm: its path holds"
+        AND NOT text MATCHES ".")
+  check("--emit slurm --out ${name}: nothing was written" NOT EXISTS "${WORK_DIR}/${name}")
+endforeach()
+
+# Finished runs made with other settings (here --epochs 4, planned now with 3): an error in
+# every mode, before any work. --dry-run, --merge and both --emit took them for done (exit 0,
+# "nothing to submit", no lines to run), which a user reads as a finished grid.
+set(other "${WORK_DIR}/other_settings")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${other}" RESULT_VARIABLE rc
+                OUTPUT_QUIET ERROR_QUIET)
+check("a sweep of 4 epochs exits 0" rc EQUAL 0)
+file(READ "${other}/summary.csv" summary_before)
+foreach(mode "" --dry-run --merge "--emit;parallel" "--emit;slurm" "--shard;1/2"
+        "--run;cartpole_p4_C_norm_s42")
+  execute_process(COMMAND "${REPRODUCE}" ${grid} --epochs 3 ${mode} --out "${other}" TIMEOUT 20
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE text ERROR_VARIABLE err)
+  check("other settings, mode '${mode}': exit 1 naming a run and its other settings (${err})"
+        rc EQUAL 1 AND err MATCHES "cartpole_p4_[RC]_norm_s4[234][^\n]*other settings|other settings[^\n]*cartpole_p4_[RC]_norm_s4[234]"
+        AND NOT text MATCHES "--run")
+endforeach()
+check("other settings: no Slurm scripts were written" NOT EXISTS "${other}/slurm")
+file(READ "${other}/summary.csv" summary_after)
+check("other settings: summary.csv is unchanged" summary_after STREQUAL summary_before)
 
 # --- 3. an interrupt while plotting ----------------------------------------------------------
 # The fake python imports anything and runs the script with sh; the fake plot script writes a

@@ -45,6 +45,33 @@ inline std::string shell_line(const std::vector<std::string>& words) {
   return line;
 }
 
+/// `word` as one argument of an #SBATCH line. sbatch splits those lines at blanks outside
+/// quotes and reads a backslash inside double quotes as an escape (Slurm 22.05): a folder with
+/// a blank or a quote in its name stays one argument.
+inline std::string sbatch_quote(const std::string& word) {
+  std::string quoted = "\"";
+  for (char c : word) {
+    if (c == '"' || c == '\\') quoted += '\\';
+    quoted += c;
+  }
+  return quoted + "\"";
+}
+
+/// Refuses, before any work, an --out that the Slurm scripts cannot name: sbatch reads '%' in
+/// --output as a pattern (%a, %j, %x, ...), and a line break would end the #SBATCH line.
+inline void require_slurm_folder(const Options& o) {
+  const std::string dir = fs::absolute(o.out).lexically_normal().string();
+  const auto bad = std::find_if(dir.begin(), dir.end(), [](char c) {
+    return c == '%' || c == '\\' || std::iscntrl(static_cast<unsigned char>(c)) != 0;
+  });
+  if (bad != dir.end())
+    throw InvalidArgument(concat("--out '", o.out, "' with --emit slurm: its path holds ",
+                                 *bad == '%' ? "'%', which sbatch reads as a file-name pattern"
+                                 : *bad == '\\' ? "a backslash, which sbatch reads as an escape"
+                                                : "a control character",
+                                 "; expected a folder without them"));
+}
+
 /// The flags that select the plan, with absolute folders: the same plan from any directory.
 inline std::vector<std::string> selection_flags(const Options& o, const fs::path& bin_dir) {
   auto joined = [](const auto& items, auto text) {
@@ -130,15 +157,16 @@ inline int emit_slurm(const Options& o, const std::vector<Run>& plan, const fs::
       "/runs.txt);\n# written by reproduce --emit slurm. Resubmitting it is harmless: a "
       "finished run is skipped.\n#SBATCH --job-name=", job, "\n#SBATCH --array=0-",
       left.size() - 1, "%", o.jobs, "\n#SBATCH --ntasks=1\n#SBATCH --cpus-per-task=", o.threads,
-      "\n#SBATCH --time=", minutes, "\n#SBATCH --output=", dir.string(),
-      "/logs/run_%a.log\nset -euo pipefail\nrun=$(sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" ",
+      "\n#SBATCH --time=", minutes, "\n#SBATCH --output=",
+      sbatch_quote((dir / "logs" / "run_%a.log").string()),
+      "\nset -euo pipefail\nrun=$(sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" ",
       shell_quote((dir / "runs.txt").string()), ")\nexec ", shell_line(command),
       " --run \"$run\"\n");
   const std::string merge = concat(
       "#!/bin/bash\n# Collects the array's runs into summary.csv, the table and the figures.\n"
       "#SBATCH --job-name=", job, "-merge\n#SBATCH --ntasks=1\n#SBATCH --cpus-per-task=1\n"
-      "#SBATCH --time=30\n#SBATCH --output=", dir.string(), "/logs/merge.log\nexec ",
-      shell_line(command), o.plot ? "" : " --no-plot", " --merge\n");
+      "#SBATCH --time=30\n#SBATCH --output=", sbatch_quote((dir / "logs" / "merge.log").string()),
+      "\nexec ", shell_line(command), o.plot ? "" : " --no-plot", " --merge\n");
   sbptt::write_file_atomically((dir / "array.sh").string(), array);
   sbptt::write_file_atomically((dir / "merge.sh").string(), merge);
   std::printf("reproduce: %zu of %zu planned runs to do; wrote %s/array.sh (--array=0-%zu%%%ld, "

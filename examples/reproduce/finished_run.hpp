@@ -158,6 +158,22 @@ inline FinishedRuns rebuild_summary(const fs::path& out) {
   return finished;
 }
 
+/// The planned runs whose finished files in `runs` describe the same run with other settings
+/// (other epochs, a retuned profile). Every mode refuses them before any work: a sweep would
+/// have to overwrite them, and --dry-run, --merge and --emit would count them as done.
+inline std::vector<std::string> runs_of_other_settings(const fs::path& runs,
+                                                       const std::vector<Run>& plan) {
+  std::vector<std::string> mismatched;
+  for (const Run& run : plan) {
+    if (!fs::exists(run_file(runs, run, ".csv"))) continue;
+    const auto described = parse_description(read_text(run_file(runs, run, ".run")));
+    if (described && described->name() == run.name() &&
+        described->description() != run.description())
+      mismatched.push_back(run.name());
+  }
+  return mismatched;
+}
+
 /// Whether `run` is among the finished runs (its name, not only its grid position).
 inline bool is_finished(const FinishedRuns& finished, const Run& run) {
   const auto found = finished.summaries.find(run.order_key());

@@ -48,21 +48,6 @@ public:
   int execute() {
     fs::create_directories(runs_);
     discard_partial_runs();
-    std::vector<std::string> mismatched;
-    for (const Run& run : plan_) {
-      if (!fs::exists(run_file(runs_, run, ".csv"))) continue;
-      const auto described = parse_description(read_text(run_file(runs_, run, ".run")));
-      if (described && described->name() == run.name() &&
-          described->description() != run.description())
-        mismatched.push_back(run.name());
-    }
-    if (!mismatched.empty()) {
-      std::cerr << "reproduce: " << mismatched.size() << " finished run(s) in " << runs_
-                << " were made with other settings than planned now (e.g. " << mismatched[0]
-                << ": see its .run file); rerun with the old settings, choose another --out, "
-                   "or remove runs/<name>.* to redo them\n";
-      return 1;
-    }
     forget_damaged();
     write_summary();
     std::vector<const Run*> todo;

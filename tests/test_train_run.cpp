@@ -6,6 +6,7 @@
 
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <csignal>
 #include <filesystem>
 #include <fstream>
@@ -213,6 +214,7 @@ TEST_CASE("checkpoint: an epoch whose squared update norm overflowed reads back"
   // A double gradient of norm 1e200 is finite and clips correctly; its square is +inf, and the
   // log says so. The checkpoint written after that epoch must still resume the run.
   Checkpoint<double> c;
+  c.shuffle_state = Rng(1).state();
   c.epoch = 7;
   c.last = EpochRecord{};
   c.last->epoch = 7;
@@ -231,7 +233,9 @@ TEST_CASE("checkpoint: an error names the line that is wrong, whichever it is", 
   // were reported one line early (the line was counted after the message was made).
   Checkpoint<double> c;
   c.settings = {{"method", "C"}};
+  c.shuffle_state = Rng(1).state();
   c.epoch = 3;
+  c.adam_t = 6;
   c.params = Vector<double>::Constant(3, 0.5);
   c.best_params = c.params;
   c.adam_m = Vector<double>::Constant(3, 0.25);
@@ -330,6 +334,13 @@ TEST_CASE("run: a checkpoint or log changed by hand is refused before any work, 
            Case{false, "best_epoch ", "best_epoch 9", "best_epoch 9; expected 0 to 4", false},
            Case{false, "adam_t ", "adam_t -1", "adam_t -1; expected 0 to", false},
            Case{false, "since_best ", "since_best -3", "since_best -3; expected 0 to 4", false},
+           // Adam's step count without moments, and one this run could not have reached (4
+           // epochs of 2 batches, none skipped: 8 steps). Resumed, the first was refused by
+           // Adam::restore without the file, the second took other bias corrections.
+           Case{false, "adam_t ", "adam_t 0", "adam_m has 2 numbers with adam_t 0", false},
+           Case{false, "adam_t ", "adam_t 2", "adam_t 2 after 4 epochs", false},
+           // The generator's state, refused by Trainer::resume_at without the file.
+           Case{false, "shuffle ", "shuffle 42 1 2 3", "not a state of the shuffling", false},
            Case{true, "3,", "7,", "row 3 is missing or does not start with '3,'", true}}) {
     fresh();
     replace_line(c.edit_log ? log : checkpoint, c.starts, c.by);
@@ -351,6 +362,12 @@ TEST_CASE("run: a checkpoint or log changed by hand is refused before any work, 
                     Catch::Contains("edited.checkpoint") &&
                         Catch::Contains("the last record is of epoch 4; expected the "
                                         "checkpoint's epoch 3"));
+  // Lines after 'end', which the run never writes.
+  fresh();
+  std::ofstream(checkpoint, std::ios::app) << "params 1\n0.5\n";
+  Setup<double> after_end(Method::Combined);
+  CHECK_THROWS_WITH(run_training(after_end.trainer, train, test, settings),
+                    Catch::Contains("edited.checkpoint") && Catch::Contains("after 'end'"));
   // A negative second moment, one of adam_v's numbers.
   fresh();
   std::string text = file_text(checkpoint);
@@ -387,6 +404,14 @@ TEST_CASE("run: a log that cannot be written still saves the parameters", "[trai
   CHECK_THAT(result.output_error, Catch::Contains("full.csv"));
   CHECK(result.epochs > 1);
   CHECK(result.epochs < 200);
+  // The write that failed left no part of its row: the log is the header and the whole rows
+  // of the epochs before (a cut row stayed behind, which only a resume from a checkpoint
+  // repaired).
+  const std::string text = file_text(log);
+  REQUIRE(!text.empty());
+  CHECK(text.back() == '\n');
+  CHECK(std::count(text.begin(), text.end(), '\n') == result.epochs);
+  CHECK_THAT(result.output_error, Catch::Contains("the log keeps its whole rows"));
   REQUIRE(result.saved_params == params.string());
   CHECK(load_parameters<double>(params, 2) == s.policy.params());
 }

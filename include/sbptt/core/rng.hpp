@@ -41,12 +41,13 @@ public:
     out << engine_;
     return out.str();
   }
-  /// Restores a `state()`; returns false (leaving the generator unchanged) on malformed text.
+  /// Restores a `state()`; returns false (leaving the generator unchanged) on malformed text,
+  /// words after the state included.
   [[nodiscard]] bool restore(const std::string& state) {
     std::istringstream in(state);
     std::mt19937_64 engine;
     in >> engine;
-    if (in.fail()) return false;
+    if (in.fail() || !(in >> std::ws).eof()) return false;
     engine_ = engine;
     return true;
   }

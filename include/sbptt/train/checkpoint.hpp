@@ -34,6 +34,7 @@
 
 #include "sbptt/core/atomic_file.hpp"
 #include "sbptt/core/number_text.hpp"
+#include "sbptt/core/rng.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/train/training_log.hpp"
 
@@ -144,6 +145,8 @@ public:
     return line;
   }
 
+  [[nodiscard]] bool at_end() const { return position_ >= text_.size(); }
+
   [[nodiscard]] std::string where() const {
     return concat("checkpoint '", path_, "', line ", line_);
   }
@@ -219,6 +222,9 @@ template <class Scalar>
   }
   c.epoch = in.integer("epoch");
   c.shuffle_state = std::string(in.value("shuffle"));
+  detail::require<ParseError>(Rng(0).restore(c.shuffle_state), in.where(),
+                              ": not a state of the shuffling generator (mt19937-64's 313 "
+                              "numbers)");
   c.log_bytes = in.integer("log_bytes", -1);  // −1: made without a log
   c.skipped_batches = in.integer("skipped_batches");
   c.since_best = in.integer("since_best", 0, static_cast<double>(c.epoch));
@@ -260,12 +266,19 @@ template <class Scalar>
   c.adam_t = in.integer("adam_t");
   c.adam_m = in.vector<Scalar>("adam_m");
   require_length(c.adam_m, "adam_m");
+  detail::require<ParseError>((c.adam_t == 0) == (c.adam_m.size() == 0), in.where(),
+                              ": adam_m has ", c.adam_m.size(), " numbers with adam_t ", c.adam_t,
+                              "; expected moments exactly when Adam has taken steps");
   c.adam_v = in.vector<Scalar>("adam_v");
-  require_length(c.adam_v, "adam_v");
+  detail::require<ParseError>(c.adam_v.size() == c.adam_m.size(), in.where(), ": adam_v has ",
+                              c.adam_v.size(), " numbers; expected ", c.adam_m.size(),
+                              " (as adam_m)");
   detail::require<ParseError>((c.adam_v.array() >= Scalar(0)).all(), in.where(),
                               ": adam_v has a negative entry; expected squares' averages (>= 0)");
   const std::string_view end = in.next();
   detail::require<ParseError>(end == "end", in.where(), ": expected 'end'");
+  detail::require<ParseError>(in.at_end(), "checkpoint '", path,
+                              "' goes on after 'end'; expected nothing after it");
   return c;
 }
 

@@ -229,6 +229,14 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
                     "checkpoint '", settings.checkpoint, "' was made without a training log; "
                     "expected one (the run would have a log without its first epochs)");
     if constexpr (detail::AdamLike<Optimizer>) {
+      // One step per batch of every epoch done, but for the skipped ones: another count would
+      // resume with other bias corrections than the run had.
+      const long long batches = (train.cols() + o.batch - 1) / o.batch;
+      const long long steps = resumed->epoch * batches - resumed->skipped_batches;
+      detail::require<ParseError>(
+          resumed->adam_t == steps, "checkpoint '", settings.checkpoint, "': adam_t ",
+          resumed->adam_t, " after ", resumed->epoch, " epochs of ", batches, " batches, ",
+          resumed->skipped_batches, " of them skipped; expected ", steps, " (one step a batch)");
       trainer.optimizer().restore(resumed->adam_m, resumed->adam_v, resumed->adam_t);
     }
     trainer.resume_at(resumed->epoch, resumed->shuffle_state);

@@ -144,8 +144,15 @@ public:
   void append(const EpochRecord& record) {
     const std::string row = training_log_row(record);
     const int error = detail::write_all(fd_, row);
-    detail::require<IoError>(error == 0, "writing training log '", path_, "' failed: ",
-                             detail::os_reason(error));
+    if (error != 0) {
+      // A full disk takes part of the row: cut it off, so that the log stays whole rows.
+      const int cut_error = ::ftruncate(fd_, size_) == 0 ? 0 : errno;
+      throw IoError(detail::concat(
+          "writing training log '", path_, "' failed: ", detail::os_reason(error),
+          cut_error == 0 ? std::string("; the log keeps its whole rows")
+                         : detail::concat("; cutting off the part written failed too: ",
+                                          detail::os_reason(cut_error))));
+    }
     size_ += static_cast<long long>(row.size());
     bytes_written_ += static_cast<long long>(row.size());
     ++writes_;

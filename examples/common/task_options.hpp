@@ -180,6 +180,7 @@ inline void require_float_range(const char* flag, double value) {
   }
   const Horizon paper = paper_horizon(task);
   std::optional<long> steps;
+  std::string model = "reference";  // cart pole's --model as given
   std::optional<double> dt, horizon;
   const long many = limits::max_count;
 
@@ -280,6 +281,7 @@ inline void require_float_range(const char* flag, double value) {
                 // Both set each time: the last --model given wins, as for every flag.
                 o.physical = text == "physical";
                 o.chain = text == "chain";
+                model = text;
               });
   if (task == Task::Guidance) {
     cli.integer("--drivers", o.drivers, 1, 16, "drivers (2 and 4 evaders run fixed-size)");
@@ -319,8 +321,11 @@ inline void require_float_range(const char* flag, double value) {
   // The switches' callbacks run in the order they were declared, not given: --double won.
   detail::require(!(cli.given("--float") && cli.given("--double")), "--float and --double both "
                   "given; expected one of them (double is the default)");
-  detail::require(!(o.chain && o.physical), "--model chain and --physical both given; expected "
-                                           "one cart-pole model");
+  // --model's callback runs after --physical's, whichever came first, and would drop it.
+  detail::require(task != Task::CartPole || !cli.given("--physical") || !cli.given("--model") ||
+                      model == "physical",
+                  "--model ", model, " and --physical both given; expected one cart-pole model "
+                  "(--physical is --model physical)");
   detail::require(!o.chain || o.poles <= 3, "--poles ", o.poles, " with --model chain; expected "
                                             "1 to 3 links");
   o.steps_flag = steps;

@@ -14,6 +14,7 @@
 #include <csignal>
 #include <cstdio>
 #include <fstream>
+#include <ios>
 #include <iostream>
 #include <iterator>
 #include <new>
@@ -147,6 +148,23 @@ inline std::vector<RunSetting> task_identity(const TaskOptions& o) {
 
 /// Trains `controller` for o.epochs epochs (or dumps gradients) with `run_training`, printing
 /// progress and every non-finite event to stderr.
+/// `read()`, which reads the file given to `flag`, with the flag in front of its error: the
+/// readers name the file, not which flag gave it.
+template <class Read>
+decltype(auto) reading_flag(const char* flag, Read&& read) {
+  try {
+    return read();
+  } catch (const ParseError& e) {
+    throw ParseError(detail::concat(flag, ": ", e.what()));
+  } catch (const IoError& e) {
+    throw IoError(detail::concat(flag, ": ", e.what()));
+  } catch (const Error&) {
+    throw;
+  } catch (const std::ios_base::failure& e) {  // the stream's own words for a failed read
+    throw IoError(detail::concat(flag, ": reading the file failed: ", e.what()));
+  }
+}
+
 template <class Sim, class Ctrl, class Loss>
 int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objective<Loss>& objective,
           Index steps, DataSplit<typename Sim::Scalar> data) {
@@ -162,8 +180,11 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                           {"--save-params", o.save_params, true},
                           {"--dump-gradients", o.dump_gradients, true},
                           {"--checkpoint", o.checkpoint, true}});
-  if (!o.init_params.empty()) load_parameters(o.init_params, controller);
-  if (!o.init_states.empty()) data.train = load_states<Scalar>(o.init_states, sim.state_dim());
+  if (!o.init_params.empty())
+    reading_flag("--init-params", [&] { load_parameters(o.init_params, controller); });
+  if (!o.init_states.empty())
+    data.train = reading_flag(
+        "--init-states", [&] { return load_states<Scalar>(o.init_states, sim.state_dim()); });
   if (!o.dump_gradients.empty())
     return dump_gradients(o, sim, controller, objective, steps, data.train);
 

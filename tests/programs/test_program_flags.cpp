@@ -218,7 +218,13 @@ TEST_CASE("numbers beyond the type's range, numbers not in decimals and contradi
         Case{"toy", "--lr 0x10", "--lr '0x10' is not a number; expected a number in [1e-300, "
                                  "1e+300]"},
         Case{"toy", "--lr=' 1e-3'", "--lr ' 1e-3' is not a number"},
-        Case{"cartpole", "--double --float --epochs 1", "--float and --double both given"}}) {
+        Case{"cartpole", "--double --float --epochs 1", "--float and --double both given"},
+        // The --model callback ran after --physical's whatever the order given and reset it:
+        // both ran the model of --model, --physical silently dropped.
+        Case{"cartpole", "--physical --model reference --epochs 1",
+             "--model reference and --physical both given"},
+        Case{"cartpole", "--model chain --physical --poles 2 --epochs 1",
+             "--model chain and --physical both given"}}) {
     const Result r = run(c.program, c.arguments);
     INFO(c.program << " " << c.arguments << "\n" << r.output);
     CHECK(r.status == 2);

@@ -234,13 +234,16 @@ TEST_CASE("bad flags get exit code 2 and a message naming the value", "[programs
 }
 
 TEST_CASE("unreadable inputs and unwritable outputs fail at once with exit 1", "[programs]") {
+  // Every message names the flag whose file failed (the inputs' named only the file).
   struct Case {
     std::string arguments, expected;
   };
   std::ofstream(scratch("narrow.csv")) << "1,2\n";
   for (const Case& c :
        {Case{"--init-params /nonexistent/p.txt", "cannot open '/nonexistent/p.txt'"},
+        Case{"--init-params " + scratch("").string(), "is a directory"},
         Case{"--init-states /nonexistent/s.csv", "cannot open states file '/nonexistent/s.csv'"},
+        Case{"--init-states " + scratch("").string(), "is a directory"},
         Case{"--init-states " + scratch("narrow.csv").string(), "2 columns; expected exactly state_dim = 4"},
         Case{"--csv /nonexistent/dir/log.csv", "directory '/nonexistent/dir' does not exist"},
         Case{"--save-params " + (scratch("narrow.csv") / "p.txt").string(), "is not a directory"},
@@ -251,6 +254,7 @@ TEST_CASE("unreadable inputs and unwritable outputs fail at once with exit 1", "
     INFO(c.arguments << "\n" << r.output);
     CHECK(r.status == 1);
     CHECK(r.output.find(c.expected) != std::string::npos);
+    CHECK(r.output.find(c.arguments.substr(0, c.arguments.find(' '))) != std::string::npos);
     CHECK(r.output.find("epoch 1") == std::string::npos);  // failed before training
   }
 }

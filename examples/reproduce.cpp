@@ -51,6 +51,9 @@ int main(int argc, char** argv) {
     if (!options.python.empty() && !can_execute(options.python))
       throw InvalidArgument(concat("--python '", options.python, "' is no executable program; "
                                    "expected a path or a name on PATH"));
+    if (!options.plot_script.empty() && !fs::is_regular_file(options.plot_script))
+      throw InvalidArgument(concat("--plot-script '", options.plot_script, "' is no file; "
+                                   "expected the plotting script (tools/plot_results.py)"));
     if (options.emit == "slurm") require_slurm_folder(options);
     plan = make_plan(options);
     if (plan.empty())

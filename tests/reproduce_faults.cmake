@@ -119,6 +119,14 @@ execute_process(COMMAND "${REPRODUCE}" ${grid} --python "${WORK_DIR}/nonexistent
 check("--python <missing>: exit 2 naming the flag, no matplotlib advice (${err})"
       rc EQUAL 2 AND err MATCHES "--python" AND NOT err MATCHES "matplotlib")
 check("--python <missing>: nothing was started" NOT EXISTS "${WORK_DIR}/python")
+# A --plot-script that is not there: refused up front like --python (the whole sweep ran, and
+# only its end warned "no plots", exit 0).
+execute_process(COMMAND "${REPRODUCE}" ${grid} --plot-script "${WORK_DIR}/nonexistent.py"
+                --out "${WORK_DIR}/plot_script" TIMEOUT 20 RESULT_VARIABLE rc OUTPUT_QUIET
+                ERROR_VARIABLE err)
+check("--plot-script <missing>: exit 2 naming the flag and the file (${err})"
+      rc EQUAL 2 AND err MATCHES "--plot-script '[^']*nonexistent.py'")
+check("--plot-script <missing>: nothing was started" NOT EXISTS "${WORK_DIR}/plot_script")
 # --out naming a file, or a path under one: refused up front, naming the flag and the file, in
 # every mode (a sweep stopped at its first write with "filesystem error: cannot create
 # directories", exit 1, and --dry-run planned into it).
@@ -131,6 +139,16 @@ foreach(out "${WORK_DIR}/a_file" "${WORK_DIR}/a_file/results")
           rc EQUAL 2 AND err MATCHES "--out '${out}'" AND err MATCHES "a_file' is a file"
           AND NOT text MATCHES ".")
   endforeach()
+endforeach()
+# A name longer than the file system takes: every mode said "filesystem error: ... File name
+# too long" (exit 1), or planned and emitted into it (exit 0).
+string(REPEAT "a" 300 long_name)
+foreach(mode "" --dry-run --merge "--emit;parallel" "--emit;slurm")
+  execute_process(COMMAND "${REPRODUCE}" ${grid} ${mode} --out "${WORK_DIR}/${long_name}/x"
+                  TIMEOUT 20 RESULT_VARIABLE rc OUTPUT_VARIABLE text ERROR_VARIABLE err)
+  check("--out <a 300-byte name> ${mode}: exit 2 naming --out and the limit (${err})"
+        rc EQUAL 2 AND err MATCHES "--out '[^']*': a name of 300 bytes in it. expected at most 255"
+        AND NOT text MATCHES ".")
 endforeach()
 file(READ "${WORK_DIR}/a_file" kept)
 check("--out <a file>: the file is unchanged" kept STREQUAL "kept\n")

@@ -89,6 +89,17 @@ inline std::string parse_choice(const std::string& flag, const std::string& text
 inline void require_output_folder(const Options& o) {
   std::error_code error;
   const fs::path out = fs::absolute(o.out, error);
+  // Linux refuses a name part over NAME_MAX (255 bytes) and a path over PATH_MAX (4096) at the
+  // first write, in words that name neither the flag nor the part; the files under --out add
+  // at most 128 bytes (runs/<name>.partial.csv.tmp.<suffix>).
+  for (const fs::path& part : out)
+    if (part.native().size() > 255)
+      throw InvalidArgument(concat("--out '", o.out, "': a name of ", part.native().size(),
+                                   " bytes in it; expected at most 255 (NAME_MAX)"));
+  if (out.native().size() > 4096 - 128)
+    throw InvalidArgument(concat("--out '", o.out, "': ", out.native().size(),
+                                 " bytes; expected a path of at most ", 4096 - 128,
+                                 " (PATH_MAX less room for the files in it)"));
   fs::path existing = out;
   while (!fs::exists(existing, error) && existing.has_relative_path())
     existing = existing.parent_path();

@@ -62,16 +62,18 @@ struct Setup {
   PolynomialPolicy<Scalar> policy{{2, 1}};
   Trainer<Sim<Scalar>, PolynomialPolicy<Scalar>, Loss<Scalar>, Adam<Scalar>> trainer;
 
-  explicit Setup(Method method, Index batch = 3, double lr = 0.02)
+  explicit Setup(Method method, Index batch = 3, double lr = 0.02,
+                 NonFinitePolicy on_non_finite = NonFinitePolicy::Stop)
       : trainer(sim, policy, to_origin<Scalar>(), 6, Adam<Scalar>(AdamOptions<Scalar>{Scalar(lr)}),
-                options(method, batch)) {}
+                options(method, batch, on_non_finite)) {}
 
-  static TrainerOptions options(Method method, Index batch) {
+  static TrainerOptions options(Method method, Index batch, NonFinitePolicy on_non_finite) {
     TrainerOptions o;
     o.method = method;
     o.batch = batch;
     o.shuffle = true;
     o.shuffle_seed = 7;
+    o.on_non_finite = on_non_finite;
     return o;
   }
 };
@@ -208,6 +210,41 @@ TEMPLATE_TEST_CASE("run: a checkpointed run resumed twice ends bit for bit as on
       }
     }
   }
+}
+
+TEST_CASE("run: a checkpoint after skipped batches resumes as one run", "[train]") {
+  // One train sample overflows the rollout, so the batch that holds it is skipped in every
+  // epoch (SkipBatch): Adam has taken one step fewer per epoch than there are batches, which
+  // the checkpoint's adam_t must show and a resume must accept. The last epoch's evaluation of
+  // the train set is not finite either and stops the run there, resumed or not.
+  Matrix<double> train = spread<double>(6, -1.0);
+  train(0, 4) = 1e300;
+  const Matrix<double> test = spread<double>(2, 0.2);
+  const fs::path checkpoint = scratch("skipped.checkpoint");
+  fs::remove(checkpoint);
+  RunSettings settings;
+  settings.epochs = 4;
+  settings.evaluate_every = 100;
+  Setup<double> whole(Method::Combined, 3, 0.02, NonFinitePolicy::SkipBatch);
+  const auto one_run = run_training(whole.trainer, train, test, settings);
+  REQUIRE(one_run.end == RunEnd::NonFinite);
+  REQUIRE(one_run.epochs == 3);
+  CHECK(one_run.skipped_batches == 4);  // the 4th epoch's skip is counted, then it stops
+
+  settings.checkpoint = checkpoint.string();
+  RunCallbacks stop_after_two;  // as a kill would: no evaluation before the stop
+  stop_after_two.should_stop = [](const EpochRecord& r) { return r.epoch == 2; };
+  Setup<double> first(Method::Combined, 3, 0.02, NonFinitePolicy::SkipBatch);
+  REQUIRE(run_training(first.trainer, train, test, settings, stop_after_two).end ==
+          RunEnd::Requested);
+  CHECK(file_text(checkpoint).find("\nskipped_batches 2\n") != std::string::npos);
+  CHECK(file_text(checkpoint).find("\nadam_t 2\n") != std::string::npos);  // 2 × 2 − 2
+  Setup<double> second(Method::Combined, 3, 0.02, NonFinitePolicy::SkipBatch);
+  const auto resumed = run_training(second.trainer, train, test, settings);
+  CHECK(resumed.resumed_from == 2);
+  CHECK(resumed.end == RunEnd::NonFinite);
+  CHECK(resumed.epochs == 3);
+  CHECK(second.policy.params() == whole.policy.params());
 }
 
 TEST_CASE("checkpoint: an epoch whose squared update norm overflowed reads back", "[train]") {

@@ -119,6 +119,11 @@ execute_process(COMMAND "${REPRODUCE}" ${grid} --python "${WORK_DIR}/nonexistent
 check("--python <missing>: exit 2 naming the flag, no matplotlib advice (${err})"
       rc EQUAL 2 AND err MATCHES "--python" AND NOT err MATCHES "matplotlib")
 check("--python <missing>: nothing was started" NOT EXISTS "${WORK_DIR}/python")
+# --run takes a run's name: an empty one was called "an empty path; expected a file path".
+execute_process(COMMAND "${REPRODUCE}" ${grid} --run "" --out "${WORK_DIR}/empty_run" TIMEOUT 20
+                RESULT_VARIABLE rc OUTPUT_QUIET ERROR_VARIABLE err)
+check("--run '': exit 2, an empty name where a run's name is expected (${err})"
+      rc EQUAL 2 AND err MATCHES "--run '' is an empty name. expected the name of a run")
 # A --plot-script that is not there: refused up front like --python (the whole sweep ran, and
 # only its end warned "no plots", exit 0).
 execute_process(COMMAND "${REPRODUCE}" ${grid} --plot-script "${WORK_DIR}/nonexistent.py"

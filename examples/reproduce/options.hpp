@@ -179,8 +179,13 @@ inline Options parse_options(int argc, const char* const* argv) {
             [&](const std::string& v) {
               std::tie(o.shard_index, o.shard_count) = parse_shard(v);
             });
-  cli.path("--run", o.run, "run only the run of this name (what emitted commands do)")
-      ->type_name("NAME");
+  cli.value("--run", "NAME", "run only the run of this name (what emitted commands do)", "none",
+            [&](const std::string& name) {
+              if (name.empty())
+                throw InvalidArgument("--run '' is an empty name; expected the name of a run "
+                                      "of the plan (--dry-run lists them)");
+              o.run = name;
+            });
   cli.flag("--merge", "summary, table and figures from the finished runs; list the missing",
            [&] { o.merge = true; });
   cli.flag("--no-plot", "skip the figures", [&] { o.plot = false; });

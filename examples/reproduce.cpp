@@ -51,7 +51,9 @@ int main(int argc, char** argv) {
     if (!options.python.empty() && !can_execute(options.python))
       throw InvalidArgument(concat("--python '", options.python, "' is no executable program; "
                                    "expected a path or a name on PATH"));
-    if (!options.plot_script.empty() && !fs::is_regular_file(options.plot_script))
+    std::error_code error;  // a path the system cannot even look at is no file either
+    if (options.plot && !options.dry_run && options.emit.empty() &&
+        !options.plot_script.empty() && !fs::is_regular_file(options.plot_script, error))
       throw InvalidArgument(concat("--plot-script '", options.plot_script, "' is no file; "
                                    "expected the plotting script (tools/plot_results.py)"));
     if (options.emit == "slurm") require_slurm_folder(options);

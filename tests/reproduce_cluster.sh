@@ -70,7 +70,7 @@ grep -q "8 of 8 planned runs done, 0 running (lock held), 0 missing" \
   "$slurm_out/slurm/logs/merge.log" || fail "the merge job did not find all 8 runs done"
 [ "$(ls "$slurm_out/slurm/logs" | grep -c '^run_.*\.log$')" = 8 ] || fail "not a log per task"
 losses "$slurm_out" | cmp -s - "$work/reference" || fail "Slurm: other losses"
-ok "Slurm job array + merge job in a folder with blanks and quotes: the local losses, a log per task"
+ok "Slurm job array + merge job, a folder with blanks and quotes: the local losses, a log per task"
 
 # (d) three shards at once
 for k in 1 2 3; do

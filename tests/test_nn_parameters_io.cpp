@@ -212,6 +212,11 @@ TEST_CASE("unreadable and unwritable paths are IoErrors", "[nn][io]") {
   REQUIRE_THROWS_WITH(sbptt::load_parameters<double>(dir.path / "missing.txt", 3),
                       Contains("missing.txt"));
   REQUIRE_THROWS_WITH(sbptt::load_parameters<double>(dir.path, 3), Contains("is a directory"));
+  // A read that fails after the open (the kernel refuses reads of /proc/self/mem at offset 0
+  // with EIO): libstdc++'s own "basic_filebuf::underflow" exception, not an IoError, escaped.
+  REQUIRE_THROWS_AS(sbptt::load_parameters<double>("/proc/self/mem", 3), sbptt::IoError);
+  REQUIRE_THROWS_WITH(sbptt::load_parameters<double>("/proc/self/mem", 3),
+                      Contains("reading parameters file '/proc/self/mem' failed"));
   REQUIRE_THROWS_AS(sbptt::save_parameters(dir.path / "no_such_dir" / "theta.txt", theta),
                     sbptt::IoError);
   // Renaming a file over a non-empty directory fails: the temporary must not survive.

@@ -229,7 +229,6 @@ TEST_CASE("run: a checkpoint after skipped batches resumes as one run", "[train]
   const auto one_run = run_training(whole.trainer, train, test, settings);
   REQUIRE(one_run.end == RunEnd::NonFinite);
   REQUIRE(one_run.epochs == 3);
-  CHECK(one_run.skipped_batches == 4);  // the 4th epoch's skip is counted, then it stops
 
   settings.checkpoint = checkpoint.string();
   RunCallbacks stop_after_two;  // as a kill would: no evaluation before the stop
@@ -285,7 +284,6 @@ TEST_CASE("checkpoint: an error names the line that is wrong, whichever it is", 
   for (std::string line; std::getline(in, line);) lines.push_back(line);
   REQUIRE(lines.size() > 20);
   for (std::size_t k = 1; k < lines.size(); ++k) {
-    if (lines[k].starts_with("shuffle ")) continue;  // the generator's own text, kept as it is
     std::vector<std::string> spoiled = lines;
     const std::size_t space = spoiled[k].find(' ');
     spoiled[k] = space == std::string::npos ? "x" : spoiled[k].substr(0, space + 1) + "x";
@@ -372,10 +370,10 @@ TEST_CASE("run: a checkpoint or log changed by hand is refused before any work, 
            Case{false, "adam_t ", "adam_t -1", "adam_t -1; expected 0 to", false},
            Case{false, "since_best ", "since_best -3", "since_best -3; expected 0 to 4", false},
            // Adam's step count without moments, and one this run could not have reached (4
-           // epochs of 2 batches, none skipped: 8 steps). Resumed, the first was refused by
+           // epochs of 2 batches: at most 8 steps). Resumed, the first was refused by
            // Adam::restore without the file, the second took other bias corrections.
-           Case{false, "adam_t ", "adam_t 0", "adam_m has 2 numbers with adam_t 0", false},
-           Case{false, "adam_t ", "adam_t 2", "adam_t 2 after 4 epochs", false},
+           Case{false, "adam_t ", "adam_t 0", "adam_t 0 with 2 numbers in adam_m", false},
+           Case{false, "adam_t ", "adam_t 9", "adam_t 9 after 4 epochs", false},
            // The generator's state, refused by Trainer::resume_at without the file.
            Case{false, "shuffle ", "shuffle 42 1 2 3", "not a state of the shuffling", false},
            Case{true, "3,", "7,", "row 3 is missing or does not start with '3,'", true}}) {

@@ -53,6 +53,10 @@ TEST_CASE("states file: every malformed input names its line and what was expect
 
 TEST_CASE("states file: unreadable paths are IoErrors naming the path", "[io]") {
   REQUIRE_THROWS_AS(load_states<double>("/nonexistent/states.csv", 2), IoError);
+  // A read that fails after the open (EIO from /proc/self/mem at offset 0).
+  REQUIRE_THROWS_AS(load_states<double>("/proc/self/mem", 2), IoError);
+  REQUIRE_THROWS_WITH(load_states<double>("/proc/self/mem", 2),
+                      Catch::Contains("reading states file '/proc/self/mem' failed"));
   REQUIRE_THROWS_WITH(load_states<double>("/nonexistent/states.csv", 2), Contains("/nonexistent/states.csv"));
   REQUIRE_THROWS_WITH(load_states<double>(std::filesystem::temp_directory_path(), 2), Contains("is a directory"));
   REQUIRE_THROWS_AS(save_states<double>("/nonexistent/dir/s.csv", Matrix<double>::Zero(2, 2)), IoError);

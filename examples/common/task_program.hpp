@@ -14,7 +14,6 @@
 #include <csignal>
 #include <cstdio>
 #include <fstream>
-#include <ios>
 #include <iostream>
 #include <iterator>
 #include <new>
@@ -146,18 +145,16 @@ inline std::vector<RunSetting> task_identity(const TaskOptions& o) {
   return identity;
 }
 
-/// `read()`, which reads `path`, given to `flag`, with the flag in front of its error: the
+/// `read()`, which reads the file given to `flag`, with the flag in front of its error: the
 /// readers name the file, not which flag gave it.
 template <class Read>
-decltype(auto) reading_flag(const char* flag, const std::string& path, Read&& read) {
+decltype(auto) reading_flag(const char* flag, Read&& read) {
   try {
     return read();
   } catch (const ParseError& e) {
     throw ParseError(detail::concat(flag, ": ", e.what()));
   } catch (const IoError& e) {
     throw IoError(detail::concat(flag, ": ", e.what()));
-  } catch (const std::ios_base::failure& e) {  // the stream's own words for a failed read
-    throw IoError(detail::concat(flag, ": reading '", path, "' failed: ", e.what()));
   }
 }
 
@@ -179,12 +176,10 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                           {"--dump-gradients", o.dump_gradients, true},
                           {"--checkpoint", o.checkpoint, true}});
   if (!o.init_params.empty())
-    reading_flag("--init-params", o.init_params,
-                 [&] { load_parameters(o.init_params, controller); });
+    reading_flag("--init-params", [&] { load_parameters(o.init_params, controller); });
   if (!o.init_states.empty())
-    data.train = reading_flag("--init-states", o.init_states, [&] {
-      return load_states<Scalar>(o.init_states, sim.state_dim());
-    });
+    data.train = reading_flag(
+        "--init-states", [&] { return load_states<Scalar>(o.init_states, sim.state_dim()); });
   if (!o.dump_gradients.empty())
     return dump_gradients(o, sim, controller, objective, steps, data.train);
 

@@ -58,7 +58,8 @@ inline std::string sbatch_quote(const std::string& word) {
 }
 
 /// Refuses, before any work, an --out that the Slurm scripts cannot name: sbatch reads '%' in
-/// --output as a pattern (%a, %j, %x, ...), and a line break would end the #SBATCH line.
+/// --output as a pattern (%a, %j, %x, ...), and a backslash there as an escape of the patterns
+/// (Slurm's documentation), which the logs' %a needs; a line break would end the line.
 inline void require_slurm_folder(const Options& o) {
   const std::string dir = fs::absolute(o.out).lexically_normal().string();
   const auto bad = std::find_if(dir.begin(), dir.end(), [](char c) {
@@ -67,7 +68,8 @@ inline void require_slurm_folder(const Options& o) {
   if (bad != dir.end())
     throw InvalidArgument(concat("--out '", o.out, "' with --emit slurm: its path holds ",
                                  *bad == '%' ? "'%', which sbatch reads as a file-name pattern"
-                                 : *bad == '\\' ? "a backslash, which sbatch reads as an escape"
+                                 : *bad == '\\' ? "a backslash, which sbatch reads as an escape "
+                                                  "of the logs' file-name pattern"
                                                 : "a control character",
                                  "; expected a folder without them"));
 }

@@ -9,6 +9,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <ios>
 #include <streambuf>
 #include <string>
 #include <string_view>
@@ -58,16 +59,22 @@ enum class LineRead { Line, End, TooLong };
 /// Reads one line (without its '\n') of at most `max_chars` characters into `line`. Returns
 /// End at the end of the input, TooLong as soon as the line exceeds `max_chars` (the rest is
 /// never read, so a file without newlines such as /dev/zero costs at most `max_chars`).
+/// `file` names the file in the `IoError` of a failed read: libstdc++'s file buffer throws its
+/// own words for it ("basic_filebuf::underflow error reading the file"), without the file.
 [[nodiscard]] inline LineRead read_bounded_line(std::streambuf& in, std::string& line,
-                                                std::size_t max_chars) {
+                                                std::size_t max_chars, const std::string& file) {
   line.clear();
   using Traits = std::streambuf::traits_type;
-  auto c = in.sbumpc();
-  if (Traits::eq_int_type(c, Traits::eof())) return LineRead::End;
-  while (!Traits::eq_int_type(c, Traits::eof()) && Traits::to_char_type(c) != '\n') {
-    if (line.size() == max_chars) return LineRead::TooLong;
-    line += Traits::to_char_type(c);
-    c = in.sbumpc();
+  try {
+    auto c = in.sbumpc();
+    if (Traits::eq_int_type(c, Traits::eof())) return LineRead::End;
+    while (!Traits::eq_int_type(c, Traits::eof()) && Traits::to_char_type(c) != '\n') {
+      if (line.size() == max_chars) return LineRead::TooLong;
+      line += Traits::to_char_type(c);
+      c = in.sbumpc();
+    }
+  } catch (const std::ios_base::failure& e) {
+    throw IoError(concat("reading ", file, " failed: ", e.what()));
   }
   return LineRead::Line;
 }

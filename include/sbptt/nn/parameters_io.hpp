@@ -70,8 +70,9 @@ template <class Scalar>
     return detail::concat("parameters file '", path.string(), "', line ", line_number);
   };
   while (true) {
-    const detail::LineRead read = detail::read_bounded_line(*in.rdbuf(), line,
-                                                            detail::max_number_chars);
+    const detail::LineRead read = detail::read_bounded_line(
+        *in.rdbuf(), line, detail::max_number_chars,
+        detail::concat("parameters file '", path.string(), "'"));
     if (read == detail::LineRead::End) break;
     ++line_number;
     detail::require<ParseError>(read == detail::LineRead::Line, where(), ": longer than ",

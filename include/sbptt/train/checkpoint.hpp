@@ -264,11 +264,13 @@ template <class Scalar>
   c.best_params = in.vector<Scalar>("best_params");
   require_length(c.best_params, "best_params");
   c.adam_t = in.integer("adam_t");
+  const std::string adam_t_line = in.where();
   c.adam_m = in.vector<Scalar>("adam_m");
   require_length(c.adam_m, "adam_m");
-  detail::require<ParseError>((c.adam_t == 0) == (c.adam_m.size() == 0), in.where(),
-                              ": adam_m has ", c.adam_m.size(), " numbers with adam_t ", c.adam_t,
-                              "; expected moments exactly when Adam has taken steps");
+  detail::require<ParseError>((c.adam_t == 0) == (c.adam_m.size() == 0), adam_t_line,
+                              ": adam_t ", c.adam_t, " with ", c.adam_m.size(),
+                              " numbers in adam_m; expected moments exactly when Adam has taken "
+                              "steps");
   c.adam_v = in.vector<Scalar>("adam_v");
   detail::require<ParseError>(c.adam_v.size() == c.adam_m.size(), in.where(), ": adam_v has ",
                               c.adam_v.size(), " numbers; expected ", c.adam_m.size(),
@@ -277,8 +279,10 @@ template <class Scalar>
                               ": adam_v has a negative entry; expected squares' averages (>= 0)");
   const std::string_view end = in.next();
   detail::require<ParseError>(end == "end", in.where(), ": expected 'end'");
-  detail::require<ParseError>(in.at_end(), "checkpoint '", path,
-                              "' goes on after 'end'; expected nothing after it");
+  if (!in.at_end()) {
+    in.next();
+    throw ParseError(detail::concat(in.where(), ": a line after 'end'; expected nothing"));
+  }
   return c;
 }
 

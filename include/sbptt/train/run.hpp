@@ -213,6 +213,7 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   std::optional<Checkpoint<Scalar>> resumed;
   if (!settings.checkpoint.empty()) resumed = load_checkpoint<Scalar>(settings.checkpoint);
   if (resumed) {
+    const bool fresh = trainer.epoch() == 0;
     require_same_settings(identity, resumed->settings, settings.checkpoint);
     detail::require<ParseError>(resumed->params.size() == params.size(), "checkpoint '",
                                 settings.checkpoint, "' has ", resumed->params.size(),
@@ -229,14 +230,16 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
                     "checkpoint '", settings.checkpoint, "' was made without a training log; "
                     "expected one (the run would have a log without its first epochs)");
     if constexpr (detail::AdamLike<Optimizer>) {
-      // One step per batch of every epoch done, but for the skipped ones: another count would
-      // resume with other bias corrections than the run had.
+      // From a fresh trainer Adam takes at most one step a batch (fewer with skipped batches,
+      // or a callback that resets it): more would resume with bias corrections the run never
+      // had. A trainer that had trained before this call has counts of its own.
       const long long batches = (train.cols() + o.batch - 1) / o.batch;
       const long long steps = resumed->epoch * batches - resumed->skipped_batches;
       detail::require<ParseError>(
-          resumed->adam_t == steps, "checkpoint '", settings.checkpoint, "': adam_t ",
+          !fresh || resumed->adam_t <= steps, "checkpoint '", settings.checkpoint, "': adam_t ",
           resumed->adam_t, " after ", resumed->epoch, " epochs of ", batches, " batches, ",
-          resumed->skipped_batches, " of them skipped; expected ", steps, " (one step a batch)");
+          resumed->skipped_batches, " of them skipped; expected at most ", steps,
+          " (one step a batch)");
       trainer.optimizer().restore(resumed->adam_m, resumed->adam_v, resumed->adam_t);
     }
     trainer.resume_at(resumed->epoch, resumed->shuffle_state);

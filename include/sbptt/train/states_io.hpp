@@ -95,7 +95,8 @@ template <class Scalar>
   std::string line;
   Index rows = 0, line_number = 0;
   while (true) {
-    const detail::LineRead read = detail::read_bounded_line(*in.rdbuf(), line, longest);
+    const detail::LineRead read = detail::read_bounded_line(
+        *in.rdbuf(), line, longest, detail::concat("states file '", path.string(), "'"));
     if (read == detail::LineRead::End) break;
     ++line_number;
     const std::string where = detail::concat("states file '", path.string(), "', line ",

@@ -96,6 +96,11 @@ struct TaskOptions {
   long patience = 0;          ///< stop after this many evaluations without a better test loss
 };
 
+/// The cart pole's --model: "reference", "physical" (also --physical) or "chain".
+inline const char* cart_pole_model(const TaskOptions& o) {
+  return o.chain ? "chain" : o.physical ? "physical" : "reference";
+}
+
 namespace detail_task {
 
 /// Steps of dt that make up T exactly; throws naming `flags` when T is not a whole number of
@@ -180,7 +185,6 @@ inline void require_float_range(const char* flag, double value) {
   }
   const Horizon paper = paper_horizon(task);
   std::optional<long> steps;
-  std::string model = "reference";  // cart pole's --model as given
   std::optional<double> dt, horizon;
   const long many = limits::max_count;
 
@@ -281,7 +285,6 @@ inline void require_float_range(const char* flag, double value) {
                 // Both set each time: the last --model given wins, as for every flag.
                 o.physical = text == "physical";
                 o.chain = text == "chain";
-                model = text;
               });
   if (task == Task::Guidance) {
     cli.integer("--drivers", o.drivers, 1, 16, "drivers (2 and 4 evaders run fixed-size)");
@@ -323,9 +326,9 @@ inline void require_float_range(const char* flag, double value) {
                   "given; expected one of them (double is the default)");
   // --model's callback runs after --physical's, whichever came first, and would drop it.
   detail::require(task != Task::CartPole || !cli.given("--physical") || !cli.given("--model") ||
-                      model == "physical",
-                  "--model ", model, " and --physical both given; expected one cart-pole model "
-                  "(--physical is --model physical)");
+                      o.physical,
+                  "--model ", cart_pole_model(o), " and --physical both given; expected one "
+                  "cart-pole model (--physical is --model physical)");
   detail::require(!o.chain || o.poles <= 3, "--poles ", o.poles, " with --model chain; expected "
                                             "1 to 3 links");
   o.steps_flag = steps;

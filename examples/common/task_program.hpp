@@ -124,7 +124,7 @@ inline std::vector<RunSetting> task_identity(const TaskOptions& o) {
                                    {"--steps", std::to_string(o.time.steps)},
                                    {"--dt", detail::concat(o.time.dt)}};
   if (o.task == Task::CartPole) {
-    identity.push_back({"--model", o.chain ? "chain" : o.physical ? "physical" : "reference"});
+    identity.push_back({"--model", cart_pole_model(o)});
     identity.push_back({"--poles", std::to_string(o.poles)});
   }
   if (o.task == Task::Guidance) {

@@ -66,13 +66,11 @@ template <class Scalar>
   values.reserve(static_cast<std::size_t>(expected > 0 ? expected : 0));
   std::string line;
   Index line_number = 0, blank_run_start = 0;
-  const auto where = [&] {
-    return detail::concat("parameters file '", path.string(), "', line ", line_number);
-  };
+  const std::string file = detail::concat("parameters file '", path.string(), "'");
+  const auto where = [&] { return detail::concat(file, ", line ", line_number); };
   while (true) {
-    const detail::LineRead read = detail::read_bounded_line(
-        *in.rdbuf(), line, detail::max_number_chars,
-        detail::concat("parameters file '", path.string(), "'"));
+    const detail::LineRead read =
+        detail::read_bounded_line(*in.rdbuf(), line, detail::max_number_chars, file);
     if (read == detail::LineRead::End) break;
     ++line_number;
     detail::require<ParseError>(read == detail::LineRead::Line, where(), ": longer than ",

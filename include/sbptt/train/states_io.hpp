@@ -94,13 +94,12 @@ template <class Scalar>
   std::vector<Scalar> values;
   std::string line;
   Index rows = 0, line_number = 0;
+  const std::string file = detail::concat("states file '", path.string(), "'");
   while (true) {
-    const detail::LineRead read = detail::read_bounded_line(
-        *in.rdbuf(), line, longest, detail::concat("states file '", path.string(), "'"));
+    const detail::LineRead read = detail::read_bounded_line(*in.rdbuf(), line, longest, file);
     if (read == detail::LineRead::End) break;
     ++line_number;
-    const std::string where = detail::concat("states file '", path.string(), "', line ",
-                                             line_number);
+    const std::string where = detail::concat(file, ", line ", line_number);
     detail::require<ParseError>(read == detail::LineRead::Line, where, ": longer than ",
                                 longest, " characters (it starts '", detail::printable(line),
                                 "'); expected a row of ", state_dim, " numbers");

@@ -314,6 +314,12 @@ TEST_CASE("run: a checkpoint of other settings is refused, naming the setting", 
   Setup<double> other_batch(Method::Regular, 2);
   CHECK_THROWS_WITH(run_training(other_batch.trainer, train, test, settings),
                     Catch::Contains("was made with batch = 3; this run has batch = 2"));
+  // A caller's own name for a trainer setting (a program's flag) is the one the message uses.
+  settings.setting_names = {{"batch", "--batch-size"}};
+  CHECK_THROWS_WITH(run_training(other_batch.trainer, train, test, settings),
+                    Catch::Contains("was made with --batch-size = 3; "
+                                    "this run has --batch-size = 2"));
+  settings.setting_names = {};
   settings.identity = {{"--poles", "3"}};
   Setup<double> other_flag(Method::Regular, 3);
   CHECK_THROWS_WITH(run_training(other_flag.trainer, train, test, settings),

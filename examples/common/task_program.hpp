@@ -213,6 +213,17 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
   run.checkpoint_every = o.checkpoint_every;
   run.save_params = o.save_params;
   run.identity = task_identity(o);
+  run.setting_names = {{"method", "--method"},
+                       {"clip", "--clip"},
+                       {"clip_threshold", "--clip-threshold"},
+                       {"batch", "--batch"},
+                       {"shuffle", "--shuffle"},
+                       {"shuffle_seed", "--seed"},
+                       {"truncation", "--truncation"},
+                       {"on_non_finite", "--on-nonfinite"},
+                       {"evaluate_every", "--evaluate-every"},
+                       {"patience", "--patience"},
+                       {"learning_rate", "--lr"}};
   // Skipped batches are listed up to this many, then counted, so that a diverging run does
   // not flood stderr.
   constexpr long shown_skips = 5;

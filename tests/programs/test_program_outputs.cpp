@@ -355,8 +355,12 @@ TEST_CASE("a checkpoint of other settings is refused, naming the setting", "[pro
   const Outcome r = launch("toy", checkpoint + " --lr 0.02");
   INFO(r.output);
   CHECK(r.status == 2);
-  CHECK(contains(r.output, "was made with learning_rate = 0.01; this run has learning_rate = 0.02"));
+  CHECK(contains(r.output, "was made with --lr = 0.01; this run has --lr = 0.02"));
   CHECK_FALSE(contains(r.output, "epoch 1"));
+  const Outcome seed = launch("toy", checkpoint + " --seed 7");
+  INFO(seed.output);
+  CHECK(seed.status == 2);
+  CHECK(contains(seed.output, "; this run has --seed = 7"));
 }
 
 TEST_CASE("every finished file is synced, renamed, and its directory synced", "[programs]") {

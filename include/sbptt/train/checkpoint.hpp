@@ -287,26 +287,34 @@ template <class Scalar>
 }
 
 /// Throws `InvalidArgument` naming the first setting in which the checkpoint at `path`
-/// differs from this run (`expected`), or one that only one of them has.
+/// differs from this run (`expected`), or one that only one of them has. A setting listed in
+/// `caller_names` (its name, the caller's) goes by the caller's name, e.g. a program's flag.
 inline void require_same_settings(const std::vector<RunSetting>& expected,
-                                  const std::vector<RunSetting>& found, const std::string& path) {
+                                  const std::vector<RunSetting>& found, const std::string& path,
+                                  const std::vector<RunSetting>& caller_names = {}) {
+  auto named = [&](const std::string& name) -> const std::string& {
+    for (const RunSetting& n : caller_names)
+      if (n.name == name) return n.value;
+    return name;
+  };
   for (const RunSetting& want : expected) {
     const RunSetting* have = nullptr;
     for (const RunSetting& f : found)
       if (f.name == want.name) have = &f;
-    detail::require(have != nullptr, "checkpoint '", path, "' has no setting ", want.name,
-                    " (this run has ", want.name, " = ", want.value,
+    const std::string& name = named(want.name);
+    detail::require(have != nullptr, "checkpoint '", path, "' has no setting ", name,
+                    " (this run has ", name, " = ", want.value,
                     "); expected a checkpoint of this run (remove it to start over)");
-    detail::require(have->value == want.value, "checkpoint '", path, "' was made with ",
-                    want.name, " = ", have->value, "; this run has ", want.name, " = ",
-                    want.value, "; expected the same settings (remove it to start over)");
+    detail::require(have->value == want.value, "checkpoint '", path, "' was made with ", name,
+                    " = ", have->value, "; this run has ", name, " = ", want.value,
+                    "; expected the same settings (remove it to start over)");
   }
   for (const RunSetting& f : found) {
     bool known = false;
     for (const RunSetting& want : expected) known = known || want.name == f.name;
-    detail::require(known, "checkpoint '", path, "' was made with setting ", f.name, " = ",
-                    f.value, ", which this run does not have; expected a checkpoint of this "
-                    "run (remove it to start over)");
+    detail::require(known, "checkpoint '", path, "' was made with setting ", named(f.name),
+                    " = ", f.value, ", which this run does not have; expected a checkpoint of "
+                    "this run (remove it to start over)");
   }
 }
 

@@ -59,6 +59,9 @@ struct RunSettings {
   std::string save_params;         ///< where the final parameters go; empty = not saved
   /// Settings of the caller that a checkpoint must share (e.g. the task's flags).
   std::vector<RunSetting> identity{};
+  /// The caller's names for the trainer's and the optimizer's settings in messages, as pairs
+  /// {setting, caller's name} (e.g. {"shuffle_seed", "--seed"}); the others keep their own.
+  std::vector<RunSetting> setting_names{};
 };
 
 /// Hooks called during a run (each may be empty).
@@ -214,7 +217,7 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   if (!settings.checkpoint.empty()) resumed = load_checkpoint<Scalar>(settings.checkpoint);
   if (resumed) {
     const bool fresh = trainer.epoch() == 0;
-    require_same_settings(identity, resumed->settings, settings.checkpoint);
+    require_same_settings(identity, resumed->settings, settings.checkpoint, settings.setting_names);
     detail::require<ParseError>(resumed->params.size() == params.size(), "checkpoint '",
                                 settings.checkpoint, "' has ", resumed->params.size(),
                                 " parameters; expected ", params.size());

@@ -79,11 +79,26 @@ Vec random_vector(Rng& rng, Index size, double scale = 1.0) {
   return v;
 }
 
+/// A step for double only: it cannot be called with dual numbers (compile_fail_autodiff_*
+/// shows the message AutoDiffSimulator then gives).
+struct DoubleOnlyStep {
+  static constexpr int kStateSize = 4, kControlSize = 1;
+  void step(const ColumnOf<double, 4>& x, const ColumnOf<double, 1>& /*u*/,
+            ColumnOf<double, 4>& next) const {
+    next = x;
+  }
+};
+
 }  // namespace
 
 static_assert(SimulatorWithJacobians<AutoDiffSimulator<CubicFriction>>);
 static_assert(SimulatorWithJacobians<AutoDiffSimulator<CubicFriction, float>>);
 static_assert(SimulatorWithJacobians<AutoDiffSimulator<DynamicChain>>);
+
+static_assert(sbptt::detail::StepsInDualNumbers<CubicFriction, double>);
+static_assert(sbptt::detail::StepsInDualNumbers<CubicFriction, float>);
+static_assert(sbptt::detail::StepsInDualNumbers<DynamicChain, double>);
+static_assert(!sbptt::detail::StepsInDualNumbers<DoubleOnlyStep, double>);
 
 TEST_CASE("AutoDiffSimulator's Jacobians and VJP agree with finite differences of the step",
           "[sim][autodiff]") {

@@ -1,7 +1,8 @@
 // Integrated<Model, Method>: the discrete maps of explicit Euler, semi-implicit Euler, Heun and
 // RK4 have Jacobians and VJPs that agree with finite differences and whose Taylor remainders
 // fall as ε²; the observed orders on the harmonic oscillator's closed form are 1, 1, 2 and 4;
-// the symplectic integrator's energy error stays bounded over 10⁴ steps of a pendulum.
+// the symplectic integrator's energy error stays bounded over 10⁴ steps of a pendulum;
+// hand-written f- or a-Jacobians run at every stage.
 #include <cmath>
 
 #include <catch2/catch.hpp>
@@ -45,6 +46,48 @@ struct PredationAnalytic : Predation {
     fu << x(0), 0.0, 0.0, 1.0;
   }
 };
+
+/// The pendulum with its a-Jacobians by hand, templated on the scalar, counting its calls.
+struct PendulumAnalytic : Pendulum {
+  int* calls = nullptr;
+  template <class T>
+  void acceleration_jacobians(const ColumnOf<T, 2>& x, const ColumnOf<T, 1>& /*u*/,
+                              Eigen::Matrix<T, 1, 2>& ax, Eigen::Matrix<T, 1, 1>& au) const {
+    using std::cos;
+    ++*calls;
+    ax << -T(omega2) * cos(x(0)), -T(damping);
+    au << T(1.0);
+  }
+};
+
+/// The predation model's f-Jacobians by hand, counting their calls.
+struct PredationCounted : PredationAnalytic {
+  int* calls = nullptr;
+  void derivative_jacobians(const Eigen::Vector2d& x, const Eigen::Vector2d& u,
+                            Eigen::Matrix2d& fx, Eigen::Matrix2d& fu) const {
+    ++*calls;
+    PredationAnalytic::derivative_jacobians(x, u, fx, fu);
+  }
+};
+
+// A Jacobian member is found by its name whatever its signature (a template, a final model),
+// so one that cannot be called is refused (the compile_fail_integrated_* tests) instead of
+// being replaced by automatic Jacobians without a word.
+struct NonConstJacobians : Predation {
+  void derivative_jacobians(const Eigen::Vector2d&, const Eigen::Vector2d&, Eigen::Matrix2d&,
+                            Eigen::Matrix2d&) {}
+};
+struct FinalPredation final : PredationAnalytic {};
+static_assert(!sbptt::detail::NamesDerivativeJacobians<Predation>);
+static_assert(!sbptt::detail::NamesAccelerationJacobians<Pendulum>);
+static_assert(sbptt::detail::NamesDerivativeJacobians<PredationAnalytic> &&
+              sbptt::detail::HasDerivativeJacobians<PredationAnalytic, double>);
+static_assert(sbptt::detail::NamesDerivativeJacobians<FinalPredation> &&
+              sbptt::detail::HasDerivativeJacobians<FinalPredation, double>);
+static_assert(sbptt::detail::NamesAccelerationJacobians<PendulumAnalytic> &&
+              sbptt::detail::HasAccelerationJacobians<PendulumAnalytic, double>);
+static_assert(sbptt::detail::NamesDerivativeJacobians<NonConstJacobians> &&
+              !sbptt::detail::HasDerivativeJacobians<NonConstJacobians, double>);
 
 /// x and the ε² slope of the remainder ‖P(x + εd, u + εe) − P(x, u) − ε(A d + B e)‖ and of its
 /// adjoint twin |⟨λ, P(x + εd, u + εe) − P(x, u)⟩ − ε(⟨Aᵀλ, d⟩ + ⟨Bᵀλ, e⟩)|.
@@ -172,6 +215,45 @@ TEST_CASE("Each integrator's Jacobians and VJP are those of its discrete map",
   SECTION("semi-implicit Euler") { check_derivatives<SemiImplicitEuler>(rng); }
   SECTION("Heun") { check_derivatives<Heun>(rng); }
   SECTION("RK4") { check_derivatives<RungeKutta4>(rng); }
+}
+
+TEST_CASE("A model's hand-written Jacobians run at every stage and give the automatic ones",
+          "[sim][integrators]") {
+  // One call per stage of the method: 1 for semi-implicit Euler, 4 for RK4, in `jacobians`
+  // and again in `vjp`.
+  int calls = 0;
+  const Integrated<Pendulum, SemiImplicitEuler> automatic(Pendulum{}, 0.1);
+  const Integrated<PendulumAnalytic, SemiImplicitEuler> analytic(PendulumAnalytic{{}, &calls}, 0.1);
+  const Integrated<Pendulum, RungeKutta4> automatic4(Pendulum{}, 0.1);
+  const Integrated<PendulumAnalytic, RungeKutta4> analytic4(PendulumAnalytic{{}, &calls}, 0.1);
+  const Integrated<Predation, Heun> first_order(Predation{}, 0.05);
+  const Integrated<PredationCounted, Heun> counted(PredationCounted{{}, &calls}, 0.05);
+  const Eigen::Vector2d x(0.7, -0.4), lambda(0.3, -1.1);
+  const Eigen::Matrix<double, 1, 1> u(0.2);
+  const Eigen::Vector2d u2(0.2, -0.5);
+  Eigen::Matrix2d a1, a2;
+  Eigen::Vector2d b1, b2, lx;
+  Eigen::Matrix<double, 1, 1> lu;
+  automatic.jacobians(x, u, a1, b1);
+  analytic.jacobians(x, u, a2, b2);
+  CHECK(calls == 1);
+  CHECK(relative_error<double>(a2, a1) < 1e-14);
+  CHECK(relative_error<double>(b2, b1) < 1e-14);
+  analytic.vjp(x, u, lambda, &lx, &lu);
+  CHECK(calls == 2);
+  automatic4.jacobians(x, u, a1, b1);
+  analytic4.jacobians(x, u, a2, b2);
+  CHECK(calls == 6);
+  CHECK(relative_error<double>(a2, a1) < 1e-14);
+  CHECK(relative_error<double>(b2, b1) < 1e-14);
+  analytic4.vjp(x, u, lambda, &lx, &lu);
+  CHECK(calls == 10);
+  Eigen::Matrix2d f1, f2, g1, g2;
+  first_order.jacobians(x, u2, f1, g1);
+  counted.jacobians(x, u2, f2, g2);
+  CHECK(calls == 12);
+  CHECK(relative_error<double>(f2, f1) < 1e-14);
+  CHECK(relative_error<double>(g2, g1) < 1e-14);
 }
 
 TEST_CASE("Observed orders on the harmonic oscillator's closed form are 1, 1, 2 and 4",

@@ -101,6 +101,18 @@ Index model_control_dim(const M& model) {
   }
 }
 
+/// A column of the dual numbers `AutoDiffSimulator<M, Scalar>` calls the model's step with.
+template <class M, class Scalar, int Size>
+using DualColumnOf = ColumnOf<Dual<Scalar, sum_or_dynamic(M::kStateSize, M::kControlSize)>, Size>;
+
+template <class M, class Scalar>
+concept StepsInDualNumbers = requires(const M& m,
+                                      const DualColumnOf<M, Scalar, M::kStateSize>& x,
+                                      const DualColumnOf<M, Scalar, M::kControlSize>& u,
+                                      DualColumnOf<M, Scalar, M::kStateSize>& x_next) {
+  m.step(x, u, x_next);
+};
+
 /// Requires the model's run-time sizes to be positive and to match its compile-time ones.
 template <class M>
 void check_model_sizes(const M& model, const char* who) {
@@ -171,6 +183,11 @@ class AutoDiffSimulator {
   static_assert(detail::HasModelSizes<Model>,
                 "sbptt::AutoDiffSimulator: the model needs `static constexpr int kStateSize` and "
                 "`kControlSize` (Eigen::Dynamic allowed)");
+  static_assert(!detail::HasModelSizes<Model> || detail::StepsInDualNumbers<Model, ScalarT>,
+                "sbptt::AutoDiffSimulator: the model's step must be a template on the scalar "
+                "(it is called with automatic-differentiation numbers): `template <class T> "
+                "void step(const ColumnOf<T, N>& x, const ColumnOf<T, K>& u, ColumnOf<T, N>& "
+                "x_next) const` (N = kStateSize, K = kControlSize)");
 
 public:
   using Scalar = ScalarT;

@@ -13,8 +13,17 @@
 /// with `static constexpr int kStateSize, kControlSize`; a second-order model also names its
 /// layout, `static constexpr StateLayout kLayout` (positions and velocities `Stacked` as
 /// (q, v), the default, or `Interleaved` as (q₀, v₀, q₁, v₁, …)). Optionally the model gives f's
-/// (or a's) Jacobians analytically, `void derivative_jacobians(x, u, Fx, Fu) const` (or
-/// `acceleration_jacobians`) in `Scalar`; otherwise they are automatic (autodiff.hpp).
+/// (or a's) Jacobians analytically, in the `Integrated`'s `Scalar` (templated or not):
+///
+///     void derivative_jacobians(const ColumnOf<Scalar, N>& x, const ColumnOf<Scalar, K>& u,
+///                               Eigen::Matrix<Scalar, N, N>& fx,           // ∂f/∂x
+///                               Eigen::Matrix<Scalar, N, K>& fu) const;    // ∂f/∂u
+///     void acceleration_jacobians(const ColumnOf<Scalar, N>& x, const ColumnOf<Scalar, K>& u,
+///                                 Eigen::Matrix<Scalar, N/2, N>& ax,       // ∂a/∂x
+///                                 Eigen::Matrix<Scalar, N/2, K>& au) const;  // ∂a/∂u
+///
+/// otherwise they are automatic (autodiff.hpp). A member of either name that cannot be called
+/// so is a compile error with this signature, not a silent switch to automatic Jacobians.
 ///
 /// Explicit Runge–Kutta methods (tableau a, b; h = dt; s stages):
 ///
@@ -43,6 +52,7 @@
 #include <array>
 #include <cmath>
 #include <concepts>
+#include <type_traits>
 #include <utility>
 
 #include <Eigen/Core>
@@ -97,6 +107,52 @@ concept IsSecondOrder = requires(const M& m, const ColumnOf<double, M::kStateSiz
   m.acceleration(x, u, a);
 };
 
+/// A model with a templated `derivative(x, u, xdot)` (tested at double).
+template <class M>
+concept IsFirstOrder = requires(const M& m, const ColumnOf<double, M::kStateSize>& x,
+                                const ColumnOf<double, M::kControlSize>& u,
+                                ColumnOf<double, M::kStateSize>& xdot) {
+  m.derivative(x, u, xdot);
+};
+
+/// Hand-written Jacobians callable as the file comment says, in `Scalar`.
+template <class M, class Scalar>
+concept HasDerivativeJacobians =
+    requires(const M& m, const ColumnOf<Scalar, M::kStateSize>& x,
+             const ColumnOf<Scalar, M::kControlSize>& u,
+             Eigen::Matrix<Scalar, M::kStateSize, M::kStateSize>& fx,
+             Eigen::Matrix<Scalar, M::kStateSize, M::kControlSize>& fu) {
+      m.derivative_jacobians(x, u, fx, fu);
+    };
+template <class M, class Scalar>
+concept HasAccelerationJacobians =
+    requires(const M& m, const ColumnOf<Scalar, M::kStateSize>& x,
+             const ColumnOf<Scalar, M::kControlSize>& u,
+             Eigen::Matrix<Scalar, half_or_dynamic(M::kStateSize), M::kStateSize>& ax,
+             Eigen::Matrix<Scalar, half_or_dynamic(M::kStateSize), M::kControlSize>& au) {
+      m.acceleration_jacobians(x, u, ax, au);
+    };
+
+// A member of any kind and signature (a template, an overload set, one that is not callable)
+// is found by its name alone: beside `JacobianNames`, the name is ambiguous in
+// `WithJacobianNames<M>`. A final model cannot be derived from; only a plain member function
+// of it is found.
+struct JacobianNames {
+  int derivative_jacobians, acceleration_jacobians;
+};
+template <class M>
+struct WithJacobianNames : M, JacobianNames {};
+template <class M>
+concept Derivable = std::is_class_v<M> && !std::is_final_v<M>;
+template <class M>
+concept NamesDerivativeJacobians =
+    (Derivable<M> && !requires { &WithJacobianNames<M>::derivative_jacobians; }) ||
+    (!Derivable<M> && requires { &M::derivative_jacobians; });
+template <class M>
+concept NamesAccelerationJacobians =
+    (Derivable<M> && !requires { &WithJacobianNames<M>::acceleration_jacobians; }) ||
+    (!Derivable<M> && requires { &M::acceleration_jacobians; });
+
 template <class M>
 constexpr StateLayout layout_of() {
   if constexpr (requires { M::kLayout; }) {
@@ -145,12 +201,11 @@ public:
   /// value = g(x, u), gx = ∂g/∂x, gu = ∂g/∂u.
   void evaluate_with_jacobians(const State& x, const Control& u, Rhs& value, RhsByState& gx,
                                RhsByControl& gu) const {
-    if constexpr (kSecondOrder && requires { model_.acceleration_jacobians(x, u, gx, gu); }) {
+    if constexpr (kSecondOrder && HasAccelerationJacobians<Model, Scalar>) {
       value.resize(rows(x.size()));
       model_.acceleration(x, u, value);
       model_.acceleration_jacobians(x, u, gx, gu);
-    } else if constexpr (!kSecondOrder &&
-                         requires { model_.derivative_jacobians(x, u, gx, gu); }) {
+    } else if constexpr (!kSecondOrder && HasDerivativeJacobians<Model, Scalar>) {
       value.resize(rows(x.size()));
       model_.derivative(x, u, value);
       model_.derivative_jacobians(x, u, gx, gu);
@@ -217,9 +272,30 @@ class Integrated {
   static_assert(detail::HasModelSizes<Model>,
                 "sbptt::Integrated: the model needs `static constexpr int kStateSize` and "
                 "`kControlSize` (Eigen::Dynamic allowed)");
+  static_assert(!detail::HasModelSizes<Model> || detail::IsFirstOrder<Model> ||
+                    detail::IsSecondOrder<Model>,
+                "sbptt::Integrated: the model needs `template <class T> void derivative(const "
+                "ColumnOf<T, N>& x, const ColumnOf<T, K>& u, ColumnOf<T, N>& xdot) const` or, "
+                "for a second-order model, `template <class T> void acceleration(const "
+                "ColumnOf<T, N>& x, const ColumnOf<T, K>& u, ColumnOf<T, N/2>& a) const` "
+                "(N = kStateSize, K = kControlSize)");
   static_assert(!std::same_as<Method, SemiImplicitEuler> || detail::IsSecondOrder<Model>,
                 "sbptt::Integrated: SemiImplicitEuler needs a second-order model (a templated "
                 "`acceleration(x, u, a)`)");
+  // Hand-written Jacobians that cannot be called would be replaced by automatic ones without
+  // a word, and never run.
+  static_assert(!detail::NamesDerivativeJacobians<Model> || detail::IsSecondOrder<Model> ||
+                    detail::HasDerivativeJacobians<Model, ScalarT>,
+                "sbptt::Integrated: the model's derivative_jacobians must be callable as `void "
+                "derivative_jacobians(const ColumnOf<Scalar, N>& x, const ColumnOf<Scalar, K>& u, "
+                "Eigen::Matrix<Scalar, N, N>& fx, Eigen::Matrix<Scalar, N, K>& fu) const` "
+                "(N = kStateSize, K = kControlSize, Scalar = the Integrated's scalar)");
+  static_assert(!detail::NamesAccelerationJacobians<Model> || !detail::IsSecondOrder<Model> ||
+                    detail::HasAccelerationJacobians<Model, ScalarT>,
+                "sbptt::Integrated: the model's acceleration_jacobians must be callable as `void "
+                "acceleration_jacobians(const ColumnOf<Scalar, N>& x, const ColumnOf<Scalar, K>& "
+                "u, Eigen::Matrix<Scalar, N/2, N>& ax, Eigen::Matrix<Scalar, N/2, K>& au) const` "
+                "(N = kStateSize, K = kControlSize, Scalar = the Integrated's scalar)");
   using Rhs = detail::RightHandSide<Model, ScalarT>;
 
 public:

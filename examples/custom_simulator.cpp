@@ -4,9 +4,12 @@
 // its Jacobians.
 #include <cstdio>
 
+#include "file_size_limit.hpp"
 #include "point_mass.hpp"
+#include "standard_streams.hpp"
 
 int main(int argc, char** argv) {
+  sbptt::examples::ignore_file_size_signal();  // a write past `ulimit -f` fails, not kills
   if (argc > 1) {
     std::fprintf(stderr, "custom_simulator takes no arguments (it trains the point mass of "
                          "docs/api.md); got '%s'\n", argv[1]);
@@ -29,5 +32,5 @@ int main(int argc, char** argv) {
                   pair.loss, pair.comparison.cos_modified_regular, pair.comparison.agree_fraction);
     update.step(network.params(), pair.modified, pair.regular);
   }
-  return 0;
+  return sbptt::examples::with_streams_checked("custom_simulator", 0);  // exit 1 if not printed
 }

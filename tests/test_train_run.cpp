@@ -300,6 +300,9 @@ TEST_CASE("checkpoint: an error names the line that is wrong, whichever it is", 
                     Catch::Contains("line " + std::to_string(lines.size()) + ": the line has no end"));
 }
 
+// Under -Wextra -Werror a string member without an initializer would stop this compiling.
+[[maybe_unused]] const RunSettings designated_with_defaults{.epochs = 3};
+
 TEST_CASE("run: a checkpoint of other settings is refused, naming the setting", "[train]") {
   const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
   const fs::path checkpoint = scratch("settings.checkpoint");

@@ -52,11 +52,11 @@ struct RunSettings {
   std::optional<BestBy> best_by{}; ///< default: the test loss, or the train loss without test set
   long patience = 0;               ///< stop after this many evaluations without improvement; 0 = never
   bool restore_best = false;       ///< end with the best parameters instead of the last
-  std::string log_csv;             ///< the training log; empty = none
-  std::string checkpoint;          ///< the checkpoint file; empty = none
+  std::string log_csv{};           ///< the training log; empty = none
+  std::string checkpoint{};        ///< the checkpoint file; empty = none
   long checkpoint_every = 1;       ///< epochs between checkpoints; 0 = only by time and at the end
   double checkpoint_seconds = 0;   ///< also after this much wall time since the last; 0 = off
-  std::string save_params;         ///< where the final parameters go; empty = not saved
+  std::string save_params{};       ///< where the final parameters go; empty = not saved
   /// Settings of the caller that a checkpoint must share (e.g. the task's flags).
   std::vector<RunSetting> identity{};
   /// The caller's names for the trainer's and the optimizer's settings in messages, as pairs

@@ -46,6 +46,7 @@
 #include <sbptt/sbptt.hpp>
 
 #include "command_line.hpp"
+#include "standard_streams.hpp"
 #include "cartpole_equations.hpp"
 
 namespace {
@@ -460,7 +461,7 @@ int main(int argc, char** argv) {
       integrator_axis(mlp<double>(10, 1),
                       sbptt::cartpole_initial_states(cartpole_d(100), same, kBatch));
       if (!csv.empty()) write_csv(csv);
-      return 0;
+      return sbptt::examples::with_streams_checked("accuracy", 0);
     }
     {  // cart pole, 4 poles, T = 1 (paper: m = 100)
       const auto net = mlp<double>(10, 1);
@@ -519,7 +520,7 @@ int main(int argc, char** argv) {
                   order(sim, sweep, "double", true, 2));
     }
     if (!csv.empty()) write_csv(csv);
-    return 0;
+    return sbptt::examples::with_streams_checked("accuracy", 0);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "accuracy: %s\n", e.what());
     return 1;

@@ -26,8 +26,10 @@
 #include "sbptt/optim/adam.hpp"
 #include "sbptt/sim/linear.hpp"
 #include "sbptt/train/trainer.hpp"
+#include "file_size_limit.hpp"
 #include "linear_feedback.hpp"
 #include "lqr.hpp"
+#include "standard_streams.hpp"
 
 using namespace sbptt;
 using lqr::Mat;
@@ -190,6 +192,7 @@ std::string study(double radius, int steps) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  sbptt::examples::ignore_file_size_signal();
   if (argc > 1) {
     std::fprintf(stderr, "lqr_convergence: unexpected argument '%s'; the study takes no options\n",
                  argv[1]);
@@ -210,5 +213,5 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "lqr_convergence: %s\n", e.what());
     return 1;
   }
-  return 0;
+  return sbptt::examples::with_streams_checked("lqr_convergence", 0);
 }

@@ -114,13 +114,24 @@ int check_derivatives(const MujocoSimulator<Scalar>& sim, const TaskOptions& o, 
   std::printf("mujoco: %s: worst relative error at 5 states: A %.3g, B %.3g, VJP %.3g\n",
               o.model.c_str(), static_cast<double>(worst_a), static_cast<double>(worst_b),
               static_cast<double>(worst_vjp));
-  return 0;
+  // An error that is not a number checked nothing: the step or its derivatives were not
+  // finite at one of the states, which a printed line with exit 0 would hide.
+  if (std::isfinite(worst_error({worst_a, worst_b, worst_vjp}))) return 0;
+  std::fprintf(stderr, "mujoco: %s: the step or its derivatives are not finite at one of the "
+               "5 states; expected finite numbers (check the model's values)\n",
+               o.model.c_str());
+  return 3;
 }
 
 template <class Scalar>
 int run(TaskOptions o) {
   detail::require(!o.model.empty(), "--model is required: the MJCF file of the scene");
-  const MujocoModelPtr model = load_mujoco_model(o.model);
+  std::vector<std::string> warnings;
+  const MujocoModelPtr model =
+      examples::reading_flag("--model", [&] { return load_mujoco_model(o.model, &warnings); });
+  for (const std::string& warning : warnings)
+    std::fprintf(stderr, "mujoco: --model '%s': MuJoCo warns: %s\n", o.model.c_str(),
+                 warning.c_str());
   o.time = examples::resolve_mujoco_time(o, model->opt.timestep);
   model->opt.timestep = o.time.dt;
   const MujocoSimulator<Scalar> sim = [&] {

@@ -29,6 +29,7 @@
 #include "sbptt/core/atomic_file.hpp"
 
 #include "command_line.hpp"
+#include "standard_streams.hpp"
 
 namespace {
 
@@ -129,6 +130,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
+    sbptt::check_output_path(s.csv, "--csv");
 
     const auto plain = run_plain(s, false);
     const auto rotated = run_plain(s, true);
@@ -171,7 +173,7 @@ int main(int argc, char** argv) {
     }
     sbptt::write_file_atomically(s.csv, csv_text(runs));
     std::printf("trajectories written to %s\n", s.csv.c_str());
-    return 0;
+    return sbptt::examples::with_streams_checked("rotation", 0);
   } catch (const std::exception& e) {
     std::cerr << "rotation: " << e.what() << "\n";
     return 1;

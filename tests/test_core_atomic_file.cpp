@@ -81,6 +81,17 @@ TEST_CASE("atomic file: a failed rename names the temporary, the path and the re
   CHECK(entries(dir) == 1);  // the temporary is gone
 }
 
+TEST_CASE("atomic file: a special file is refused and left as it was", "[core]") {
+  // Renamed over, a FIFO or a device (think /dev/null) would become a regular file.
+  const fs::path dir = fresh_directory("special");
+  const fs::path fifo = dir / "pipe";
+  REQUIRE(::mkfifo(fifo.c_str(), 0666) == 0);
+  CHECK_THROWS_WITH(write_file_atomically(fifo.string(), "new\n"),
+                    Catch::Contains("'" + fifo.string() + "' exists and is a special file"));
+  CHECK(fs::is_fifo(fifo));
+  CHECK(entries(dir) == 1);  // no temporary left
+}
+
 namespace {
 
 /// Runs `body` as the unprivileged user 65534 (nobody) in a child process when this test runs

@@ -362,6 +362,15 @@ inline void require_float_range(const char* flag, double value) {
 
 /// The time stepping of a mujoco run: the flags resolved against the model's time step.
 [[nodiscard]] inline Horizon resolve_mujoco_time(const TaskOptions& o, double model_dt) {
+  // The model's step is held to --dt's range wherever it is used (as dt, or for T with --dt
+  // alone), as the flag would be; two of the flags leave it unused.
+  const int given = int{o.steps_flag.has_value()} + int{o.dt_flag.has_value()} +
+                    int{o.horizon_flag.has_value()};
+  detail::require(given >= 2 || (model_dt >= limits::min_dt && model_dt <= limits::max_dt),
+                  "--model '", o.model, "': its opt.timestep ", shown(model_dt),
+                  " is out of range; expected a number in ",
+                  range_text(limits::min_dt, limits::max_dt),
+                  " (or two of --steps, --dt and --T, which leave it unused)");
   return detail_task::resolve({paper_horizon(Task::Mujoco).steps, model_dt}, o.steps_flag,
                               o.dt_flag, o.horizon_flag);
 }

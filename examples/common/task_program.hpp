@@ -169,7 +169,8 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                                    std::pair{"--dump-gradients", &o.dump_gradients},
                                    std::pair{"--checkpoint", &o.checkpoint}})
     if (!path->empty()) check_output_path(*path, flag);
-  require_distinct_files({{"--init-params", o.init_params, false},
+  require_distinct_files({{"--model", o.task == Task::Mujoco ? o.model : std::string(), false},
+                          {"--init-params", o.init_params, false},
                           {"--init-states", o.init_states, false},
                           {"--csv", o.csv, true},
                           {"--save-params", o.save_params, true},

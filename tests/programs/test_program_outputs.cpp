@@ -172,12 +172,39 @@ TEST_CASE("output cut short by a file-size limit ends with exit 1, not 0", "[pro
 }
 
 TEST_CASE("stdout that cannot be written: exit 1, and stderr gives the reason", "[programs]") {
-  // stderr into the pipe, stdout into /dev/full (every write fails with ENOSPC).
-  const auto r = sbptt::testing::run("toy", "--epochs 5", "", "2>&1 >/dev/full");
-  INFO(r.output);
-  CHECK(r.status == 1);
-  CHECK(contains(r.output, "toy: standard output or standard error was not written in full: "
-                           "No space left on device"));
+  // stderr into the pipe, stdout into /dev/full (every write fails with ENOSPC). Not
+  // lqr_convergence, which takes a minute and a half; it ends the same way.
+  const std::string csv = scratch("full_stdout.csv").string();
+  const fs::path own_scene = fresh_directory("full_stdout_own_scene");
+  for (const auto& [program, arguments] : std::vector<std::pair<std::string, std::string>>{
+           {"toy", "--epochs 5"},
+           {"custom_simulator", ""},
+           {"train_own_scene", own_scene.string()},
+           {"rotation", "--iterations 5 --csv " + csv},
+           {"accuracy", "--integrators-only --csv " + csv}}) {
+    const auto r = sbptt::testing::run(program, arguments, "", "2>&1 >/dev/full");
+    INFO(program << "\n" << r.output);
+    CHECK(r.status == 1);
+    CHECK(contains(r.output, program + ": standard output" +
+                                 (program == "train_own_scene" ? " was not written in full"
+                                                               : " or standard error was not "
+                                                                 "written in full: No space "
+                                                                 "left on device")));
+  }
+}
+
+TEST_CASE("rotation refuses a --csv it could not write before the study", "[programs]") {
+  const fs::path dir = fresh_directory("rotation_csv");
+  const fs::path fifo = dir / "pipe";
+  REQUIRE(::mkfifo(fifo.c_str(), 0666) == 0);
+  for (const fs::path& csv : {fifo, dir / "missing" / "r.csv"}) {
+    const Outcome r = launch("rotation", "--iterations 5 --csv " + csv.string());
+    INFO(r.output);
+    CHECK(r.status == 1);
+    CHECK(contains(r.output, "rotation: --csv '" + csv.string() + "'"));
+    CHECK_FALSE(contains(r.output, "iteration"));
+  }
+  CHECK(fs::is_fifo(fifo));
 }
 
 TEST_CASE("a name too long for its temporary file fails before training", "[programs]") {

@@ -242,7 +242,7 @@ TEST_CASE("unreadable inputs and unwritable outputs fail at once with exit 1", "
   for (const Case& c :
        {Case{"--init-params /nonexistent/p.txt", "cannot open '/nonexistent/p.txt'"},
         Case{"--init-params " + scratch("").string(), "is a directory"},
-        Case{"--init-states /nonexistent/s.csv", "cannot open states file '/nonexistent/s.csv'"},
+        Case{"--init-states /nonexistent/s.csv", "load_states: cannot open '/nonexistent/s.csv' for reading"},
         Case{"--init-states " + scratch("").string(), "is a directory"},
         Case{"--init-states " + scratch("narrow.csv").string(), "2 columns; expected exactly state_dim = 4"},
         Case{"--csv /nonexistent/dir/log.csv", "directory '/nonexistent/dir' does not exist"},

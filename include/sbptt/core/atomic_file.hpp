@@ -13,7 +13,8 @@
 /// A symbolic link is followed: the write replaces the link's final target, not the link.
 /// An existing target keeps its permission bits (and its group and owner where the writer may
 /// set them); a target the writer may not write (a write-protected file) is refused rather
-/// than replaced. `check_output_path` makes the same checks up front, before any work.
+/// than replaced, and so is a special file (a device, a FIFO). `check_output_path` makes the
+/// same checks up front, before any work.
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -218,6 +219,13 @@ private:
   void keep_owner_and_mode() {
     struct stat existing {};
     if (::stat(target_.c_str(), &existing) != 0) return;  // a new file: the umask decides
+    // A rename would replace a device or a FIFO with a regular file (/dev/null for all users),
+    // even for a caller that skipped `check_output_path`. Over a directory it fails by itself.
+    if (!S_ISREG(existing.st_mode) && !S_ISDIR(existing.st_mode)) {
+      discard();
+      throw IoError(detail::concat("'", path_, "' exists and is a special file, not a regular "
+                                   "file; it is not replaced"));
+    }
     if (::access(target_.c_str(), W_OK) != 0) {
       const int error = errno;
       discard();

@@ -10,8 +10,6 @@
 /// text. Writing goes to a temporary file beside the target, renamed over it at the end, so a
 /// crash never leaves a half-written parameters file.
 #include <cmath>
-#include <cerrno>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -22,6 +20,7 @@
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/number_text.hpp"
 #include "sbptt/core/error.hpp"
+#include "sbptt/core/input_file.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt {
@@ -52,16 +51,7 @@ void save_parameters(const std::filesystem::path& path, const Vector<Scalar>& th
 /// without reading the rest of the file.
 template <class Scalar>
 [[nodiscard]] Vector<Scalar> load_parameters(const std::filesystem::path& path, Index expected) {
-  std::error_code error;
-  detail::require<IoError>(!std::filesystem::is_directory(path, error),
-                           "load_parameters: '", path.string(), "' is a directory, expected a "
-                           "parameters file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    const int reason = errno;
-    throw IoError(detail::concat("load_parameters: cannot open '", path.string(),
-                                 "' for reading (", std::strerror(reason), ")"));
-  }
+  std::ifstream in = detail::open_for_reading(path, "load_parameters: ", "a parameters file");
   std::vector<Scalar> values;
   values.reserve(static_cast<std::size_t>(expected > 0 ? expected : 0));
   std::string line;

@@ -53,6 +53,7 @@
 #include <mujoco/mjxmacro.h>
 
 #include "sbptt/core/error.hpp"
+#include "sbptt/core/input_file.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt {
@@ -65,12 +66,45 @@ struct MujocoModelDeleter {
 /// An owned `mjModel`.
 using MujocoModelPtr = std::unique_ptr<mjModel, MujocoModelDeleter>;
 
-/// Parses and compiles the MJCF (or URDF) file `path`. Throws InvalidArgument naming the file
-/// and quoting MuJoCo's own message when it does not load.
-[[nodiscard]] inline MujocoModelPtr load_mujoco_model(const std::string& path) {
+namespace detail {
+
+/// Where the warnings of the `load_mujoco_model` call in progress go. MuJoCo's warning hook
+/// is one process-wide pointer, so loads take turns (`mujoco_load_lock`).
+inline std::vector<std::string>*& mujoco_load_warnings() {
+  static std::vector<std::string>* sink = nullptr;
+  return sink;
+}
+inline std::mutex& mujoco_load_lock() {
+  static std::mutex lock;
+  return lock;
+}
+inline void collect_mujoco_warning(const char* message) {
+  if (std::vector<std::string>* sink = mujoco_load_warnings()) sink->emplace_back(message);
+}
+
+}  // namespace detail
+
+/// Parses and compiles the MJCF (or URDF) file `path`. Throws IoError with the system's reason
+/// when the file cannot be read (MuJoCo would call any such file "not found"), InvalidArgument
+/// naming the file and quoting MuJoCo's own message when it does not load. The warnings MuJoCo
+/// raises while loading (e.g. "XML contains a 'NaN'") go to `warnings` when given, not to
+/// stdout and MUJOCO_LOG.TXT as MuJoCo would write them.
+[[nodiscard]] inline MujocoModelPtr load_mujoco_model(
+    const std::string& path, std::vector<std::string>* warnings = nullptr) {
+  (void)detail::open_for_reading(path, "load_mujoco_model: ", "an MJCF or URDF file");
   std::vector<char> message(1000, '\0');
-  MujocoModelPtr model(
-      mj_loadXML(path.c_str(), nullptr, message.data(), static_cast<int>(message.size())));
+  std::vector<std::string> raised;
+  MujocoModelPtr model;
+  {
+    const std::lock_guard<std::mutex> lock(detail::mujoco_load_lock());
+    void (*const previous)(const char*) = mju_user_warning;
+    detail::mujoco_load_warnings() = &raised;
+    mju_user_warning = detail::collect_mujoco_warning;
+    model.reset(
+        mj_loadXML(path.c_str(), nullptr, message.data(), static_cast<int>(message.size())));
+    mju_user_warning = previous;
+    detail::mujoco_load_warnings() = nullptr;
+  }
   if (model == nullptr) {
     std::string reason(message.data());
     while (!reason.empty() && std::isspace(static_cast<unsigned char>(reason.back())) != 0)
@@ -78,6 +112,7 @@ using MujocoModelPtr = std::unique_ptr<mjModel, MujocoModelDeleter>;
     throw InvalidArgument(
         detail::concat("load_mujoco_model: cannot load the model file '", path, "': ", reason));
   }
+  if (warnings != nullptr) *warnings = std::move(raised);
   return model;
 }
 

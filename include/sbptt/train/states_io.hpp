@@ -2,8 +2,6 @@
 /// \file The states file (docs/formats.md): CSV without header, one sample per row, the
 /// simulator's State layout, numbers in round-trip precision. In memory a set of states is a
 /// state_dim × N matrix (one sample per column).
-#include <cerrno>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -11,6 +9,7 @@
 #include <vector>
 
 #include "sbptt/core/atomic_file.hpp"
+#include "sbptt/core/input_file.hpp"
 #include "sbptt/core/number_text.hpp"
 #include "sbptt/core/types.hpp"
 
@@ -81,15 +80,7 @@ template <class Scalar>
 /// soon as it is, without reading the rest.
 template <class Scalar>
 [[nodiscard]] Matrix<Scalar> load_states(const std::filesystem::path& path, Index state_dim) {
-  std::error_code error;
-  detail::require<IoError>(!std::filesystem::is_directory(path, error), "states file '",
-                           path.string(), "' is a directory; expected a CSV file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    const int reason = errno;
-    throw IoError(detail::concat("cannot open states file '", path.string(), "' for reading (",
-                                 std::strerror(reason), ")"));
-  }
+  std::ifstream in = detail::open_for_reading(path, "load_states: ", "a CSV file of states");
   const auto longest = static_cast<std::size_t>(state_dim) * (detail::max_number_chars + 1);
   std::vector<Scalar> values;
   std::string line;

@@ -27,6 +27,18 @@ std::string model_file(const std::string& relative) {
   return std::string(SBPTT_SOURCE_DIR) + "/" + relative;
 }
 
+/// A copy of the model at `relative` with `from` replaced by `to`, in the scratch folder.
+fs::path edited_model(const std::string& relative, const std::string& from, const std::string& to,
+                      const std::string& name) {
+  std::string text = file_text(model_file(relative));
+  const auto at = text.find(from);
+  REQUIRE(at != std::string::npos);
+  text.replace(at, from.size(), to);
+  const fs::path file = scratch(name);
+  std::ofstream(file) << text;
+  return file;
+}
+
 const std::string double_pendulum =
     "--model " + model_file("examples/models/double_pendulum.xml") + " --target 3.14159,0 ";
 
@@ -171,12 +183,8 @@ TEST_CASE("mujoco says why it cannot read --model, and never writes over it",
 }
 
 TEST_CASE("mujoco holds the model's own time step to --dt's range", "[programs][mujoco]") {
-  std::string acrobot = file_text(model_file("examples/models/acrobot.xml"));
-  const auto at = acrobot.find("timestep=\"");
-  REQUIRE(at != std::string::npos);
-  const auto end = acrobot.find('"', at + 10);
-  const fs::path tiny = scratch("acrobot_tiny_step.xml");
-  std::ofstream(tiny) << acrobot.substr(0, at) + "timestep=\"1e-300" + acrobot.substr(end);
+  const fs::path tiny = edited_model("examples/models/acrobot.xml", "timestep=\"0.01\"",
+                                     "timestep=\"1e-300\"", "acrobot_tiny_step.xml");
   const std::string model = "--model " + tiny.string();
   const Result r = run("mujoco", model + " --target 1,2 --epochs 1 --samples 2");
   INFO(r.output);
@@ -192,10 +200,8 @@ TEST_CASE("mujoco holds the model's own time step to --dt's range", "[programs][
 
 TEST_CASE("mujoco --check-derivatives fails on derivatives that are not finite",
           "[programs][mujoco]") {
-  std::string pendulum = file_text(model_file("examples/models/double_pendulum.xml"));
-  pendulum.replace(pendulum.find("damping=\"0.05\""), 14, "damping=\"1e308\"");
-  const fs::path file = scratch("double_pendulum_huge_damping.xml");
-  std::ofstream(file) << pendulum;
+  const fs::path file = edited_model("examples/models/double_pendulum.xml", "damping=\"0.05\"",
+                                     "damping=\"1e308\"", "double_pendulum_huge_damping.xml");
   const Result r = run("mujoco", "--model " + file.string() + " --check-derivatives");
   INFO(r.output);
   CHECK(r.status == 3);
@@ -258,10 +264,8 @@ TEST_CASE("mujoco --check-derivatives refuses the flags it does not use, before 
 
 TEST_CASE("mujoco refuses a model with a non-finite number before any work, naming the field",
           "[programs][mujoco]") {
-  std::string acrobot = file_text(model_file("examples/models/acrobot.xml"));
-  acrobot.replace(acrobot.find("gravity=\"0 0 -9.81\""), 19, "gravity=\"0 0 nan\"");
-  const fs::path file = scratch("acrobot_nan_gravity.xml");
-  std::ofstream(file) << acrobot;
+  const fs::path file = edited_model("examples/models/acrobot.xml", "gravity=\"0 0 -9.81\"",
+                                     "gravity=\"0 0 nan\"", "acrobot_nan_gravity.xml");
   for (const char* mode : {" --target 1,2", " --check-derivatives"}) {
     // MuJoCo's own warning reaches stderr, not stdout nor a MUJOCO_LOG.TXT beside the caller.
     fs::remove("MUJOCO_LOG.TXT");

@@ -114,12 +114,12 @@ int check_derivatives(const MujocoSimulator<Scalar>& sim, const TaskOptions& o, 
   std::printf("mujoco: %s: worst relative error at 5 states: A %.3g, B %.3g, VJP %.3g\n",
               o.model.c_str(), static_cast<double>(worst_a), static_cast<double>(worst_b),
               static_cast<double>(worst_vjp));
-  // An error that is not a number checked nothing: the step or its derivatives were not
-  // finite at one of the states, which a printed line with exit 0 would hide.
+  // An error that is not finite checked nothing: the step or its derivatives were NaN, or too
+  // large to compare, at one of the states, which a printed line with exit 0 would hide.
   if (std::isfinite(worst_error({worst_a, worst_b, worst_vjp}))) return 0;
-  std::fprintf(stderr, "mujoco: %s: the step or its derivatives are not finite at one of the "
-               "5 states; expected finite numbers (check the model's values)\n",
-               o.model.c_str());
+  std::fprintf(stderr, "mujoco: %s: an error is not finite: the step or its derivatives are "
+               "NaN or too large to compare at one of the 5 states; expected finite errors "
+               "(check the model's values)\n", o.model.c_str());
   return 3;
 }
 

@@ -192,7 +192,8 @@ inline void require_float_range(const char* flag, double value) {
       "sbptt task program '", to_string(task), "': trains a controller on ",
       task == Task::Mujoco ? "the MuJoCo scene of --model (docs/mujoco.md)" : "the paper's task",
       " with the chosen gradient (docs/programs.md). Exit codes: 0 success, 1 error, 2 bad "
-      "flag, 3 a non-finite value stopped training."));
+      "flag, 3 a non-finite value stopped training",
+      task == Task::Mujoco ? " or --check-derivatives found an error that is not finite." : "."));
   cli.value("--method", "R|M|C|S|N",
             "gradient: regular, modified, combined, stopped, network-only (long names and "
             "full/physics/stop work too)", "C",

@@ -143,15 +143,36 @@ struct JacobianNames {
 template <class M>
 struct WithJacobianNames : M, JacobianNames {};
 template <class M>
-concept Derivable = std::is_class_v<M> && !std::is_final_v<M>;
+concept Inheritable = std::is_class_v<M> && !std::is_final_v<M>;
 template <class M>
 concept NamesDerivativeJacobians =
-    (Derivable<M> && !requires { &WithJacobianNames<M>::derivative_jacobians; }) ||
-    (!Derivable<M> && requires { &M::derivative_jacobians; });
+    (Inheritable<M> && !requires { &WithJacobianNames<M>::derivative_jacobians; }) ||
+    (!Inheritable<M> && requires { &M::derivative_jacobians; });
 template <class M>
 concept NamesAccelerationJacobians =
-    (Derivable<M> && !requires { &WithJacobianNames<M>::acceleration_jacobians; }) ||
-    (!Derivable<M> && requires { &M::acceleration_jacobians; });
+    (Inheritable<M> && !requires { &WithJacobianNames<M>::acceleration_jacobians; }) ||
+    (!Inheritable<M> && requires { &M::acceleration_jacobians; });
+
+// The dual numbers of automatic Jacobians (autodiff.hpp) are what f (or a) is called with.
+template <class M, class Scalar>
+concept DerivativeInDualNumbers =
+    requires(const M& m, const DualColumnOf<M, Scalar, M::kStateSize>& x,
+             const DualColumnOf<M, Scalar, M::kControlSize>& u,
+             DualColumnOf<M, Scalar, M::kStateSize>& xdot) { m.derivative(x, u, xdot); };
+template <class M, class Scalar>
+concept AccelerationInDualNumbers =
+    requires(const M& m, const DualColumnOf<M, Scalar, M::kStateSize>& x,
+             const DualColumnOf<M, Scalar, M::kControlSize>& u,
+             DualColumnOf<M, Scalar, half_or_dynamic(M::kStateSize)>& a) {
+      m.acceleration(x, u, a);
+    };
+/// f's (or a's) Jacobians can be had: by hand, or automatically from a templated f (or a).
+template <class M, class Scalar>
+concept HasRightHandSideJacobians =
+    (IsSecondOrder<M> && (HasAccelerationJacobians<M, Scalar> ||
+                          AccelerationInDualNumbers<M, Scalar>)) ||
+    (!IsSecondOrder<M> && (HasDerivativeJacobians<M, Scalar> ||
+                           DerivativeInDualNumbers<M, Scalar>));
 
 template <class M>
 constexpr StateLayout layout_of() {
@@ -282,8 +303,21 @@ class Integrated {
   static_assert(!std::same_as<Method, SemiImplicitEuler> || detail::IsSecondOrder<Model>,
                 "sbptt::Integrated: SemiImplicitEuler needs a second-order model (a templated "
                 "`acceleration(x, u, a)`)");
-  // Hand-written Jacobians that cannot be called would be replaced by automatic ones without
-  // a word, and never run.
+  static_assert(!detail::HasModelSizes<Model> ||
+                    !(detail::IsFirstOrder<Model> || detail::IsSecondOrder<Model>) ||
+                    detail::HasRightHandSideJacobians<Model, ScalarT>,
+                "sbptt::Integrated: without hand-written Jacobians the model's derivative (or "
+                "acceleration) must be a template on the scalar (it is called with "
+                "automatic-differentiation numbers): `template <class T> void derivative(const "
+                "ColumnOf<T, N>& x, const ColumnOf<T, K>& u, ColumnOf<T, N>& xdot) const`");
+  // Hand-written Jacobians that cannot be called, or of the other kind of model, would be
+  // replaced by automatic ones without a word, and never run.
+  static_assert(!detail::IsSecondOrder<Model> || !detail::NamesDerivativeJacobians<Model>,
+                "sbptt::Integrated: a second-order model (with `acceleration`) gives "
+                "acceleration_jacobians, not derivative_jacobians, which would never run");
+  static_assert(detail::IsSecondOrder<Model> || !detail::NamesAccelerationJacobians<Model>,
+                "sbptt::Integrated: a first-order model (with `derivative`, no `acceleration`) "
+                "gives derivative_jacobians, not acceleration_jacobians, which would never run");
   static_assert(!detail::NamesDerivativeJacobians<Model> || detail::IsSecondOrder<Model> ||
                     detail::HasDerivativeJacobians<Model, ScalarT>,
                 "sbptt::Integrated: the model's derivative_jacobians must be callable as `void "

@@ -59,7 +59,7 @@ struct RunSettings {
   std::string save_params{};       ///< where the final parameters go; empty = not saved
   /// Settings of the caller that a checkpoint must share (e.g. the task's flags).
   std::vector<RunSetting> identity{};
-  /// The caller's names for the trainer's and the optimizer's settings in messages, as pairs
+  /// The caller's names, in messages, for any setting the checkpoint compares, as pairs
   /// {setting, caller's name} (e.g. {"shuffle_seed", "--seed"}); the others keep their own.
   std::vector<RunSetting> setting_names{};
 };

@@ -45,9 +45,9 @@
 
 #include <sbptt/sbptt.hpp>
 
+#include "cartpole_equations.hpp"
 #include "command_line.hpp"
 #include "standard_streams.hpp"
-#include "cartpole_equations.hpp"
 
 namespace {
 

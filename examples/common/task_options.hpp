@@ -293,7 +293,8 @@ inline void require_float_range(const char* flag, double value) {
     cli.number("--rc", o.rc, 0, 1e9, "weight of the control regulariser");
   }
   if (task == Task::Mujoco) {
-    cli.path("--model", o.model, "the MJCF file of the scene (a URDF cannot name actuators); required", "none");
+    cli.path("--model", o.model,
+             "the MJCF file of the scene (a URDF cannot name actuators); required", "none");
     cli.value("--target", "q1,...,qN",
               "final positions, one per qpos coordinate (nq of them; hinges in radians, compared "
               "as angles); required",

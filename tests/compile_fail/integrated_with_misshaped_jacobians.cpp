@@ -1,15 +1,9 @@
 // Must NOT compile: hand-written a-Jacobians of a 2-state model with a_x declared 1 × 3 (it is
 // 1 × 2) could not be called, and were silently replaced by automatic ones; the message gives
 // the signature they need.
-#include <sbptt/sbptt.hpp>
+#include "spring.hpp"
 
-struct Spring {
-  static constexpr int kStateSize = 2, kControlSize = 1;
-  template <class T>
-  void acceleration(const sbptt::ColumnOf<T, 2>& x, const sbptt::ColumnOf<T, 1>& u,
-                    sbptt::ColumnOf<T, 1>& a) const {
-    a(0) = -x(0) + u(0);
-  }
+struct Spring : SpringAcceleration {
   void acceleration_jacobians(const Eigen::Vector2d&, const Eigen::Matrix<double, 1, 1>&,
                               Eigen::Matrix<double, 1, 3>& ax,  // 1 × 2 for two states
                               Eigen::Matrix<double, 1, 1>& au) const {

@@ -12,7 +12,8 @@
 #   2. checks that --epochs and --samples above the task programs' limit, a --python that
 #      does not exist and an --out that is a file or lies under one are refused with exit 2
 #      before any work, and so are a missing --plot-script, an empty --run, an --out name
-#      longer than the file system takes or one that sbatch would misread (--emit slurm);
+#      longer than the file system takes, one where no folder can be made (/proc) or one that
+#      sbatch would misread (--emit slurm);
 #      finished runs of other settings are refused with exit 1 in every mode;
 #   3. interrupts the runner while it plots (a fake python and plot script that leave a
 #      temporary PNG behind): exit 130, no "no plots" message, no plots/.tmp.* left;
@@ -160,6 +161,18 @@ foreach(mode "" --dry-run --merge "--emit;parallel" "--emit;slurm")
 endforeach()
 file(READ "${WORK_DIR}/a_file" kept)
 check("--out <a file>: the file is unchanged" kept STREQUAL "kept\n")
+# A folder where the file system makes none (/proc: root passes every permission check there):
+# --emit parallel printed its commands and exited 0, each command then failing at its first
+# write. Every mode that writes refuses it up front; a dry run only reads it.
+if(IS_DIRECTORY /proc/self)
+  foreach(mode "" --merge "--emit;parallel" "--emit;slurm")
+    execute_process(COMMAND "${REPRODUCE}" ${grid} ${mode} --out /proc/sbptt_results
+                    TIMEOUT 20 RESULT_VARIABLE rc OUTPUT_VARIABLE text ERROR_VARIABLE err)
+    check("--out /proc/sbptt_results ${mode}: exit 2 naming --out (${err})"
+          rc EQUAL 2 AND err MATCHES "--out '/proc/sbptt_results': (cannot make a folder there|this user may not write in)"
+          AND NOT text MATCHES ".")
+  endforeach()
+endif()
 
 # A folder that sbatch would read as a pattern ('%') or an escape: refused for --emit slurm
 # before any work (blanks and quotes are quoted; reproduce_cluster.sh submits such a folder).

@@ -116,8 +116,10 @@ inline std::string file_fingerprint(const std::string& path) {
 }
 
 /// The settings besides the trainer's and the optimizer's that decide a task's result; a
-/// checkpoint must have been made with the same. (--seed and --spread shape only the data and
-/// the initial parameters, whose fingerprints run_training adds.)
+/// checkpoint must have been made with the same. (--seed shapes only the data and the initial
+/// parameters, whose fingerprints run_training adds, and goes by its name as the shuffle seed.
+/// --spread is listed, though the train set's fingerprint would catch it too, so that a changed
+/// value is reported as the flag.)
 inline std::vector<RunSetting> task_identity(const TaskOptions& o) {
   std::vector<RunSetting> identity{{"task", to_string(o.task)},
                                    {"--samples", std::to_string(o.samples)},
@@ -141,6 +143,7 @@ inline std::vector<RunSetting> task_identity(const TaskOptions& o) {
     // The physics is the model file's content, which a path does not pin down.
     identity.push_back({"--model", file_fingerprint(o.model)});
     identity.push_back({"--target", comma_separated(o.positions)});
+    identity.push_back({"--spread", comma_separated({o.spread})});  // the shortest exact text
   }
   return identity;
 }

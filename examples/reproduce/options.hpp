@@ -2,8 +2,11 @@
 #pragma once
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -83,6 +86,28 @@ inline std::string parse_choice(const std::string& flag, const std::string& text
   throw InvalidArgument(concat(flag, " '", text, "' is unknown; expected ", expected));
 }
 
+/// Makes a folder in `out` (or `out` itself and the folders above it, up to `existing`) and
+/// removes what it made: the permission bits do not tell root, nor anyone, whether the file
+/// system takes a new folder there (/proc, a read-only mount, a full disk's inode table).
+/// `--emit parallel` writes nothing itself, and its commands would fail one by one.
+inline void probe_output_folder(const Options& o, const fs::path& out, const fs::path& existing) {
+  std::error_code error;
+  const bool made_out = !fs::exists(out, error);
+  fs::path probe = made_out ? out : out / ".reproduce-probe-XXXXXX";
+  std::string name = probe.string();
+  const bool made = made_out ? fs::create_directories(probe, error)
+                             : ::mkdtemp(name.data()) != nullptr;
+  if (!made) {
+    const std::string reason = made_out ? error.message() : std::strerror(errno);
+    throw InvalidArgument(concat("--out '", o.out, "': cannot make a folder there (", reason,
+                                 "); expected a folder this user may write in, or a path where "
+                                 "one can be made"));
+  }
+  if (!made_out) probe = name;
+  for (; probe != existing && probe.has_relative_path(); probe = probe.parent_path())
+    fs::remove(probe, error);
+}
+
 /// --out is a folder, or a path where one can be made, that this user may write in (a dry
 /// run only reads it): otherwise every mode would fail at its first write, with the file
 /// system's words and without the flag.
@@ -110,9 +135,11 @@ inline void require_output_folder(const Options& o) {
                                  itself ? "" : concat(": '", existing.string(), "'"), " ", what,
                                  "; expected a folder, or a path where one can be made"));
   }
-  if (!o.dry_run && ::access(existing.c_str(), W_OK | X_OK) != 0)
+  if (o.dry_run) return;
+  if (::access(existing.c_str(), W_OK | X_OK) != 0)
     throw InvalidArgument(concat("--out '", o.out, "': this user may not write in '",
                                  existing.string(), "'; expected a folder it may write in"));
+  probe_output_folder(o, out, existing);
 }
 
 inline Options parse_options(int argc, const char* const* argv) {

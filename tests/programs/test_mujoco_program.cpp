@@ -208,8 +208,8 @@ TEST_CASE("mujoco --check-derivatives fails on derivatives that are not finite",
   CHECK(r.output.find("an error is not finite: the step or its derivatives are NaN or too large") != std::string::npos);
 }
 
-TEST_CASE("mujoco: a checkpoint of another --target or model file is refused, naming it",
-          "[programs][mujoco]") {
+TEST_CASE("mujoco: a checkpoint of another --target, --spread or model file is refused, "
+          "naming it", "[programs][mujoco]") {
   const std::string original = file_text(model_file("examples/models/double_pendulum.xml"));
   const fs::path moved = scratch("checkpoint_moved.xml"), damped = scratch("checkpoint_damped.xml");
   std::ofstream(moved) << original;
@@ -225,6 +225,12 @@ TEST_CASE("mujoco: a checkpoint of another --target or model file is refused, na
   INFO(target.output);
   CHECK(target.status == 2);
   CHECK(target.output.find("was made with --target = 3.14159,0; this run has --target = 0,0") !=
+        std::string::npos);
+  // The initial states' spread is named as the flag, not as a changed train set.
+  const Result spread = run("mujoco", double_pendulum + common + "--spread 0.2 --epochs 4");
+  INFO(spread.output);
+  CHECK(spread.status == 2);
+  CHECK(spread.output.find("was made with --spread = 0.1; this run has --spread = 0.2") !=
         std::string::npos);
   const Result model = run("mujoco", "--model " + damped.string() + " --target 3.14159,0 " +
                                          common + "--epochs 4");

@@ -12,7 +12,7 @@ int main(int argc, char** argv) {
   std::signal(SIGXFSZ, SIG_IGN);  // past `ulimit -f` a write then fails instead of killing
   if (argc == 2 && std::strcmp(argv[1], "--help") == 0) {
     std::printf("usage: custom_simulator\ntrains the point mass of docs/api.md with the combined "
-                "update for 1000 iterations and prints its loss every 200; no options\n");
+                "update, printing its loss every 200 iterations up to 1000; no options\n");
     return 0;
   }
   if (argc > 1) {

@@ -13,7 +13,7 @@
 //   K_M      the fixed point of M (Newton on the engine's PhysicsOnly sweep), J(K_M);
 // then, for R, M and C at a few epochs, ‖K − K̄*‖ and the relative loss gap (J(K) − J̄*)/J̄*.
 //
-// Usage: lqr_convergence        (no options but --help; about a minute and a half)
+// Usage: lqr_convergence        (no options but --help; about a minute)
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -196,7 +196,7 @@ int main(int argc, char** argv) {
   sbptt::examples::ignore_file_size_signal();
   if (argc == 2 && std::string_view(argv[1]) == "--help") {
     std::printf("usage: lqr_convergence\ncompares R, M and C with the Riccati optimum of a linear "
-                "scene (docs/results.md); no options, about a minute and a half\n");
+                "scene (docs/results.md); no options, about a minute\n");
     return 0;
   }
   if (argc > 1) {

@@ -12,8 +12,9 @@
 #   2. checks that --epochs and --samples above the task programs' limit, a --python that
 #      does not exist and an --out that is a file or lies under one are refused with exit 2
 #      before any work, and so are a missing --plot-script, an empty --run, an --out name
-#      longer than the file system takes, one where no folder can be made (/proc) or one that
-#      sbatch would misread (--emit slurm);
+#      longer than the file system takes, one where no folder can be made (/proc), one under
+#      a symbolic link to nothing or one that sbatch would misread (--emit slurm); the probe
+#      of --out leaves nothing behind;
 #      finished runs of other settings are refused with exit 1 in every mode;
 #   3. interrupts the runner while it plots (a fake python and plot script that leave a
 #      temporary PNG behind): exit 130, no "no plots" message, no plots/.tmp.* left;
@@ -163,16 +164,39 @@ file(READ "${WORK_DIR}/a_file" kept)
 check("--out <a file>: the file is unchanged" kept STREQUAL "kept\n")
 # A folder where the file system makes none (/proc: root passes every permission check there):
 # --emit parallel printed its commands and exited 0, each command then failing at its first
-# write. Every mode that writes refuses it up front; a dry run only reads it.
+# write. Every mode that writes refuses it up front; a dry run only reads it. Another user is
+# refused by the permission check, with other words.
+execute_process(COMMAND id -u OUTPUT_VARIABLE uid OUTPUT_STRIP_TRAILING_WHITESPACE)
+if(uid STREQUAL "0")
+  set(proc_refusal "cannot make a folder in '/proc' \\(")
+else()
+  set(proc_refusal "this user may not write in '/proc' \\(")
+endif()
 if(IS_DIRECTORY /proc/self)
   foreach(mode "" --merge "--emit;parallel" "--emit;slurm")
     execute_process(COMMAND "${REPRODUCE}" ${grid} ${mode} --out /proc/sbptt_results
                     TIMEOUT 20 RESULT_VARIABLE rc OUTPUT_VARIABLE text ERROR_VARIABLE err)
     check("--out /proc/sbptt_results ${mode}: exit 2 naming --out (${err})"
-          rc EQUAL 2 AND err MATCHES "--out '/proc/sbptt_results': (cannot make a folder there|this user may not write in)"
+          rc EQUAL 2 AND err MATCHES "--out '/proc/sbptt_results': ${proc_refusal}"
           AND NOT text MATCHES ".")
   endforeach()
 endif()
+# The probe is made and removed inside the folder that exists, and nothing else is touched:
+# an empty --out given with a trailing slash stays (a probe that walked back up to the folder
+# that existed, comparing paths, removed it and the empty folders above it).
+file(MAKE_DIRECTORY "${WORK_DIR}/empty_out")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --emit parallel --out "${WORK_DIR}/empty_out/"
+                TIMEOUT 20 RESULT_VARIABLE rc OUTPUT_QUIET ERROR_VARIABLE err)
+file(GLOB left_over "${WORK_DIR}/empty_out/*" "${WORK_DIR}/empty_out/.*")
+list(LENGTH left_over left_count)
+check("--emit parallel --out <an empty folder>/: exit 0, the folder kept and empty (${err})"
+      rc EQUAL 0 AND IS_DIRECTORY "${WORK_DIR}/empty_out" AND left_count EQUAL 0)
+# A symbolic link to nothing: mkdir would say "File exists" at the first write.
+file(CREATE_LINK "${WORK_DIR}/nowhere" "${WORK_DIR}/dangling" SYMBOLIC)
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${WORK_DIR}/dangling/results"
+                TIMEOUT 20 RESULT_VARIABLE rc OUTPUT_QUIET ERROR_VARIABLE err)
+check("--out <under a link to nothing>: exit 2 naming the link (${err})"
+      rc EQUAL 2 AND err MATCHES "dangling' is a symbolic link to nothing")
 
 # A folder that sbatch would read as a pattern ('%') or an escape: refused for --emit slurm
 # before any work (blanks and quotes are quoted; reproduce_cluster.sh submits such a folder).

@@ -15,6 +15,7 @@
 
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/parameters_io.hpp"
+#include "support/files.hpp"
 
 namespace fs = std::filesystem;
 using Catch::Contains;
@@ -195,15 +196,8 @@ TEST_CASE("a parameters file that cannot be opened says why", "[nn][io]") {
 }
 
 TEST_CASE("parameters are read from a pipe as from a file (docs/formats.md)", "[nn][io]") {
-  // What `--init-params <(zcat theta.txt.gz)` hands the reader: /dev/fd/N of a pipe's read end.
-  int ends[2];
-  REQUIRE(::pipe(ends) == 0);
-  const std::string text = "0.25\n-1e-3\n7\n";
-  // The text fits in the pipe's buffer: written whole and closed before the reader starts.
-  REQUIRE(::write(ends[1], text.data(), text.size()) == static_cast<ssize_t>(text.size()));
-  ::close(ends[1]);
-  const auto theta = sbptt::load_parameters<double>("/dev/fd/" + std::to_string(ends[0]), 3);
-  ::close(ends[0]);
+  const sbptt::testing::PipeHolding pipe("0.25\n-1e-3\n7\n");
+  const auto theta = sbptt::load_parameters<double>(pipe.path(), 3);
   REQUIRE(theta.size() == 3);
   CHECK(theta(0) == 0.25);
   CHECK(theta(1) == -1e-3);

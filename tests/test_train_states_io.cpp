@@ -9,6 +9,7 @@
 
 #include "sbptt/core/rng.hpp"
 #include "sbptt/train/states_io.hpp"
+#include "support/files.hpp"
 
 using namespace sbptt;
 using Catch::Contains;
@@ -77,4 +78,17 @@ TEST_CASE("states file: reading is bounded by the longest row state_dim numbers 
 TEST_CASE("states file: a file that cannot be opened says why", "[io]") {
   REQUIRE_THROWS_WITH(load_states<double>("/nonexistent/states.csv", 2),
                       Contains("(No such file or directory)"));
+}
+
+TEST_CASE("states file: read from a pipe as from a file (docs/formats.md)", "[io]") {
+  const testing::PipeHolding pipe("1,-2.5\n0.125,3e-3\n4,5\n");
+  const Matrix<double> states = load_states<double>(pipe.path(), 2);
+  REQUIRE(states.rows() == 2);
+  REQUIRE(states.cols() == 3);
+  CHECK(states(0, 0) == 1.0);
+  CHECK(states(1, 0) == -2.5);
+  CHECK(states(0, 1) == 0.125);
+  CHECK(states(1, 1) == 3e-3);
+  CHECK(states(0, 2) == 4.0);
+  CHECK(states(1, 2) == 5.0);
 }

@@ -116,10 +116,9 @@ inline std::string file_fingerprint(const std::string& path) {
 }
 
 /// The settings besides the trainer's and the optimizer's that decide a task's result; a
-/// checkpoint must have been made with the same. (--seed shapes only the data and the initial
-/// parameters, whose fingerprints run_training adds, and goes by its name as the shuffle seed.
-/// --spread is listed, though the train set's fingerprint would catch it too, so that a changed
-/// value is reported as the flag.)
+/// checkpoint must have been made with the same. (--seed is recorded as the trainer's
+/// shuffle_seed, which messages name --seed. --spread is listed, though the data's fingerprints
+/// would catch it too, so that a changed value is reported as the flag.)
 inline std::vector<RunSetting> task_identity(const TaskOptions& o) {
   std::vector<RunSetting> identity{{"task", to_string(o.task)},
                                    {"--samples", std::to_string(o.samples)},

@@ -86,26 +86,24 @@ inline std::string parse_choice(const std::string& flag, const std::string& text
   throw InvalidArgument(concat(flag, " '", text, "' is unknown; expected ", expected));
 }
 
-/// Makes a folder in `out` (or `out` itself and the folders above it, up to `existing`) and
-/// removes what it made: the permission bits do not tell root, nor anyone, whether the file
-/// system takes a new folder there (/proc, a read-only mount, a full disk's inode table).
-/// `--emit parallel` writes nothing itself, and its commands would fail one by one.
-inline void probe_output_folder(const Options& o, const fs::path& out, const fs::path& existing) {
-  std::error_code error;
-  const bool made_out = !fs::exists(out, error);
-  fs::path probe = made_out ? out : out / ".reproduce-probe-XXXXXX";
-  std::string name = probe.string();
-  const bool made = made_out ? fs::create_directories(probe, error)
-                             : ::mkdtemp(name.data()) != nullptr;
-  if (!made) {
-    const std::string reason = made_out ? error.message() : std::strerror(errno);
-    throw InvalidArgument(concat("--out '", o.out, "': cannot make a folder there (", reason,
+/// Makes a folder in `existing`, the part of --out that exists, and removes it again: the
+/// permission bits do not tell root, nor anyone, whether the file system takes a new folder
+/// there (/proc, a full disk's inode table), and `--emit parallel`, which writes nothing
+/// itself, would print commands that each fail at their first write. Whatever --out still
+/// needs would be made in `existing`, on the same file system. Only the probe is made and
+/// removed, never --out or a folder above it: several executors may be starting on the same
+/// new --out at once (docs/reproduce.md).
+inline void probe_output_folder(const Options& o, const fs::path& existing) {
+  std::string probe = (existing / ".reproduce-probe-XXXXXX").string();
+  if (::mkdtemp(probe.data()) == nullptr) {
+    const int reason = errno;
+    throw InvalidArgument(concat("--out '", o.out, "': cannot make a folder in '",
+                                 existing.string(), "' (", std::strerror(reason),
                                  "); expected a folder this user may write in, or a path where "
                                  "one can be made"));
   }
-  if (!made_out) probe = name;
-  for (; probe != existing && probe.has_relative_path(); probe = probe.parent_path())
-    fs::remove(probe, error);
+  std::error_code ignored;
+  fs::remove(probe, ignored);
 }
 
 /// --out is a folder, or a path where one can be made, that this user may write in (a dry
@@ -126,8 +124,14 @@ inline void require_output_folder(const Options& o) {
                                  " bytes; expected a path of at most ", 4096 - 128,
                                  " (PATH_MAX less room for the files in it)"));
   fs::path existing = out;
-  while (!fs::exists(existing, error) && existing.has_relative_path())
+  while (!fs::exists(existing, error) && existing.has_relative_path()) {
+    // A link to nothing exists for mkdir (EEXIST) but not for exists().
+    if (fs::is_symlink(fs::symlink_status(existing, error)))
+      throw InvalidArgument(concat("--out '", o.out, "': '", existing.string(),
+                                   "' is a symbolic link to nothing; expected a folder, or a "
+                                   "path where one can be made"));
     existing = existing.parent_path();
+  }
   if (!fs::is_directory(existing, error)) {
     const std::string what = fs::is_regular_file(existing, error) ? "is a file" : "is not a folder";
     const bool itself = existing == out;
@@ -136,10 +140,13 @@ inline void require_output_folder(const Options& o) {
                                  "; expected a folder, or a path where one can be made"));
   }
   if (o.dry_run) return;
-  if (::access(existing.c_str(), W_OK | X_OK) != 0)
+  if (::access(existing.c_str(), W_OK | X_OK) != 0) {
+    const int reason = errno;
     throw InvalidArgument(concat("--out '", o.out, "': this user may not write in '",
-                                 existing.string(), "'; expected a folder it may write in"));
-  probe_output_folder(o, out, existing);
+                                 existing.string(), "' (", std::strerror(reason),
+                                 "); expected a folder it may write in"));
+  }
+  probe_output_folder(o, existing);
 }
 
 inline Options parse_options(int argc, const char* const* argv) {

@@ -47,7 +47,10 @@ public:
     const bool whole = ::write(ends[1], text.data(), text.size()) ==
                        static_cast<ssize_t>(text.size());
     ::close(ends[1]);
-    if (!whole) throw std::runtime_error("PipeHolding: the text did not fit in the pipe");
+    if (!whole) {
+      ::close(read_end_);  // no destructor runs after a throw from here
+      throw std::runtime_error("PipeHolding: the text did not fit in the pipe");
+    }
   }
   ~PipeHolding() { ::close(read_end_); }
   PipeHolding(const PipeHolding&) = delete;

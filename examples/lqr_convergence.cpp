@@ -208,6 +208,7 @@ int main(int argc, char** argv) {
     std::printf("# LQR convergence: d = 2, k = 1, A = s rot(0.3), B = (0,1), Q = I, R = %.2g, "
                 "64 states, full batch, Adam lr 0.01, %ld epochs, double\n",
                 control_cost, epochs);
+    if (!sbptt::examples::streams_written("lqr_convergence")) return 1;
     std::vector<std::string> summary;
     for (double radius : {0.9, 1.0, 1.1})
       for (int steps : {5, 20, 50}) summary.push_back(study(radius, steps));

@@ -86,6 +86,14 @@ inline std::string parse_choice(const std::string& flag, const std::string& text
   throw InvalidArgument(concat(flag, " '", text, "' is unknown; expected ", expected));
 }
 
+/// The refusal of --out for `reason` ("--out 'DIR': <reason>").
+inline InvalidArgument bad_out(const Options& o, const std::string& reason) {
+  return InvalidArgument(concat("--out '", o.out, "': ", reason));
+}
+
+/// What --out may be, for the refusals that say so.
+inline constexpr const char* expected_out = "expected a folder, or a path where one can be made";
+
 /// Makes a folder in `existing`, the part of --out that exists, and removes it again: the
 /// permission bits do not tell root, nor anyone, whether the file system takes a new folder
 /// there (/proc, a full disk's inode table), and `--emit parallel`, which writes nothing
@@ -97,10 +105,9 @@ inline void probe_output_folder(const Options& o, const fs::path& existing) {
   std::string probe = (existing / ".reproduce-probe-XXXXXX").string();
   if (::mkdtemp(probe.data()) == nullptr) {
     const int reason = errno;
-    throw InvalidArgument(concat("--out '", o.out, "': cannot make a folder in '",
-                                 existing.string(), "' (", std::strerror(reason),
-                                 "); expected a folder this user may write in, or a path where "
-                                 "one can be made"));
+    throw bad_out(o, concat("cannot make a folder in '", existing.string(), "' (",
+                            std::strerror(reason), "); expected a folder this user may write "
+                            "in, or a path where one can be made"));
   }
   std::error_code ignored;
   fs::remove(probe, ignored);
@@ -117,19 +124,17 @@ inline void require_output_folder(const Options& o) {
   // at most 128 bytes (runs/<name>.partial.csv.tmp.<suffix>).
   for (const fs::path& part : out)
     if (part.native().size() > 255)
-      throw InvalidArgument(concat("--out '", o.out, "': a name of ", part.native().size(),
-                                   " bytes in it; expected at most 255 (NAME_MAX)"));
+      throw bad_out(o, concat("a name of ", part.native().size(),
+                              " bytes in it; expected at most 255 (NAME_MAX)"));
   if (out.native().size() > 4096 - 128)
-    throw InvalidArgument(concat("--out '", o.out, "': ", out.native().size(),
-                                 " bytes; expected a path of at most ", 4096 - 128,
-                                 " (PATH_MAX less room for the files in it)"));
+    throw bad_out(o, concat(out.native().size(), " bytes; expected a path of at most ",
+                            4096 - 128, " (PATH_MAX less room for the files in it)"));
   fs::path existing = out;
   while (!fs::exists(existing, error) && existing.has_relative_path()) {
     // A link to nothing exists for mkdir (EEXIST) but not for exists().
     if (fs::is_symlink(fs::symlink_status(existing, error)))
-      throw InvalidArgument(concat("--out '", o.out, "': '", existing.string(),
-                                   "' is a symbolic link to nothing; expected a folder, or a "
-                                   "path where one can be made"));
+      throw bad_out(o, concat("'", existing.string(), "' is a symbolic link to nothing; ",
+                              expected_out));
     existing = existing.parent_path();
   }
   if (!fs::is_directory(existing, error)) {
@@ -137,14 +142,13 @@ inline void require_output_folder(const Options& o) {
     const bool itself = existing == out;
     throw InvalidArgument(concat("--out '", o.out, "'",
                                  itself ? "" : concat(": '", existing.string(), "'"), " ", what,
-                                 "; expected a folder, or a path where one can be made"));
+                                 "; ", expected_out));
   }
   if (o.dry_run) return;
   if (::access(existing.c_str(), W_OK | X_OK) != 0) {
     const int reason = errno;
-    throw InvalidArgument(concat("--out '", o.out, "': this user may not write in '",
-                                 existing.string(), "' (", std::strerror(reason),
-                                 "); expected a folder it may write in"));
+    throw bad_out(o, concat("this user may not write in '", existing.string(), "' (",
+                            std::strerror(reason), "); expected a folder it may write in"));
   }
   probe_output_folder(o, existing);
 }

@@ -17,7 +17,8 @@
 #      of --out leaves nothing behind;
 #      finished runs of other settings are refused with exit 1 in every mode;
 #   3. interrupts the runner while it plots (a fake python and plot script that leave a
-#      temporary PNG behind): exit 130, no "no plots" message, no plots/.tmp.* left;
+#      temporary PNG behind): exit 130, no "no plots" message, no plots/.tmp.* left; started
+#      with SIGHUP and SIGINT ignored (nohup, a script's background job), it ignores them;
 #   4. (when strace is installed) traces a sweep: every file the runner renames into place was
 #      fsync'ed just before, and its folder just after (a file written unnamed, O_TMPFILE, is
 #      fsync'ed through its descriptor and then linked to the name that is renamed).
@@ -242,8 +243,11 @@ echo started > "$1/plotting"
 exec sleep 30
 ]=])
 file(CHMOD "${WORK_DIR}/fake_python" PERMISSIONS OWNER_READ OWNER_WRITE OWNER_EXECUTE)
+# The runner starts as `nohup` starts it, with SIGHUP ignored, which a hangup must not undo. As
+# the background job of a script it starts with SIGINT ignored too, so SIGTERM stops it.
 file(WRITE "${WORK_DIR}/interrupt.sh" [=[
 runner=$1; out=$2; shift 2
+trap '' HUP
 "$runner" "$@" --out "$out" > "$out.log" 2>&1 &
 pid=$!
 i=0
@@ -251,7 +255,12 @@ until [ -f "$out/plotting" ]; do
   i=$((i + 1)); [ $i -gt 400 ] && { kill -9 $pid; echo "never plotted"; exit 1; }
   sleep 0.05
 done
+kill -HUP $pid
 kill -INT $pid
+sleep 1
+# Not reaped yet, a runner that ended would still answer kill -0: its state tells.
+grep -qs '^State:[^Z]*$' /proc/$pid/status && echo "still running after SIGHUP and SIGINT"
+kill -TERM $pid
 wait $pid
 echo "exit code $?"
 cat "$out.log"
@@ -263,6 +272,8 @@ execute_process(COMMAND sh "${WORK_DIR}/interrupt.sh" "${REPRODUCE}" "${WORK_DIR
                 --plot-script "${WORK_DIR}/plot.sh"
                 OUTPUT_VARIABLE interrupted ERROR_VARIABLE interrupted_err)
 message(STATUS "interrupted while plotting:\n${interrupted}${interrupted_err}")
+check("started with SIGHUP and SIGINT ignored, the runner keeps them ignored"
+      interrupted MATCHES "still running after SIGHUP and SIGINT\n")
 check("interrupted while plotting: exit code 130" interrupted MATCHES "exit code 130\n")
 check("interrupted while plotting: no false 'no plots'" NOT interrupted MATCHES "no plots")
 check("interrupted while plotting: the figure is kept" interrupted MATCHES "\na.png")

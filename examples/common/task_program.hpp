@@ -9,7 +9,8 @@
 // the parameters the trainer rolled back to: those of the last logged epoch, or the initial
 // ones; mujoco: or --check-derivatives found an error that is not finite), 128 + the signal:
 // SIGINT or SIGTERM stopped training after the epoch it came in (its log row, checkpoint and
-// parameters written; a second one ends the program at once).
+// parameters written; a second one ends the program at once; one the program was started
+// ignoring stays ignored: stop_signals.hpp).
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -26,6 +27,7 @@
 #include <sbptt/sbptt.hpp>
 
 #include "standard_streams.hpp"
+#include "stop_signals.hpp"
 #include "task_options.hpp"
 
 namespace sbptt::examples {
@@ -231,6 +233,7 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
   // not flood stderr.
   constexpr long shown_skips = 5;
   long skips = 0;
+  const std::vector<int> stop_signals = not_ignored({SIGINT, SIGTERM});
   RunCallbacks callbacks;
   callbacks.on_resume = [&](long epoch) {
     std::fprintf(stderr, "%s: resuming after epoch %ld from checkpoint '%s'\n", name, epoch,
@@ -253,7 +256,7 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                    name, epoch == 0 ? "initial" : "resumed",
                    std::string(to_string(where->quantity)).c_str(),
                    detail::concat(where->value).c_str(), describe_where(*where).c_str());
-    for (const int signal : {SIGINT, SIGTERM}) std::signal(signal, detail_task::request_stop);
+    for (const int signal : stop_signals) std::signal(signal, detail_task::request_stop);
   };
   callbacks.on_non_finite = [&](const NonFiniteEvent& event, bool skipped) {
     if (skipped && ++skips > shown_skips) return;
@@ -273,7 +276,7 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
   };
   callbacks.should_stop = [](const EpochRecord&) { return detail_task::stop_signal != 0; };
   const RunResult<Scalar> result = run_training(trainer, data.train, data.test, run, callbacks);
-  for (const int signal : {SIGINT, SIGTERM}) std::signal(signal, SIG_DFL);
+  for (const int signal : stop_signals) std::signal(signal, SIG_DFL);
   if (skips > shown_skips)
     std::fprintf(stderr, "%s: %ld skipped batches in all (%ld not listed)\n", name, skips,
                  skips - shown_skips);

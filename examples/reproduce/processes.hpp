@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "stop_signals.hpp"
 #include "text.hpp"
 
 namespace reproduce {
@@ -29,11 +30,14 @@ namespace reproduce {
 inline volatile std::sig_atomic_t interrupted = 0;
 extern "C" void on_signal(int signal_number) { interrupted = signal_number; }
 
+/// SIGINT, SIGTERM and SIGHUP stop the sweep, but one the runner was started ignoring
+/// (stop_signals.hpp): `nohup reproduce ... &` must outlive a hangup.
 inline void install_signal_handlers() {
   struct sigaction action {};
   action.sa_handler = on_signal;
   sigemptyset(&action.sa_mask);
-  for (int s : {SIGINT, SIGTERM, SIGHUP}) sigaction(s, &action, nullptr);
+  for (int s : sbptt::examples::not_ignored({SIGINT, SIGTERM, SIGHUP}))
+    sigaction(s, &action, nullptr);
 }
 
 /// Forks and execs argv[0] with stdin from /dev/null and stdout + stderr into `log_fd` (or

@@ -376,6 +376,19 @@ TEST_CASE("SIGINT or SIGTERM stops after the current epoch, keeps its work and s
   }
 }
 
+TEST_CASE("a run started with SIGINT ignored, as a shell starts a background job, ends as if "
+          "it never came", "[programs]") {
+  const CartPoleRun run("ignored", "");
+  const auto& [dir, log_path, common, params, log] = run;
+  const Outcome r =
+      launch("cartpole", common, "trap '' INT; ", [&] { return run.rows() >= 3; }, "", SIGINT);
+  INFO(r.output);
+  REQUIRE(r.status == 0);
+  CHECK_FALSE(contains(r.output, "stopped by"));
+  CHECK(file_text(dir / "p.txt") == params);
+  CHECK(without_seconds(file_text(log_path)) == without_seconds(log));
+}
+
 TEST_CASE("a checkpoint of other settings is refused, naming the setting", "[programs]") {
   const fs::path dir = fresh_directory("settings");
   const std::string checkpoint = "--epochs 2 --checkpoint " + (dir / "c").string();

@@ -20,6 +20,8 @@
 # The programs of [slow] cases alone are not built (SBPTT_SLOW_TESTS=OFF): only the default
 # suite runs here. The network kernels are compiled once (SBPTT_SEPARATE_KERNELS), not once in
 # each program (but the test files that #define a macro before the headers).
+# The package tests (package_consumer, install_without_tests), which build projects of their own
+# with the default compiler and flags, are left to tools/test.sh (tests/CMakeLists.txt).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build=${SBPTT_BUILD_DIR:-build-asan}

@@ -17,8 +17,9 @@
 #      of --out leaves nothing behind;
 #      finished runs of other settings are refused with exit 1 in every mode;
 #   3. interrupts the runner while it plots (a fake python and plot script that leave a
-#      temporary PNG behind): exit 130, no "no plots" message, no plots/.tmp.* left; started
-#      with SIGHUP and SIGINT ignored (nohup, a script's background job), it ignores them;
+#      temporary PNG behind): exit 130 on SIGTERM and on SIGINT, no "no plots" message, no
+#      plots/.tmp.* left; started with SIGHUP and SIGINT ignored (nohup, a script's background
+#      job), it neither catches them nor stops on them;
 #   4. (when strace is installed) traces a sweep: every file the runner renames into place was
 #      fsync'ed just before, and its folder just after (a file written unnamed, O_TMPFILE, is
 #      fsync'ed through its descriptor and then linked to the name that is renamed).
@@ -243,26 +244,39 @@ echo started > "$1/plotting"
 exec sleep 30
 ]=])
 file(CHMOD "${WORK_DIR}/fake_python" PERMISSIONS OWNER_READ OWNER_WRITE OWNER_EXECUTE)
-# The runner starts as `nohup` starts it, with SIGHUP ignored, which a hangup must not undo. As
-# the background job of a script it starts with SIGINT ignored too, so SIGTERM stops it.
 file(WRITE "${WORK_DIR}/interrupt.sh" [=[
 runner=$1; out=$2; shift 2
+wait_for_plot() {
+  i=0
+  until [ -f "$out/plotting" ]; do
+    i=$((i + 1)); [ $i -gt 400 ] && { kill -9 $pid; echo "never plotted"; exit 1; }
+    sleep 0.05
+  done
+  rm "$out/plotting"
+}
+# As nohup starts it (SIGHUP ignored) and as a script's background job (SIGINT ignored).
 trap '' HUP
 "$runner" "$@" --out "$out" > "$out.log" 2>&1 &
 pid=$!
-i=0
-until [ -f "$out/plotting" ]; do
-  i=$((i + 1)); [ $i -gt 400 ] && { kill -9 $pid; echo "never plotted"; exit 1; }
-  sleep 0.05
-done
+wait_for_plot
 kill -HUP $pid
 kill -INT $pid
-sleep 1
-# Not reaped yet, a runner that ended would still answer kill -0: its state tells.
+# Bits 0 and 1 of the mask of caught signals are SIGHUP's and SIGINT's.
+caught=$(sed -n 's/^SigCgt:[[:space:]]*//p' /proc/$pid/status)
+[ -n "$caught" ] && [ $((0x$caught & 3)) -eq 0 ] && echo "SIGHUP and SIGINT not caught"
 grep -qs '^State:[^Z]*$' /proc/$pid/status && echo "still running after SIGHUP and SIGINT"
 kill -TERM $pid
 wait $pid
-echo "exit code $?"
+echo "ignoring them: exit code $?"
+cat "$out.log"
+ls -A "$out/plots"
+# As a terminal's foreground job: Ctrl-C's SIGINT stops it. Its runs are finished: it plots.
+env --default-signal=INT "$runner" "$@" --out "$out" > "$out.log" 2>&1 &
+pid=$!
+wait_for_plot
+kill -INT $pid
+wait $pid
+echo "SIGINT at its default: exit code $?"
 cat "$out.log"
 ls -A "$out/plots"
 ]=])
@@ -272,9 +286,14 @@ execute_process(COMMAND sh "${WORK_DIR}/interrupt.sh" "${REPRODUCE}" "${WORK_DIR
                 --plot-script "${WORK_DIR}/plot.sh"
                 OUTPUT_VARIABLE interrupted ERROR_VARIABLE interrupted_err)
 message(STATUS "interrupted while plotting:\n${interrupted}${interrupted_err}")
-check("started with SIGHUP and SIGINT ignored, the runner keeps them ignored"
+check("started with SIGHUP and SIGINT ignored, the runner does not catch them"
+      interrupted MATCHES "SIGHUP and SIGINT not caught\n")
+check("started with SIGHUP and SIGINT ignored, the runner runs on after them"
       interrupted MATCHES "still running after SIGHUP and SIGINT\n")
-check("interrupted while plotting: exit code 130" interrupted MATCHES "exit code 130\n")
+check("interrupted while plotting (SIGTERM): exit code 130"
+      interrupted MATCHES "ignoring them: exit code 130\n")
+check("interrupted while plotting (SIGINT): exit code 130"
+      interrupted MATCHES "SIGINT at its default: exit code 130\n")
 check("interrupted while plotting: no false 'no plots'" NOT interrupted MATCHES "no plots")
 check("interrupted while plotting: the figure is kept" interrupted MATCHES "\na.png")
 check("interrupted while plotting: no temporary figure is left" NOT interrupted MATCHES "\\.tmp\\.")

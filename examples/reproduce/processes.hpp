@@ -56,6 +56,8 @@ inline pid_t spawn(const std::vector<std::string>& argv, int log_fd, bool search
     ::setpgid(0, 0);
     ::prctl(PR_SET_PDEATHSIG, SIGKILL);
     if (::getppid() != parent) ::_exit(127);  // the runner died before prctl took effect
+    // exec passes an ignored signal on: whatever the runner was started ignoring, its SIGTERM
+    // must stop the child.
     struct sigaction action {};
     action.sa_handler = SIG_DFL;
     for (int s : {SIGINT, SIGTERM, SIGHUP}) ::sigaction(s, &action, nullptr);
@@ -81,6 +83,7 @@ inline int run_command(const std::vector<std::string>& argv, bool quiet) {
   const pid_t pid = spawn(argv, log_fd, true);
   if (log_fd >= 0) ::close(log_fd);
   if (pid < 0) return -1;
+  if (interrupted) ::kill(pid, SIGTERM);  // the signal came before the wait it would interrupt
   int status = 0;
   while (::waitpid(pid, &status, 0) < 0) {
     if (errno != EINTR) return -1;

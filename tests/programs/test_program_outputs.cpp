@@ -58,6 +58,10 @@ Outcome launch(const std::string& program, const std::string& arguments,
   const pid_t pid = fork();
   REQUIRE(pid >= 0);
   if (pid == 0) {
+    // The program starts with SIGINT and SIGTERM at their default (then `prefix` may ignore
+    // them), whatever this test program was started ignoring.
+    signal(SIGINT, SIG_DFL);
+    signal(SIGTERM, SIG_DFL);
     execl("/bin/sh", "sh", "-c", command.c_str(), static_cast<char*>(nullptr));
     _exit(127);
   }

@@ -35,7 +35,9 @@
 //                speed-up above 2 / that ratio cannot be had here; and the speed-ups of
 //                the epoch's two parts, the evaluation of the two sets (timed alone, in
 //                turn: CSV ms_evaluation, ms_evaluation_threads) and its training batches
-//                (the rest of the epoch)
+//                (the rest of the epoch), with how many of the N-thread trainer's sweeps
+//                whose threads meet at every step ran on the threads (CSV sweeps_threaded,
+//                sweeps_alone; the rest ran on one thread: `SweepThreading` in the engine)
 //   sim ns       one simulator step plus one full VJP (Aᵀλ and Bᵀλ) per sample, on the
 //                states of the last training batch (the per-sample work of the engine;
 //                for a BatchSimulator, the batched calls' time over the batch size)

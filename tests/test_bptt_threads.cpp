@@ -59,14 +59,24 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
   std::vector<bool> overlapped;
   // 1 thread, then 2 and 3 threads with every per-sample loop split (threshold 0), with the
   // default threshold (cheap loops stay on one thread), and with no loop ever split, which
-  // makes every lone sweep after the first hand its parameter products to a second thread.
+  // makes every lone sweep after the first hand its parameter products to a second thread;
+  // those sweeps always on the threads, then as timed (some on the threads, some not), and
+  // never.
   const double never = std::numeric_limits<double>::max();
-  const std::vector<std::pair<Index, double>> settings = {
-      {1, 4000}, {2, 0}, {3, 0}, {2, 4000}, {2, never}, {3, never}};
-  for (const auto& [threads, split] : settings) {
+  struct Setting {
+    Index threads;
+    double split;
+    SweepThreading sweeps;
+  };
+  const auto always = SweepThreading::Always, timed = SweepThreading::Timed;
+  const std::vector<Setting> settings = {
+      {1, 4000, timed},    {2, 0, always},     {3, 0, always},
+      {2, 4000, always},   {2, never, always}, {3, never, always},
+      {2, 0, timed},       {2, never, timed},  {2, never, SweepThreading::Never}};
+  for (const auto& [threads, split, sweeps] : settings) {
     Net net = initial;
     Engine engine(sim, net, objective, steps);
-    engine.set_threads(threads, split);
+    engine.set_threads(threads, split, sweeps);
     REQUIRE(engine.threads() == threads);
     GradientPair<S> pair;
     engine.regular_and_modified(x0, pair);
@@ -91,7 +101,7 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
       options.clip = ClipMode::Norm;
       options.threads = threads;
       Trainer trainer(sim, trained, objective, steps, Adam<S>(AdamOptions<S>{S(1e-3)}), options);
-      trainer.engine().set_threads(threads, split);
+      trainer.engine().set_threads(threads, split, sweeps);
       for (int epoch = 0; epoch < 2; ++epoch) {
         const EpochRecord record = trainer.train_epoch(train, test);
         REQUIRE(std::isfinite(record.test_loss.value()));
@@ -100,8 +110,10 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
     }
   }
   for (std::size_t t = 1; t < pairs.size(); ++t) {
-    INFO("threads " << settings[t].first << ", split above " << settings[t].second
-                    << " ns, against 1 thread");
+    const Setting& setting = settings[t];
+    INFO("threads " << setting.threads << ", split above " << setting.split
+                    << " ns, sweeps " << static_cast<int>(setting.sweeps)
+                    << " (0 timed, 1 always, 2 never), against 1 thread");
     CHECK(pairs[t].loss == pairs[0].loss);
     CHECK(pairs[t].regular == pairs[0].regular);
     CHECK(pairs[t].modified == pairs[0].modified);
@@ -119,8 +131,10 @@ void check_thread_independence(const Sim& sim, const Net& initial, const Objecti
     CHECK(evaluations[t] == evaluations[0]);
     CHECK(trained_r[t] == trained_r[0]);
     CHECK(trained_c[t] == trained_c[0]);
-    if (settings[t].second == never) CHECK(overlapped[t]);  // so the hand-off was compared
-    if (settings[t].second == 0) CHECK_FALSE(overlapped[t]);
+    if (setting.split == never && setting.sweeps == always)
+      CHECK(overlapped[t]);  // so the hand-off was compared
+    if (setting.split == 0 || setting.sweeps == SweepThreading::Never)
+      CHECK_FALSE(overlapped[t]);
   }
   CHECK_FALSE(overlapped[0]);
   // The pair's g_C, formed in the comparison's pass, is combine(g_M, g_R).
@@ -320,7 +334,7 @@ TEST_CASE("threads: a sweep that throws while a second thread works on its steps
   alone.reverse(FlowMode::Full, expected);
 
   Engine engine(sim, net, cartpole_objective<double, 2>(), 25);
-  engine.set_threads(2, std::numeric_limits<double>::max());
+  engine.set_threads(2, std::numeric_limits<double>::max(), SweepThreading::Always);
   Vector<double> g;
   engine.forward(x0);
   CHECK_FALSE(engine.reverse(FlowMode::Full, g).params_overlapped);  // the loops are timed

@@ -52,6 +52,9 @@ struct RowResult {
   /// The epoch's evaluation of the two sets (`Engine::evaluate`), at 1 and at N threads, in
   /// turn with the epochs (0: one thread): the rest of an epoch is its training batches.
   double ms_evaluation = 0, ms_evaluation_threads = 0;
+  /// Of the N-thread trainer's sweeps whose threads meet at every step (`SweepThreading`), how
+  /// many ran on the threads and how many on one thread, over its timed epochs.
+  long long sweeps_threaded = 0, sweeps_alone = 0;
   double trajectory_bytes = 0, rss_kib = 0;
   int ok = 0;
   char error[200] = {};
@@ -332,6 +335,8 @@ RowResult measure(const Settings& settings, const Sim& sim,
     keep_fastest(best, [&] { epoch(row_trainer); });
   };
   long long evaluation_macs = 0;  // not the epochs' work: kept out of the GFLOP count
+  const sbptt::SweepTally tally_before =
+      threaded ? threaded->trainer.engine().sweep_tally() : sbptt::SweepTally{};
   for (int repeat = 0; repeat < settings.repeats; ++repeat) {
     keep_best(r.ms_epoch, alone);
     if (regular) keep_best(r.ms_regular, *regular);  // right after the C epoch it is set against
@@ -354,6 +359,9 @@ RowResult measure(const Settings& settings, const Sim& sim,
   r.sim_ns = simulator_ns(sim, alone.trainer.engine());
   r.trajectory_bytes = static_cast<double>(alone.trainer.engine().trajectory().bytes());
   if (threaded) {
+    const sbptt::SweepTally tally = threaded->trainer.engine().sweep_tally();
+    r.sweeps_threaded = tally.threaded - tally_before.threaded;
+    r.sweeps_alone = tally.alone - tally_before.alone;
     r.round_trip_ns = cross_core_round_trip_ns();
     r.other_core_read_ratio = other_core_read_ratio();
     r.copies_ratio =

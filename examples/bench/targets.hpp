@@ -96,14 +96,15 @@ inline void summarize(const std::vector<Row>& rows, Index threads) {
         const double speedup = t.ms_epoch / t.ms_threads;
         std::printf("  %-9s float %s: 2 threads %.3fx faster than 1 (target >= %.2f): %s "
                     "(the evaluation of the two sets %.2fx, %.1f of %.1f ms on 1 thread, the "
-                    "training batches %.2fx; cross-core round trip %.0f ns; the other core's "
+                    "training batches %.2fx, their sweeps on two threads in %lld of %lld; "
+                    "cross-core round trip %.0f ns; the other core's "
                     "lines read %.1fx as slowly as this one's; two 1-thread epochs at once "
                     "took %.2fx as long as one alone, so at most %.2fx)\n",
                     task, method, speedup, target, verdict(speedup >= target),
                     t.ms_evaluation / t.ms_evaluation_threads, t.ms_evaluation, t.ms_epoch,
                     (t.ms_epoch - t.ms_evaluation) / (t.ms_threads - t.ms_evaluation_threads),
-                    t.round_trip_ns, t.other_core_read_ratio, t.copies_ratio,
-                    2 / t.copies_ratio);
+                    t.sweeps_threaded, t.sweeps_threaded + t.sweeps_alone, t.round_trip_ns,
+                    t.other_core_read_ratio, t.copies_ratio, 2 / t.copies_ratio);
       }
     }
   } else {
@@ -125,7 +126,7 @@ inline void write_csv(const Settings& settings, const std::vector<Row>& rows) {
       "task,scalar,method,nx,steps,params,ms_epoch,gflop_epoch,gflops,peak_gflops,"
       "fraction_of_peak,ms_epoch_regular_in_turn,threads,ms_epoch_threads,speedup_threads,"
       "round_trip_ns,other_core_read_ratio,copies_ratio,ms_evaluation,ms_evaluation_threads,"
-      "sim_ns_per_sample_step,"
+      "sweeps_threaded,sweeps_alone,sim_ns_per_sample_step,"
       "trajectory_bytes_per_batch,peak_rss_kib\n";
   char line[512];
   for (const auto& row : rows) {
@@ -133,12 +134,13 @@ inline void write_csv(const Settings& settings, const std::vector<Row>& rows) {
     if (r.ok == 0) continue;
     std::snprintf(line, sizeof line,
                   "%s,%s,%s,%lld,%lld,%lld,%.3f,%.6f,%.3f,%.3f,%.4f,%.3f,%lld,%.3f,%.3f,%.0f,"
-                  "%.2f,%.3f,%.3f,%.3f,%.1f,%.0f,%.0f\n",
+                  "%.2f,%.3f,%.3f,%.3f,%lld,%lld,%.1f,%.0f,%.0f\n",
                   row.task.c_str(), row.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
                   r.params, r.ms_epoch, r.gflop, r.gflops(), r.peak_gflops, r.fraction_of_peak(),
                   r.ms_regular, static_cast<long long>(settings.threads), r.ms_threads,
                   r.ms_epoch / r.ms_threads, r.round_trip_ns, r.other_core_read_ratio,
-                  r.copies_ratio, r.ms_evaluation, r.ms_evaluation_threads, r.sim_ns,
+                  r.copies_ratio, r.ms_evaluation, r.ms_evaluation_threads, r.sweeps_threaded,
+                  r.sweeps_alone, r.sim_ns,
                   r.trajectory_bytes, r.rss_kib);
     text += line;
   }

@@ -31,15 +31,20 @@
 /// `SplitBackwardController` to a second thread instead, step by step, and adds them in step
 /// order (param_handoff.hpp, `ParamHandoff`). The pair of `regular_and_modified` splits its
 /// steps between two threads when its sweeps share one backward pass (one control:
-/// shared_seed_sweeps.hpp, step_split.hpp), else its two sweeps run at once. Every sample is
-/// computed by the same operations whatever the thread count, and every batch sum is taken in a
-/// fixed order, so all results are bitwise identical for any number of threads. With more than
+/// shared_seed_sweeps.hpp, step_split.hpp), else its two sweeps run at once. A batch whose
+/// sweep meets the other thread at every step (the lone sweep's split loops or hand-off, the
+/// split pair) runs on the calling thread alone instead, its forward pass included, while
+/// that is faster (timed now and then: `SweepThreading`, sweep_threading.hpp). Every
+/// sample is computed by the same operations whatever the thread count, and every batch sum is
+/// taken in a fixed order, so all results are bitwise identical for any number of threads, and
+/// whichever way a sweep ran. With more than
 /// one thread the controller's `backward` must be safe to call concurrently on one workspace,
 /// its `add_param_gradient` (both) concurrently with `backward_inputs` of another step,
 /// `backward_inputs` concurrently with itself into different records, and the scaled
 /// `add_param_gradient` concurrently with itself on different steps, with different `scaled`
 /// buffers and gradients (`Network`'s are all of
 /// these), and the loss functor must be thread-safe (a `const` pure function).
+#include <chrono>
 #include <cmath>
 #include <initializer_list>
 #include <memory>
@@ -58,6 +63,7 @@
 #include "sbptt/bptt/param_handoff.hpp"
 #include "sbptt/bptt/reverse_sweeps.hpp"
 #include "sbptt/bptt/shared_seed_sweeps.hpp"
+#include "sbptt/bptt/sweep_threading.hpp"
 #include "sbptt/core/parallel.hpp"
 
 namespace sbptt {
@@ -138,8 +144,13 @@ public:
   ///        split over the threads only when it takes at least this long on one thread
   ///        (timed on its first calls): a fork costs about a microsecond, more than a cheap
   ///        simulator's whole batch. 0 splits every loop. The forward pass of a
-  ///        `ColumnSplitController` is always done in parts, with one fork per rollout.
-  void set_threads(Index threads, double split_above_ns = 4000) {
+  ///        `ColumnSplitController` is done in parts, with one fork per rollout, unless its
+  ///        batch runs on one thread (`sweep_threading`).
+  /// \param sweep_threading whether a batch whose sweep meets the other thread at every step
+  ///        uses the threads (`SweepThreading`: by default timed against one thread now and
+  ///        then).
+  void set_threads(Index threads, double split_above_ns = 4000,
+                   SweepThreading sweep_threading = SweepThreading::Timed) {
     detail::require(threads >= 1, "Engine::set_threads: threads = ", threads,
                     "; expected at least 1");
     detail::require(split_above_ns >= 0, "Engine::set_threads: split_above_ns = ",
@@ -150,41 +161,29 @@ public:
     if constexpr (SeedScalingController<Ctrl>) shared_seed_.set_threaded(pool_ != nullptr);
     threads_ = threads;
     for (auto& decision : fork_) decision = detail::ForkDecision(split_above_ns);
+    lone_threading_ = pair_threading_ = detail::SweepThreadingDecision(sweep_threading);
+    batch_threaded_ = true;
+    batch_way_of_.reset();
+    awaiting_.reset();
     const auto slots = static_cast<std::size_t>(threads);
     for (auto* scratch : {&forward_scratch_, &sweeps_[0].scratch, &sweeps_[1].scratch})
       scratch->assign(slots, Scratch(sim_.state_dim(), sim_.control_dim()));
     forward_in_parts_.resize(slots);
   }
   [[nodiscard]] Index threads() const { return threads_; }
+  /// How the batches that `SweepThreading` applies to ran since `set_threads`: those of lone
+  /// sweeps and of shared-seed pairs together.
+  [[nodiscard]] SweepTally sweep_tally() const {
+    const SweepTally& lone = lone_threading_.tally();
+    const SweepTally& pair = pair_threading_.tally();
+    return {lone.threaded + pair.threaded, lone.alone + pair.alone};
+  }
 
   /// Rolls out the batch `initial_states` (state_dim × B), stores the trajectory and returns
-  /// the batch-mean loss.
+  /// the batch-mean loss. With threads, the rollout and the next `reverse` go one way
+  /// (`SweepThreading`).
   Scalar forward(const Matrix<Scalar>& initial_states) {
-    check_initial_states(initial_states, "forward");
-    const Index batch = initial_states.cols();
-    trajectory_.resize(steps_, sim_.state_dim(), sim_.control_dim(), batch);
-    forward_non_finite_.reset();
-    trajectory_.states[0] = initial_states;
-    packed_controller_.pack();
-    if constexpr (ColumnSplitController<Ctrl>) {
-      if (pool_ && batch > 1) {
-        forward_in_parts_.run(*this, std::min(threads_, batch));
-        return batch_loss();
-      }
-    }
-    note_non_finite(Quantity::State, 0, trajectory_.states[0]);
-    for (Index n = 0; n < steps_; ++n) {
-      const auto i = static_cast<std::size_t>(n);
-      packed_controller_.forward(trajectory_.states[i], trajectory_.controls[i],
-                                 trajectory_.workspaces[i]);
-      note_non_finite(Quantity::Control, n, trajectory_.controls[i]);
-      detail::step_columns(sim_, trajectory_.states[i], trajectory_.controls[i],
-                           trajectory_.states[i + 1], [&](auto&& body) {
-        fork_[0].for_samples(pool_.get(), batch, forward_scratch_, true, body);
-      });
-      note_non_finite(Quantity::State, n + 1, trajectory_.states[i + 1]);
-    }
-    return batch_loss();
+    return forward_for(initial_states, SweepKind::Lone);
   }
 
   /// Batch-mean loss of a rollout of `initial_states` (state_dim × B) without storing the
@@ -224,15 +223,14 @@ public:
   const SweepDiagnostics& reverse(const FlowSchedule& schedule, Vector<Scalar>& gradient,
                                   Index truncation = 0) {
     check_sweep(schedule, truncation);
+    const LonePlan plan = lone_plan();
+    // The way of the forward pass when that was the decision's (its loops may have been timed
+    // since, or the batch may be a pair's).
+    const bool threaded =
+        !plan.meets_threads ||
+        (batch_way_of_ == SweepKind::Lone ? batch_threaded_ : lone_threading_.next_threaded());
     if constexpr (SplitBackwardController<Ctrl>) {
-      // Only once the simulator's loops have been found too cheap to split: the second
-      // thread then has nothing better to do than the parameter products. A BatchSimulator's
-      // VJPs are never split (only its loss seeds, and those only when told to split every
-      // loop), so there is nothing to wait for.
-      const bool split_loops = BatchSimulator<Sim>
-                                   ? fork_[1].splits_every_loop()
-                                   : fork_[1].probing() || fork_[1].fork();
-      if (handoff_ && !split_loops) {
+      if (threaded && plan.handoff) {
         Handoff& h = *handoff_;
         auto add = [&](std::size_t slot) {
           detail::ReverseSweeps::add_params(*this, h, slot, gradient);
@@ -241,11 +239,13 @@ public:
           detail::ReverseSweeps::lone(*this, sweeps_[0], schedule, gradient, truncation, false,
                                       &h);
         });
+        finish_batch(SweepKind::Lone);
         return sweeps_[0].diagnostics;
       }
     }
-    detail::ReverseSweeps::lone(*this, sweeps_[0], schedule, gradient, truncation, true,
+    detail::ReverseSweeps::lone(*this, sweeps_[0], schedule, gradient, truncation, threaded,
                                 nullptr);
+    finish_batch(SweepKind::Lone);
     return sweeps_[0].diagnostics;
   }
 
@@ -263,12 +263,13 @@ public:
   /// each exactly as it would alone, and on one thread they go step by step together.
   void regular_and_modified(const Matrix<Scalar>& initial_states, GradientPair<Scalar>& result,
                             Index truncation = 0) {
-    result.loss = forward(initial_states);
+    result.loss = forward_for(initial_states, SweepKind::Pair);
     result.forward_non_finite = forward_non_finite_;
     check_sweep(FlowMode::Full, truncation);
     if constexpr (SeedScalingController<Ctrl>) {
-      if (sim_.control_dim() == 1) {
-        shared_seed_.run(*this, result, truncation);
+      if (shares_seed()) {
+        shared_seed_.run(*this, result, truncation, batch_threaded_);
+        finish_batch(SweepKind::Pair);
         finish_pair(result);
         return;
       }
@@ -319,6 +320,82 @@ private:
     schedule.validate(steps_);
   }
 
+  /// The sweeps that `SweepThreading` decides: a lone sweep (`reverse`), the shared-seed pair.
+  enum class SweepKind { Lone, Pair };
+
+  /// How the next lone sweep would use the threads: `handoff` its parameter products, or its
+  /// per-sample loops split; `meets_threads` if either, once the loops are timed.
+  struct LonePlan {
+    bool handoff = false, meets_threads = false;
+  };
+  [[nodiscard]] LonePlan lone_plan() const {
+    // A BatchSimulator's VJPs are never split (only its loss seeds, and those only when told
+    // to split every loop); other simulators' loops are split once timed and found worth it.
+    const bool loops_timed = BatchSimulator<Sim> || !fork_[1].probing();
+    const bool split_loops =
+        BatchSimulator<Sim> ? fork_[1].splits_every_loop() : fork_[1].fork();
+    // Only where the loops are not split: the second thread then has nothing better to do
+    // than the parameter products.
+    const bool handoff = handoff_ != nullptr && loops_timed && !split_loops;
+    return {handoff, pool_ != nullptr && loops_timed && (split_loops || handoff)};
+  }
+  /// Whether the pair shares one backward pass and, with threads, splits its steps.
+  [[nodiscard]] bool shares_seed() const {
+    return SeedScalingController<Ctrl> && sim_.control_dim() == 1;
+  }
+
+  detail::SweepThreadingDecision& decision_of(SweepKind kind) {
+    return kind == SweepKind::Lone ? lone_threading_ : pair_threading_;
+  }
+
+  /// `forward`, for a batch whose sweep of kind `kind` follows: when that sweep would meet the
+  /// other thread at every step, the whole batch, this rollout included, goes the way its
+  /// decision says, and is timed from here to the sweep's end (`finish_batch`). A rollout in
+  /// parts leaves half of the trajectory in the other core's cache, which a sweep on this
+  /// thread alone would then read across (docs/design.md).
+  Scalar forward_for(const Matrix<Scalar>& initial_states, SweepKind kind) {
+    check_initial_states(initial_states, "forward");
+    const bool decided = kind == SweepKind::Lone ? lone_plan().meets_threads
+                                                 : pool_ != nullptr && shares_seed();
+    batch_threaded_ = !decided || decision_of(kind).next_threaded();
+    batch_way_of_ = awaiting_ = decided ? std::optional<SweepKind>(kind) : std::nullopt;
+    batch_start_ = std::chrono::steady_clock::now();
+    const Index batch = initial_states.cols();
+    trajectory_.resize(steps_, sim_.state_dim(), sim_.control_dim(), batch);
+    forward_non_finite_.reset();
+    trajectory_.states[0] = initial_states;
+    packed_controller_.pack();
+    if constexpr (ColumnSplitController<Ctrl>) {
+      if (pool_ && batch > 1 && batch_threaded_) {
+        forward_in_parts_.run(*this, std::min(threads_, batch));
+        return batch_loss();
+      }
+    }
+    note_non_finite(Quantity::State, 0, trajectory_.states[0]);
+    for (Index n = 0; n < steps_; ++n) {
+      const auto i = static_cast<std::size_t>(n);
+      packed_controller_.forward(trajectory_.states[i], trajectory_.controls[i],
+                                 trajectory_.workspaces[i]);
+      note_non_finite(Quantity::Control, n, trajectory_.controls[i]);
+      detail::step_columns(sim_, trajectory_.states[i], trajectory_.controls[i],
+                           trajectory_.states[i + 1], [&](auto&& body) {
+        fork_[0].for_samples(pool_.get(), batch, forward_scratch_, batch_threaded_, body);
+      });
+      note_non_finite(Quantity::State, n + 1, trajectory_.states[i + 1]);
+    }
+    return batch_loss();
+  }
+
+  /// The end of the timed batch of kind `kind`, if one awaits it: its time, per sample, to its
+  /// decision.
+  void finish_batch(SweepKind kind) {
+    if (awaiting_ != kind) return;
+    awaiting_.reset();
+    const std::chrono::duration<double, std::nano> took =
+        std::chrono::steady_clock::now() - batch_start_;
+    decision_of(kind).finished(took.count() / static_cast<double>(trajectory_.batch()));
+  }
+
   void finish_pair(GradientPair<Scalar>& result) const {
     result.regular_diagnostics = sweeps_[0].diagnostics;
     result.modified_diagnostics = sweeps_[1].diagnostics;
@@ -332,7 +409,8 @@ private:
     const Scalar w = static_cast<Scalar>(objective_.step_weight);
     const Index first = objective_.timing == LossTiming::Final ? steps_ : 1;
     eval_losses_.setZero(batch);
-    fork_[2].for_samples(pool_.get(), batch, forward_scratch_, true, [&](Index b, Scratch& t) {
+    fork_[2].for_samples(pool_.get(), batch, forward_scratch_, batch_threaded_,
+                         [&](Index b, Scratch& t) {
       for (Index n = first; n <= steps_; ++n) {
         t.x = trajectory_.states[static_cast<std::size_t>(n)].col(b);
         eval_losses_(b) += w * objective_.state_loss(t.x, static_cast<State*>(nullptr));
@@ -367,6 +445,13 @@ private:
   std::vector<Scratch> forward_scratch_;
   detail::ForwardInParts<Scalar> forward_in_parts_;  ///< `forward` on several threads
   detail::ForkDecision fork_[3];  ///< per-sample loops: simulator step, VJPs, batch loss
+  /// Whether a lone sweep whose threads would meet at every step, and the shared-seed pair,
+  /// use the threads.
+  detail::SweepThreadingDecision lone_threading_, pair_threading_;
+  bool batch_threaded_ = true;  ///< the way of the last forward pass's batch
+  std::optional<SweepKind> batch_way_of_;  ///< the decision that chose it, if one did
+  std::optional<SweepKind> awaiting_;  ///< the decision that awaits that batch's time
+  std::chrono::steady_clock::time_point batch_start_;
   Sweep sweeps_[2];
   /// Each sweep's layer adjoints when it adds its own parameter products (no hand-off).
   typename detail::LayerAdjointsOf<Ctrl>::Type sweep_adjoints_[2];

@@ -44,10 +44,11 @@ public:
   void set_threaded(bool threaded) { split_ = threaded ? std::make_unique<Split>() : nullptr; }
 
   /// g_R into `result.regular`, g_M into `result.modified`, and both sweeps' diagnostics in
-  /// the engine's sweep buffers, over the engine's stored trajectory.
+  /// the engine's sweep buffers, over the engine's stored trajectory; the split's tasks on the
+  /// engine's second thread when `threaded` (and threads were set).
   template <class Engine, class Pair>
-  void run(Engine& engine, Pair& result, Index truncation) {
-    Split* split = split_.get();
+  void run(Engine& engine, Pair& result, Index truncation, bool threaded) {
+    Split* split = threaded ? split_.get() : nullptr;
     unit_seed_.setOnes(1, engine.trajectory_.batch());  // before the second thread reads it
     if (split == nullptr) {
       sweep(engine, result, truncation, nullptr);

@@ -82,7 +82,8 @@ long allocations_during(Work&& work) {
 }
 
 /// Warm-up, then the same calls again with Eigen's allocator switched off. The results of the
-/// guarded calls must equal the warm-up's (the guard changes nothing but the check).
+/// guarded calls must equal the warm-up's (the guard changes nothing but the check). Each
+/// thread count gets an engine of its own, so that no buffer is sized by another's calls.
 template <class Engine, class Scalar>
 void check_no_allocation(Engine& engine, const Matrix<Scalar>& x0, Index threads) {
   engine.set_threads(threads);
@@ -115,6 +116,18 @@ void check_no_allocation(Engine& engine, const Matrix<Scalar>& x0, Index threads
   });
   CHECK(eigen_failures == 0);
   CHECK(allocations == 0);
+  // On two threads the timed decision runs a probing's batches on the threads and then alone
+  // (SweepThreading): the batches run alone allocate nothing either, the lone sweep's and the
+  // pair's.
+  const long probing = allocations_during([&] {
+    for (int k = 0; k < 2 * detail::SweepThreadingDecision::probes; ++k) {
+      engine.forward(x0);
+      engine.reverse(FlowMode::Full, g_full);
+      engine.regular_and_modified(x0, pair);
+    }
+  });
+  CHECK(eigen_failures == 0);
+  CHECK(probing == 0);
   for (std::size_t repeat = 0; repeat < 2; ++repeat) {
     CHECK(losses[repeat] == loss);
     CHECK(evaluations[repeat] == evaluated);
@@ -144,10 +157,10 @@ TEMPLATE_TEST_CASE("engine: cart pole with the paper's MLP allocates nothing aft
   auto net = Network<S>::mlp(sim.state_dim(), {100, 100}, 1);
   Rng rng(3);
   glorot_uniform(net, rng);  // last kernel not zeroed, so that g is non-trivial everywhere
-  Engine engine(sim, net, cartpole_objective<S, 4>(), 100);
   const Matrix<S> x0 = cartpole_initial_states(sim, rng, 8);
   for (const Index threads : {1, 2}) {
     INFO("threads " << threads);
+    Engine engine(sim, net, cartpole_objective<S, 4>(), 100);
     check_no_allocation(engine, x0, threads);
   }
 }
@@ -180,10 +193,10 @@ TEMPLATE_TEST_CASE("engine: quantum control with the paper's CNN allocates nothi
   auto net = testing::quantum_cnn<S>();
   Rng rng(4);
   glorot_uniform(net, rng);
-  Engine engine(sim, net, quantum_objective(sim, 4), 24);
   const Matrix<S> x0 = sim.initial_states(rng, 8);
   for (const Index threads : {1, 2}) {
     INFO("threads " << threads);
+    Engine engine(sim, net, quantum_objective(sim, 4), 24);
     check_no_allocation(engine, x0, threads);
   }
 }
@@ -197,10 +210,10 @@ TEMPLATE_TEST_CASE("engine: guidance with the paper's MLP allocates nothing afte
   auto net = Network<S>::mlp(sim.state_dim(), {100, 100}, sim.control_dim());
   Rng rng(5);
   glorot_uniform(net, rng);
-  Engine engine(sim, net, guidance_objective(sim, 0.1), sim.steps());
   const Matrix<S> x0 = guidance_initial_states(sim, rng, 8);
   for (const Index threads : {1, 2}) {
     INFO("threads " << threads);
+    Engine engine(sim, net, guidance_objective(sim, 0.1), sim.steps());
     check_no_allocation(engine, x0, threads);
   }
 }

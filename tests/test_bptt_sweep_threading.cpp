@@ -1,11 +1,15 @@
-// Whether the sweeps whose threads meet at every step use the threads (`SweepThreading`): the
-// timed decision's schedule against its closed form, fed made-up times (probes alternate, the
-// threaded way first; the faster way is kept for `sweeps_between` batches; then it probes
-// again), and the engine's batches against the way each policy says they ran. That the results
-// are the same bits either way is tests/test_bptt_threads.cpp's.
+// Whether the batches whose sweeps meet the other thread at every step use the threads
+// (`SweepThreading`): the timed decision's schedule against its closed form, fed made-up times
+// (three probes on the threads, then three alone; the faster way is kept for `batches_between`
+// batches; then it probes again), and the engine's batches against the way each policy says
+// they ran, the first at a batch shape on the threads, and none on another thread with `Never`.
+// That the results are the same bits either way is tests/test_bptt_threads.cpp's; that neither
+// way allocates after the first batches, tests/test_bptt_no_malloc.cpp's.
 #include <catch2/catch.hpp>
 
+#include <atomic>
 #include <limits>
+#include <thread>
 #include <vector>
 
 #include "sbptt/bptt/engine.hpp"
@@ -22,15 +26,16 @@ namespace {
 using Decision = detail::SweepThreadingDecision;
 constexpr int kProbing = 2 * Decision::probes;
 
-/// Feeds one probing: the threaded way's times and the other's, in the order they are asked
-/// for; checks that the ways alternate, the threaded way first.
+/// Feeds one probing: the threaded way's times, then the other's; checks that it asks for them
+/// in that order.
 void probe(Decision& decision, const std::vector<double>& threaded_ns,
            const std::vector<double>& alone_ns) {
   for (int k = 0; k < kProbing; ++k) {
-    const bool threaded = k % 2 == 0;
+    const bool threaded = k < Decision::probes;
     INFO("probe " << k);
     REQUIRE(decision.next_threaded() == threaded);
-    const auto i = static_cast<std::size_t>(k / 2);
+    REQUIRE(decision.next_threaded(true));  // a batch at a new shape: on the threads
+    const auto i = static_cast<std::size_t>(k % Decision::probes);
     decision.finished(threaded ? threaded_ns[i] : alone_ns[i]);
   }
 }
@@ -47,33 +52,36 @@ void follow(Decision& decision, int count, bool threaded) {
 }  // namespace
 
 TEST_CASE("sweep threading: the timed decision keeps the faster way by its best probe, and "
-          "probes again after sweeps_between batches", "[bptt][threads]") {
+          "probes again after batches_between batches", "[bptt][threads]") {
   Decision decision;
   // The threaded way's best (8) is slower than the other's (7), though its mean is not.
   probe(decision, {8, 9, 8}, {7, 20, 20});
-  follow(decision, Decision::sweeps_between, false);
+  follow(decision, Decision::batches_between, false);
   // Now the threaded way's best is the faster.
   probe(decision, {5, 6, 6}, {6, 6, 6});
-  follow(decision, Decision::sweeps_between, true);
+  follow(decision, Decision::batches_between, true);
   probe(decision, {4, 4, 4}, {4, 5, 5});  // a tie: the threads are kept only when faster
   follow(decision, 3, false);
+  decision.count_unscheduled(true);  // a batch at a new shape, out of the schedule
+  follow(decision, 1, false);
   const SweepTally tally = decision.tally();
-  CHECK(tally.threaded == 3 * Decision::probes + Decision::sweeps_between);
-  CHECK(tally.alone == 3 * Decision::probes + Decision::sweeps_between + 3);
+  CHECK(tally.threaded == 3 * Decision::probes + Decision::batches_between + 1);
+  CHECK(tally.alone == 3 * Decision::probes + Decision::batches_between + 4);
 }
 
 TEST_CASE("sweep threading: Always and Never are never timed", "[bptt][threads]") {
   for (const SweepThreading policy : {SweepThreading::Always, SweepThreading::Never}) {
     const bool threaded = policy == SweepThreading::Always;
     Decision decision(policy);
-    follow(decision, kProbing + Decision::sweeps_between + 1, threaded);
-    CHECK(decision.tally().threaded == (threaded ? kProbing + Decision::sweeps_between + 1 : 0));
-    CHECK(decision.tally().alone == (threaded ? 0 : kProbing + Decision::sweeps_between + 1));
+    CHECK(decision.next_threaded(true) == threaded);
+    follow(decision, kProbing + Decision::batches_between + 1, threaded);
+    CHECK(decision.tally().threaded == (threaded ? kProbing + Decision::batches_between + 1 : 0));
+    CHECK(decision.tally().alone == (threaded ? 0 : kProbing + Decision::batches_between + 1));
   }
 }
 
 TEST_CASE("sweep threading: the engine's batches, lone sweeps and pairs, run the way the policy "
-          "says",
+          "says, the first at a batch shape on the threads when timed",
           "[bptt][threads]") {
   const CartPole<double, 2> sim;
   auto net = Network<double>::mlp(sim.state_dim(), {16}, 1);
@@ -84,41 +92,98 @@ TEST_CASE("sweep threading: the engine's batches, lone sweeps and pairs, run the
   // never split here, so a lone sweep on the threads hands its parameter products to the
   // second thread from the first sweep on.
   const double never_split = std::numeric_limits<double>::max();
-  const int sweeps = kProbing + 2;
+  const int batches = kProbing + 2;
+  const int probes = Decision::probes;
   for (const SweepThreading policy :
        {SweepThreading::Always, SweepThreading::Never, SweepThreading::Timed}) {
     INFO("policy " << static_cast<int>(policy) << " (0 timed, 1 always, 2 never)");
+    const bool timed = policy == SweepThreading::Timed;
     Engine engine(sim, net, cartpole_objective<double, 2>(), 20);
     engine.set_threads(2, never_split, policy);
     Vector<double> g;
-    for (int k = 0; k < sweeps; ++k) {
-      INFO("lone sweep " << k);
-      const bool expected = policy == SweepThreading::Always ||
-                            (policy == SweepThreading::Timed && k < kProbing && k % 2 == 0);
+    // Timed: the first batch (a new shape) on the threads, then a probing: 3 on the threads,
+    // 3 alone; later batches go the faster way, not checked.
+    for (int k = 0; k < batches; ++k) {
+      INFO("lone batch " << k);
+      const bool expected = policy == SweepThreading::Always || (timed && k <= probes);
       engine.forward(x0);
       const bool overlapped = engine.reverse(FlowMode::Full, g).params_overlapped;
-      if (policy != SweepThreading::Timed || k < kProbing) CHECK(overlapped == expected);
+      if (!timed || k <= 2 * probes) CHECK(overlapped == expected);
       // A second sweep over the same batch goes its way, and is neither timed nor counted.
       CHECK(engine.reverse(FlowMode::PhysicsOnly, g).params_overlapped == overlapped);
     }
     // With one control the pair shares its backward pass and, on the threads, splits its steps.
-    for (int k = 0; k < sweeps; ++k) {
+    // Its batches are of the lone batches' shape, so its probing starts at once.
+    for (int k = 0; k < batches; ++k) {
       INFO("pair " << k);
-      const bool expected = policy == SweepThreading::Always ||
-                            (policy == SweepThreading::Timed && k < kProbing && k % 2 == 0);
+      const bool expected = policy == SweepThreading::Always || (timed && k < probes);
       const GradientPair<double> pair = engine.regular_and_modified(x0);
-      if (policy != SweepThreading::Timed || k < kProbing) {
+      if (!timed || k < 2 * probes) {
         CHECK(pair.regular_diagnostics.params_overlapped == expected);
         CHECK(pair.modified_diagnostics.params_overlapped == expected);
       }
     }
+    // A batch of a new shape, whatever the decision stands at.
+    engine.forward(x0.leftCols(5));
+    CHECK(engine.reverse(FlowMode::Full, g).params_overlapped ==
+          (policy != SweepThreading::Never));
     const SweepTally tally = engine.sweep_tally();
-    CHECK(tally.threaded + tally.alone == 2 * sweeps);
+    CHECK(tally.threaded + tally.alone == 2 * batches + 1);
     if (policy == SweepThreading::Always) CHECK(tally.alone == 0);
     if (policy == SweepThreading::Never) CHECK(tally.threaded == 0);
-    if (policy == SweepThreading::Timed) {  // half of each probing, and each decided sweep's way
-      CHECK(tally.threaded >= kProbing);
+    if (timed) {  // the two new shapes and the probings', and each later batch's way
+      CHECK(tally.threaded >= 2 + kProbing);
       CHECK(tally.alone >= kProbing);
     }
+  }
+}
+
+TEST_CASE("sweep threading: with Never no simulator call of a training batch leaves the calling "
+          "thread, even while the per-sample loops are timed", "[bptt][threads]") {
+  /// The cart pole stepped and differentiated sample by sample (its batched calls hidden), so
+  /// that the engine times its per-sample loops and, told to split every loop, would split
+  /// them; it notes any call made on another thread than the test's.
+  struct Watched : CartPole<double, 2> {
+    std::thread::id caller = std::this_thread::get_id();
+    mutable std::atomic<int> elsewhere{0};
+    void step_batch(const Matrix<double>&, const Matrix<double>&, Matrix<double>&) const = delete;
+    void vjp_batch(const Matrix<double>&, const Matrix<double>&, const Matrix<double>&,
+                   Matrix<double>*, Matrix<double>*) const = delete;
+    void step(const State& x, const Control& u, State& x_next) const {
+      note();
+      CartPole<double, 2>::step(x, u, x_next);
+    }
+    void vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
+             Control* lambda_u) const {
+      note();
+      CartPole<double, 2>::vjp(x, u, lambda, lambda_x, lambda_u);
+    }
+    void note() const {
+      if (std::this_thread::get_id() != caller) elsewhere.fetch_add(1);
+    }
+  };
+  const Watched sim;
+  auto net = Network<double>::mlp(sim.state_dim(), {16}, 1);
+  Rng rng(6);
+  glorot_uniform(net, rng);
+  const Matrix<double> x0 = cartpole_initial_states(sim, rng, 12);
+  for (const SweepThreading policy : {SweepThreading::Never, SweepThreading::Always}) {
+    INFO("policy " << static_cast<int>(policy) << " (1 always, 2 never)");
+    sim.elsewhere = 0;
+    Engine engine(sim, net, cartpole_objective<double, 2>(), 20);
+    engine.set_threads(2, 0, policy);  // every per-sample loop split once timed
+    Vector<double> g;
+    // Always: the forward pass in parts, and the loops split, on the other thread too; but the
+    // calling thread takes every part itself while the worker has not woken yet, so the
+    // batches go on until a call is seen elsewhere (which shows that the watch sees them).
+    int batches = 0;
+    for (; batches < 200 && (policy == SweepThreading::Never || sim.elsewhere.load() == 0);
+         ++batches) {
+      engine.forward(x0);
+      engine.reverse(FlowMode::Full, g);
+      engine.regular_and_modified(x0);
+    }
+    if (policy == SweepThreading::Never) CHECK(sim.elsewhere.load() == 0);
+    if (policy == SweepThreading::Always) CHECK(sim.elsewhere.load() > 0);
   }
 }

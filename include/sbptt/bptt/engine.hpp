@@ -37,8 +37,8 @@
 /// that is faster (timed now and then: `SweepThreading`, sweep_threading.hpp). Every
 /// sample is computed by the same operations whatever the thread count, and every batch sum is
 /// taken in a fixed order, so all results are bitwise identical for any number of threads, and
-/// whichever way a sweep ran. With more than
-/// one thread the controller's `backward` must be safe to call concurrently on one workspace,
+/// whichever way a sweep ran. With more than one thread the controller's `backward` must be
+/// safe to call concurrently on one workspace,
 /// its `add_param_gradient` (both) concurrently with `backward_inputs` of another step,
 /// `backward_inputs` concurrently with itself into different records, and the scaled
 /// `add_param_gradient` concurrently with itself on different steps, with different `scaled`
@@ -223,12 +223,13 @@ public:
   const SweepDiagnostics& reverse(const FlowSchedule& schedule, Vector<Scalar>& gradient,
                                   Index truncation = 0) {
     check_sweep(schedule, truncation);
+    const bool timed = take_timing(SweepKind::Lone);
     const LonePlan plan = lone_plan();
-    // The way of the forward pass when that was the decision's (its loops may have been timed
-    // since, or the batch may be a pair's).
-    const bool threaded =
-        !plan.meets_threads ||
-        (batch_way_of_ == SweepKind::Lone ? batch_threaded_ : lone_threading_.next_threaded());
+    bool threaded = batch_threaded_;  // the way of the forward pass, when the decision chose it
+    if (batch_way_of_ != SweepKind::Lone) {  // else its loops are timed now, or it was a pair's
+      threaded = plan.meets_threads ? lone_threading_.next_threaded()
+                                    : lone_threading_.policy() != SweepThreading::Never;
+    }
     if constexpr (SplitBackwardController<Ctrl>) {
       if (threaded && plan.handoff) {
         Handoff& h = *handoff_;
@@ -239,13 +240,13 @@ public:
           detail::ReverseSweeps::lone(*this, sweeps_[0], schedule, gradient, truncation, false,
                                       &h);
         });
-        finish_batch(SweepKind::Lone);
+        if (timed) finish_batch(SweepKind::Lone);
         return sweeps_[0].diagnostics;
       }
     }
     detail::ReverseSweeps::lone(*this, sweeps_[0], schedule, gradient, truncation, threaded,
                                 nullptr);
-    finish_batch(SweepKind::Lone);
+    if (timed) finish_batch(SweepKind::Lone);
     return sweeps_[0].diagnostics;
   }
 
@@ -268,8 +269,9 @@ public:
     check_sweep(FlowMode::Full, truncation);
     if constexpr (SeedScalingController<Ctrl>) {
       if (shares_seed()) {
+        const bool timed = take_timing(SweepKind::Pair);
         shared_seed_.run(*this, result, truncation, batch_threaded_);
-        finish_batch(SweepKind::Pair);
+        if (timed) finish_batch(SweepKind::Pair);
         finish_pair(result);
         return;
       }
@@ -349,18 +351,24 @@ private:
   }
 
   /// `forward`, for a batch whose sweep of kind `kind` follows: when that sweep would meet the
-  /// other thread at every step, the whole batch, this rollout included, goes the way its
-  /// decision says, and is timed from here to the sweep's end (`finish_batch`). A rollout in
-  /// parts leaves half of the trajectory in the other core's cache, which a sweep on this
-  /// thread alone would then read across (docs/design.md).
+  /// other thread at every step (or the decision says `Never`), the whole batch, this rollout
+  /// included, goes the way its decision says, and is timed from here to the sweep's end
+  /// (`finish_batch`). A rollout in parts leaves half of the trajectory in the other core's
+  /// cache, which a sweep on this thread alone would then read across (docs/design.md).
   Scalar forward_for(const Matrix<Scalar>& initial_states, SweepKind kind) {
     check_initial_states(initial_states, "forward");
-    const bool decided = kind == SweepKind::Lone ? lone_plan().meets_threads
-                                                 : pool_ != nullptr && shares_seed();
-    batch_threaded_ = !decided || decision_of(kind).next_threaded();
-    batch_way_of_ = awaiting_ = decided ? std::optional<SweepKind>(kind) : std::nullopt;
-    batch_start_ = std::chrono::steady_clock::now();
+    detail::SweepThreadingDecision& decision = decision_of(kind);
+    const bool never = decision.policy() == SweepThreading::Never;
+    const bool decided = pool_ != nullptr && (kind == SweepKind::Lone
+                                                  ? lone_plan().meets_threads || never
+                                                  : shares_seed());
     const Index batch = initial_states.cols();
+    const bool first_at_shape = trajectory_.batch() != batch;
+    batch_threaded_ = !decided || decision.next_threaded(first_at_shape);
+    batch_way_of_ = decided ? std::optional<SweepKind>(kind) : std::nullopt;
+    awaiting_ = decided && !first_at_shape ? batch_way_of_ : std::nullopt;
+    if (decided && first_at_shape) decision.count_unscheduled(batch_threaded_);
+    batch_start_ = std::chrono::steady_clock::now();
     trajectory_.resize(steps_, sim_.state_dim(), sim_.control_dim(), batch);
     forward_non_finite_.reset();
     trajectory_.states[0] = initial_states;
@@ -386,11 +394,30 @@ private:
     return batch_loss();
   }
 
-  /// The end of the timed batch of kind `kind`, if one awaits it: its time, per sample, to its
-  /// decision.
-  void finish_batch(SweepKind kind) {
-    if (awaiting_ != kind) return;
+  /// The layer adjoints of sweep `s` when it adds its own parameter products. The first
+  /// sweep's are the hand-off's first slot where there is a hand-off: a batch on the threads
+  /// sizes that slot, so that a batch run alone after it allocates nothing (the two never run
+  /// at once).
+  template <class SweepBuffers>
+  auto& own_adjoints(const SweepBuffers& s) {
+    if constexpr (SplitBackwardController<Ctrl>) {
+      if (&s == &sweeps_[1]) return sweep_adjoints_[1];
+      return handoff_ ? handoff_->ring[0] : sweep_adjoints_[0];
+    } else {
+      return sweep_adjoints_[0];
+    }
+  }
+
+  /// Whether the current batch's time awaits the sweep of kind `kind`; at most once per batch,
+  /// so that a sweep that throws leaves its batch uncounted.
+  bool take_timing(SweepKind kind) {
+    const bool awaited = awaiting_ == kind;
     awaiting_.reset();
+    return awaited;
+  }
+
+  /// The end of the current batch: its time, per sample, to the decision of kind `kind`.
+  void finish_batch(SweepKind kind) {
     const std::chrono::duration<double, std::nano> took =
         std::chrono::steady_clock::now() - batch_start_;
     decision_of(kind).finished(took.count() / static_cast<double>(trajectory_.batch()));
@@ -453,7 +480,7 @@ private:
   std::optional<SweepKind> awaiting_;  ///< the decision that awaits that batch's time
   std::chrono::steady_clock::time_point batch_start_;
   Sweep sweeps_[2];
-  /// Each sweep's layer adjoints when it adds its own parameter products (no hand-off).
+  /// Each sweep's layer adjoints when it adds its own parameter products (`own_adjoints`).
   typename detail::LayerAdjointsOf<Ctrl>::Type sweep_adjoints_[2];
   /// Both sweeps' VJPs in one `vjp_batch` call, for a simulator without `vjp_batch_pair`.
   detail::PairedColumns<Scalar> paired_columns_;

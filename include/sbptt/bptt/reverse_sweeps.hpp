@@ -153,7 +153,7 @@ private:
                                Matrix<typename Engine::Scalar>* dx) {
     const auto& workspace = e.trajectory_.workspaces[static_cast<std::size_t>(n)];
     if constexpr (SplitBackwardController<typename Engine::Controller>) {
-      auto& adjoints = e.sweep_adjoints_[&s == &e.sweeps_[0] ? 0 : 1];
+      auto& adjoints = e.own_adjoints(s);
       e.packed_controller_.backward_inputs(workspace, s.mu, dx, adjoints);
       e.controller_.add_param_gradient(workspace, adjoints, gradient);
     } else {

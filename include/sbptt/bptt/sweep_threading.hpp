@@ -15,16 +15,20 @@ namespace sbptt {
 /// time can change about fivefold within a minute (docs/benchmark-runs.md, fiftieth run). A
 /// batch run alone has its forward pass on the calling thread too: a rollout in parts leaves
 /// half of the trajectory in the other core's cache for the sweep to read. `evaluate` and a
-/// batch whose two sweeps run apart (more than one control) use the threads in every case:
+/// pair whose sweeps run apart (they share no backward pass) use the threads in every case:
 /// their threads meet once per call. Results are the same bits whichever way a batch runs.
 enum class SweepThreading {
   /// Both ways timed in turn, the faster kept, and timed again after a few hundred batches.
+  /// The first batch at a batch shape runs on the threads, untimed: the buffers of that way
+  /// include those of the other, so that the first batch sizes both.
   Timed,
   Always,  ///< every such batch on the threads
-  Never,   ///< every such batch on the calling thread alone, as with one thread
+  /// Every batch of `forward` and `reverse`, and of a pair that shares its backward pass, on
+  /// the calling thread alone, its per-sample loops too, as with one thread.
+  Never,
 };
 
-/// How many of an engine's batches of one kind ran each way (`Engine::sweep_tally`).
+/// How many of an engine's batches ran each way (`Engine::sweep_tally`).
 struct SweepTally {
   Index threaded = 0;  ///< on the threads
   Index alone = 0;     ///< on the calling thread
@@ -32,47 +36,54 @@ struct SweepTally {
 
 namespace detail {
 
-/// `SweepThreading::Timed` for one kind of sweep: a probing runs `probes` batches each way,
-/// alternately and the threaded way first, then keeps the way with the least time per sample
-/// (the best of its probes) for `sweeps_between` batches; then it probes again. The engine
-/// times a batch from its forward pass to the end of its sweep. The threaded way goes first
-/// because its buffers include the other's, so that both are sized by the first batches at a
-/// shape. A batch whose sweep throws is not counted.
+/// `SweepThreading::Timed` for one kind of sweep: a probing runs `probes` batches on the
+/// threads, then `probes` on the calling thread, then keeps the way with the least time per
+/// sample (the best of its probes) for `batches_between` batches; then it probes again. The
+/// engine times a batch from its forward pass to the end of its sweep. The threaded probes
+/// come in a row so that only the first of them meets workers that slept through batches run
+/// alone (`ThreadPool`'s workers sleep when idle), and the best of three drops that one.
 class SweepThreadingDecision {
 public:
   static constexpr int probes = 3;
-  static constexpr int sweeps_between = 256;
+  static constexpr int batches_between = 256;
 
   explicit SweepThreadingDecision(SweepThreading policy = SweepThreading::Timed)
       : policy_(policy) {}
 
-  /// Whether the next batch runs on the threads.
-  [[nodiscard]] bool next_threaded() const {
+  [[nodiscard]] SweepThreading policy() const { return policy_; }
+
+  /// Whether the next batch runs on the threads; a batch that is `first_at_shape` does when
+  /// timed, and is then left out of the schedule (`count_unscheduled`).
+  [[nodiscard]] bool next_threaded(bool first_at_shape = false) const {
     if (policy_ != SweepThreading::Timed) return policy_ == SweepThreading::Always;
-    return probing() ? sweeps_ % 2 == 0 : threaded_;
+    return first_at_shape || (probing() ? batches_ < probes : threaded_);
   }
 
-  /// Counts a finished batch that took `ns_per_sample` (read only while probing).
+  /// Counts a finished batch of the schedule that took `ns_per_sample` (read only while
+  /// probing).
   void finished(double ns_per_sample) {
-    ++(next_threaded() ? tally_.threaded : tally_.alone);
+    const bool threaded = next_threaded();
+    ++(threaded ? tally_.threaded : tally_.alone);
     if (policy_ != SweepThreading::Timed) return;
     if (probing()) {
-      const bool threaded = next_threaded();
       double& best = best_ns_[threaded ? 1 : 0];
-      best = sweeps_ < 2 ? ns_per_sample : std::min(best, ns_per_sample);
-      if (sweeps_ + 1 == 2 * probes) threaded_ = best_ns_[1] < best_ns_[0];
+      best = batches_ % probes == 0 ? ns_per_sample : std::min(best, ns_per_sample);
+      if (batches_ + 1 == 2 * probes) threaded_ = best_ns_[1] < best_ns_[0];
     }
-    if (++sweeps_ == 2 * probes + sweeps_between) sweeps_ = 0;
+    if (++batches_ == 2 * probes + batches_between) batches_ = 0;
   }
+
+  /// Counts a batch that ran outside the schedule, `threaded` or not.
+  void count_unscheduled(bool threaded) { ++(threaded ? tally_.threaded : tally_.alone); }
 
   [[nodiscard]] const SweepTally& tally() const { return tally_; }
 
 private:
-  [[nodiscard]] bool probing() const { return sweeps_ < 2 * probes; }
+  [[nodiscard]] bool probing() const { return batches_ < 2 * probes; }
 
   SweepThreading policy_;
   SweepTally tally_;
-  int sweeps_ = 0;          ///< since the last probing began
+  int batches_ = 0;         ///< of the schedule, since the last probing began
   bool threaded_ = true;    ///< the last probing's choice
   double best_ns_[2] = {};  ///< per sample, alone and threaded, in the current probing
 };

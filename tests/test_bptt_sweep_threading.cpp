@@ -62,8 +62,11 @@ TEST_CASE("sweep threading: the timed decision keeps the faster way by its best 
   follow(decision, Decision::batches_between, true);
   probe(decision, {4, 4, 4}, {4, 5, 5});  // a tie: the threads are kept only when faster
   follow(decision, 3, false);
-  decision.count_unscheduled(true);  // a batch at a new shape, out of the schedule
+  decision.count_unscheduled(true);  // a batch at a new size, out of the schedule
   follow(decision, 1, false);
+  CHECK(decision.first_at(8));
+  CHECK_FALSE(decision.first_at(8));
+  CHECK(decision.first_at(7));
   const SweepTally tally = decision.tally();
   CHECK(tally.threaded == 3 * Decision::probes + Decision::batches_between + 1);
   CHECK(tally.alone == 3 * Decision::probes + Decision::batches_between + 4);
@@ -113,12 +116,12 @@ TEST_CASE("sweep threading: the engine's batches, lone sweeps and pairs, run the
       CHECK(engine.reverse(FlowMode::PhysicsOnly, g).params_overlapped == overlapped);
     }
     // With one control the pair shares its backward pass and, on the threads, splits its steps.
-    // Its batches are of the lone batches' shape, so its probing starts at once.
+    // Its first batch is the first of its kind at this size.
     for (int k = 0; k < batches; ++k) {
       INFO("pair " << k);
-      const bool expected = policy == SweepThreading::Always || (timed && k < probes);
+      const bool expected = policy == SweepThreading::Always || (timed && k <= probes);
       const GradientPair<double> pair = engine.regular_and_modified(x0);
-      if (!timed || k < 2 * probes) {
+      if (!timed || k <= 2 * probes) {
         CHECK(pair.regular_diagnostics.params_overlapped == expected);
         CHECK(pair.modified_diagnostics.params_overlapped == expected);
       }
@@ -131,18 +134,43 @@ TEST_CASE("sweep threading: the engine's batches, lone sweeps and pairs, run the
     CHECK(tally.threaded + tally.alone == 2 * batches + 1);
     if (policy == SweepThreading::Always) CHECK(tally.alone == 0);
     if (policy == SweepThreading::Never) CHECK(tally.threaded == 0);
-    if (timed) {  // the two new shapes and the probings', and each later batch's way
-      CHECK(tally.threaded >= 2 + kProbing);
+    if (timed) {  // the three first batches at a size and the probings', and later batches
+      CHECK(tally.threaded >= 3 + kProbing);
       CHECK(tally.alone >= kProbing);
     }
   }
 }
 
+TEST_CASE("sweep threading: the first lone batch at a size runs on the threads though a pair "
+          "ran at that size before", "[bptt][threads]") {
+  const CartPole<double, 2> sim;
+  auto net = Network<double>::mlp(sim.state_dim(), {16}, 1);
+  Rng rng(7);
+  glorot_uniform(net, rng);
+  const Matrix<double> x0 = cartpole_initial_states(sim, rng, 6);
+  Engine engine(sim, net, cartpole_objective<double, 2>(), 20);
+  engine.set_threads(2, std::numeric_limits<double>::max(), SweepThreading::Timed);
+  Vector<double> g;
+  auto lone_overlapped = [&](const Matrix<double>& states) {
+    engine.forward(states);
+    return engine.reverse(FlowMode::Full, g).params_overlapped;
+  };
+  REQUIRE(lone_overlapped(x0));  // the first at its size
+  for (int k = 0; k < Decision::probes; ++k) REQUIRE(lone_overlapped(x0));  // threaded probes
+  // The lone decision's next batch is an alone probe; a pair at a new size comes first. The
+  // lone batch at that size is still the first of its kind there, so it runs on the threads
+  // (its hand-off's buffers are not the pair's); then the probing resumes.
+  const Matrix<double> fewer = x0.leftCols(4);
+  CHECK(engine.regular_and_modified(fewer).regular_diagnostics.params_overlapped);
+  CHECK(lone_overlapped(fewer));
+  CHECK_FALSE(lone_overlapped(fewer));
+}
+
 TEST_CASE("sweep threading: with Never no simulator call of a training batch leaves the calling "
-          "thread, even while the per-sample loops are timed", "[bptt][threads]") {
+          "thread, from the first batch on", "[bptt][threads]") {
   /// The cart pole stepped and differentiated sample by sample (its batched calls hidden), so
-  /// that the engine times its per-sample loops and, told to split every loop, would split
-  /// them; it notes any call made on another thread than the test's.
+  /// that the engine, told to split every loop, would split them once timed; it notes any
+  /// call made on another thread than the test's.
   struct Watched : CartPole<double, 2> {
     std::thread::id caller = std::this_thread::get_id();
     mutable std::atomic<int> elsewhere{0};
@@ -176,8 +204,9 @@ TEST_CASE("sweep threading: with Never no simulator call of a training batch lea
     // Always: the forward pass in parts, and the loops split, on the other thread too; but the
     // calling thread takes every part itself while the worker has not woken yet, so the
     // batches go on until a call is seen elsewhere (which shows that the watch sees them).
-    int batches = 0;
-    for (; batches < 200 && (policy == SweepThreading::Never || sim.elsewhere.load() == 0);
+    const int most = policy == SweepThreading::Never ? 50 : 1000;
+    for (int batches = 0;
+         batches < most && (policy == SweepThreading::Never || sim.elsewhere.load() == 0);
          ++batches) {
       engine.forward(x0);
       engine.reverse(FlowMode::Full, g);

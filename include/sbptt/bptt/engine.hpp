@@ -223,10 +223,12 @@ public:
   const SweepDiagnostics& reverse(const FlowSchedule& schedule, Vector<Scalar>& gradient,
                                   Index truncation = 0) {
     check_sweep(schedule, truncation);
-    const bool timed = take_timing(SweepKind::Lone);
+    const bool ends_batch = claim_batch_end(SweepKind::Lone);
     const LonePlan plan = lone_plan();
     bool threaded = batch_threaded_;  // the way of the forward pass, when the decision chose it
-    if (batch_way_of_ != SweepKind::Lone) {  // else its loops are timed now, or it was a pair's
+    // Else the loops were not yet timed at the forward pass, or its batch did not meet the
+    // threads, or it was a pair's.
+    if (batch_way_of_ != SweepKind::Lone) {
       threaded = plan.meets_threads ? lone_threading_.next_threaded()
                                     : lone_threading_.policy() != SweepThreading::Never;
     }
@@ -240,13 +242,13 @@ public:
           detail::ReverseSweeps::lone(*this, sweeps_[0], schedule, gradient, truncation, false,
                                       &h);
         });
-        if (timed) finish_batch(SweepKind::Lone);
+        if (ends_batch) finish_batch(SweepKind::Lone);
         return sweeps_[0].diagnostics;
       }
     }
     detail::ReverseSweeps::lone(*this, sweeps_[0], schedule, gradient, truncation, threaded,
                                 nullptr);
-    if (timed) finish_batch(SweepKind::Lone);
+    if (ends_batch) finish_batch(SweepKind::Lone);
     return sweeps_[0].diagnostics;
   }
 
@@ -269,9 +271,9 @@ public:
     check_sweep(FlowMode::Full, truncation);
     if constexpr (SeedScalingController<Ctrl>) {
       if (shares_seed()) {
-        const bool timed = take_timing(SweepKind::Pair);
+        const bool ends_batch = claim_batch_end(SweepKind::Pair);
         shared_seed_.run(*this, result, truncation, batch_threaded_);
-        if (timed) finish_batch(SweepKind::Pair);
+        if (ends_batch) finish_batch(SweepKind::Pair);
         finish_pair(result);
         return;
       }
@@ -351,9 +353,10 @@ private:
   }
 
   /// `forward`, for a batch whose sweep of kind `kind` follows: when that sweep would meet the
-  /// other thread at every step (or the decision says `Never`), the whole batch, this rollout
-  /// included, goes the way its decision says, and is timed from here to the sweep's end
-  /// (`finish_batch`). A rollout in parts leaves half of the trajectory in the other core's
+  /// other thread at every step (or, for a lone sweep, the decision says `Never`), the whole
+  /// batch, this rollout included, goes the way its decision says, timed from here to the
+  /// sweep's end (`finish_batch`), but for the first of its kind at a size, which runs on the
+  /// threads untimed. A rollout in parts leaves half of the trajectory in the other core's
   /// cache, which a sweep on this thread alone would then read across (docs/design.md).
   Scalar forward_for(const Matrix<Scalar>& initial_states, SweepKind kind) {
     check_initial_states(initial_states, "forward");
@@ -363,11 +366,11 @@ private:
                                                   ? lone_plan().meets_threads || never
                                                   : shares_seed());
     const Index batch = initial_states.cols();
-    const bool first_at_shape = trajectory_.batch() != batch;
-    batch_threaded_ = !decided || decision.next_threaded(first_at_shape);
-    batch_way_of_ = decided ? std::optional<SweepKind>(kind) : std::nullopt;
-    awaiting_ = decided && !first_at_shape ? batch_way_of_ : std::nullopt;
-    if (decided && first_at_shape) decision.count_unscheduled(batch_threaded_);
+    // Per kind: each kind's threaded buffers are its own (the hand-off's, the split's).
+    const bool first_at_size = decided && decision.first_at(batch);
+    batch_threaded_ = !decided || decision.next_threaded(first_at_size);
+    batch_way_of_ = awaiting_ = decided ? std::optional<SweepKind>(kind) : std::nullopt;
+    batch_scheduled_ = !first_at_size;
     batch_start_ = std::chrono::steady_clock::now();
     trajectory_.resize(steps_, sim_.state_dim(), sim_.control_dim(), batch);
     forward_non_finite_.reset();
@@ -408,19 +411,25 @@ private:
     }
   }
 
-  /// Whether the current batch's time awaits the sweep of kind `kind`; at most once per batch,
-  /// so that a sweep that throws leaves its batch uncounted.
-  bool take_timing(SweepKind kind) {
+  /// Whether the decision of kind `kind` awaits the end of the current batch; true at most
+  /// once per batch, so that a sweep that throws leaves its batch uncounted.
+  bool claim_batch_end(SweepKind kind) {
     const bool awaited = awaiting_ == kind;
     awaiting_.reset();
     return awaited;
   }
 
-  /// The end of the current batch: its time, per sample, to the decision of kind `kind`.
+  /// The end of the current batch, to the decision of kind `kind`: its time per sample, or
+  /// only its way for a batch out of the schedule.
   void finish_batch(SweepKind kind) {
+    detail::SweepThreadingDecision& decision = decision_of(kind);
+    if (!batch_scheduled_) {
+      decision.count_unscheduled(batch_threaded_);
+      return;
+    }
     const std::chrono::duration<double, std::nano> took =
         std::chrono::steady_clock::now() - batch_start_;
-    decision_of(kind).finished(took.count() / static_cast<double>(trajectory_.batch()));
+    decision.finished(took.count() / static_cast<double>(trajectory_.batch()));
   }
 
   void finish_pair(GradientPair<Scalar>& result) const {
@@ -477,7 +486,8 @@ private:
   detail::SweepThreadingDecision lone_threading_, pair_threading_;
   bool batch_threaded_ = true;  ///< the way of the last forward pass's batch
   std::optional<SweepKind> batch_way_of_;  ///< the decision that chose it, if one did
-  std::optional<SweepKind> awaiting_;  ///< the decision that awaits that batch's time
+  std::optional<SweepKind> awaiting_;  ///< the decision that awaits that batch's end
+  bool batch_scheduled_ = true;  ///< that batch is in its decision's schedule
   std::chrono::steady_clock::time_point batch_start_;
   Sweep sweeps_[2];
   /// Each sweep's layer adjoints when it adds its own parameter products (`own_adjoints`).

@@ -18,9 +18,9 @@ namespace sbptt {
 /// pair whose sweeps run apart (they share no backward pass) use the threads in every case:
 /// their threads meet once per call. Results are the same bits whichever way a batch runs.
 enum class SweepThreading {
-  /// Both ways timed in turn, the faster kept, and timed again after a few hundred batches.
-  /// The first batch at a batch shape runs on the threads, untimed: the buffers of that way
-  /// include those of the other, so that the first batch sizes both.
+  /// 3 batches on the threads, then 3 alone, timed; the faster way kept, and timed again after
+  /// a few hundred batches. The first batch of each kind at a batch size runs on the threads,
+  /// untimed: the buffers of that way include those of the other, so that it sizes both.
   Timed,
   Always,  ///< every such batch on the threads
   /// Every batch of `forward` and `reverse`, and of a pair that shares its backward pass, on
@@ -52,11 +52,11 @@ public:
 
   [[nodiscard]] SweepThreading policy() const { return policy_; }
 
-  /// Whether the next batch runs on the threads; a batch that is `first_at_shape` does when
+  /// Whether the next batch runs on the threads; a batch that is `first_at_size` does when
   /// timed, and is then left out of the schedule (`count_unscheduled`).
-  [[nodiscard]] bool next_threaded(bool first_at_shape = false) const {
+  [[nodiscard]] bool next_threaded(bool first_at_size = false) const {
     if (policy_ != SweepThreading::Timed) return policy_ == SweepThreading::Always;
-    return first_at_shape || (probing() ? batches_ < probes : threaded_);
+    return first_at_size || (probing() ? batches_ < probes : threaded_);
   }
 
   /// Counts a finished batch of the schedule that took `ns_per_sample` (read only while
@@ -76,6 +76,14 @@ public:
   /// Counts a batch that ran outside the schedule, `threaded` or not.
   void count_unscheduled(bool threaded) { ++(threaded ? tally_.threaded : tally_.alone); }
 
+  /// Whether a batch of `samples` is the first of this kind at that size since the last, and
+  /// notes the size.
+  [[nodiscard]] bool first_at(Index samples) {
+    const bool first = samples != samples_;
+    samples_ = samples;
+    return first;
+  }
+
   [[nodiscard]] const SweepTally& tally() const { return tally_; }
 
 private:
@@ -83,6 +91,7 @@ private:
 
   SweepThreading policy_;
   SweepTally tally_;
+  Index samples_ = 0;       ///< the size of the last batch
   int batches_ = 0;         ///< of the schedule, since the last probing began
   bool threaded_ = true;    ///< the last probing's choice
   double best_ns_[2] = {};  ///< per sample, alone and threaded, in the current probing

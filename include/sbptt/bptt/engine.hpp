@@ -44,13 +44,13 @@
 /// `add_param_gradient` concurrently with itself on different steps, with different `scaled`
 /// buffers and gradients (`Network`'s are all of
 /// these), and the loss functor must be thread-safe (a `const` pure function).
-#include <chrono>
 #include <cmath>
 #include <initializer_list>
 #include <memory>
 #include <optional>
 #include <vector>
 
+#include "sbptt/bptt/batch_threading.hpp"
 #include "sbptt/bptt/diagnostics.hpp"
 #include "sbptt/bptt/flow_mode.hpp"
 #include "sbptt/bptt/objective.hpp"
@@ -63,7 +63,6 @@
 #include "sbptt/bptt/param_handoff.hpp"
 #include "sbptt/bptt/reverse_sweeps.hpp"
 #include "sbptt/bptt/shared_seed_sweeps.hpp"
-#include "sbptt/bptt/sweep_threading.hpp"
 #include "sbptt/core/parallel.hpp"
 
 namespace sbptt {
@@ -161,10 +160,7 @@ public:
     if constexpr (SeedScalingController<Ctrl>) shared_seed_.set_threaded(pool_ != nullptr);
     threads_ = threads;
     for (auto& decision : fork_) decision = detail::ForkDecision(split_above_ns);
-    lone_threading_ = pair_threading_ = detail::SweepThreadingDecision(sweep_threading);
-    batch_threaded_ = true;
-    batch_way_of_.reset();
-    awaiting_.reset();
+    batch_threading_ = detail::BatchThreading(sweep_threading);
     const auto slots = static_cast<std::size_t>(threads);
     for (auto* scratch : {&forward_scratch_, &sweeps_[0].scratch, &sweeps_[1].scratch})
       scratch->assign(slots, Scratch(sim_.state_dim(), sim_.control_dim()));
@@ -173,17 +169,13 @@ public:
   [[nodiscard]] Index threads() const { return threads_; }
   /// How the batches that `SweepThreading` applies to ran since `set_threads`: those of lone
   /// sweeps and of shared-seed pairs together.
-  [[nodiscard]] SweepTally sweep_tally() const {
-    const SweepTally& lone = lone_threading_.tally();
-    const SweepTally& pair = pair_threading_.tally();
-    return {lone.threaded + pair.threaded, lone.alone + pair.alone};
-  }
+  [[nodiscard]] SweepTally sweep_tally() const { return batch_threading_.tally(); }
 
   /// Rolls out the batch `initial_states` (state_dim × B), stores the trajectory and returns
   /// the batch-mean loss. With threads, the rollout and the next `reverse` go one way
   /// (`SweepThreading`).
   Scalar forward(const Matrix<Scalar>& initial_states) {
-    return forward_for(initial_states, SweepKind::Lone);
+    return forward_for(initial_states, detail::SweepKind::Lone);
   }
 
   /// Batch-mean loss of a rollout of `initial_states` (state_dim × B) without storing the
@@ -223,15 +215,9 @@ public:
   const SweepDiagnostics& reverse(const FlowSchedule& schedule, Vector<Scalar>& gradient,
                                   Index truncation = 0) {
     check_sweep(schedule, truncation);
-    const bool ends_batch = claim_batch_end(SweepKind::Lone);
-    const LonePlan plan = lone_plan();
-    bool threaded = batch_threaded_;  // the way of the forward pass, when the decision chose it
-    // Else the loops were not yet timed at the forward pass, or its batch did not meet the
-    // threads, or it was a pair's.
-    if (batch_way_of_ != SweepKind::Lone) {
-      threaded = plan.meets_threads ? lone_threading_.next_threaded()
-                                    : lone_threading_.policy() != SweepThreading::Never;
-    }
+    const bool ends_batch = batch_threading_.claim_end(detail::SweepKind::Lone);
+    const detail::LonePlan plan = lone_plan();
+    const bool threaded = batch_threading_.lone_sweep_threaded(plan.meets_threads);
     if constexpr (SplitBackwardController<Ctrl>) {
       if (threaded && plan.handoff) {
         Handoff& h = *handoff_;
@@ -242,13 +228,13 @@ public:
           detail::ReverseSweeps::lone(*this, sweeps_[0], schedule, gradient, truncation, false,
                                       &h);
         });
-        if (ends_batch) finish_batch(SweepKind::Lone);
+        if (ends_batch) finish_batch(detail::SweepKind::Lone);
         return sweeps_[0].diagnostics;
       }
     }
     detail::ReverseSweeps::lone(*this, sweeps_[0], schedule, gradient, truncation, threaded,
                                 nullptr);
-    if (ends_batch) finish_batch(SweepKind::Lone);
+    if (ends_batch) finish_batch(detail::SweepKind::Lone);
     return sweeps_[0].diagnostics;
   }
 
@@ -266,14 +252,14 @@ public:
   /// each exactly as it would alone, and on one thread they go step by step together.
   void regular_and_modified(const Matrix<Scalar>& initial_states, GradientPair<Scalar>& result,
                             Index truncation = 0) {
-    result.loss = forward_for(initial_states, SweepKind::Pair);
+    result.loss = forward_for(initial_states, detail::SweepKind::Pair);
     result.forward_non_finite = forward_non_finite_;
     check_sweep(FlowMode::Full, truncation);
     if constexpr (SeedScalingController<Ctrl>) {
       if (shares_seed()) {
-        const bool ends_batch = claim_batch_end(SweepKind::Pair);
-        shared_seed_.run(*this, result, truncation, batch_threaded_);
-        if (ends_batch) finish_batch(SweepKind::Pair);
+        const bool ends_batch = batch_threading_.claim_end(detail::SweepKind::Pair);
+        shared_seed_.run(*this, result, truncation, batch_threading_.threaded());
+        if (ends_batch) finish_batch(detail::SweepKind::Pair);
         finish_pair(result);
         return;
       }
@@ -324,60 +310,32 @@ private:
     schedule.validate(steps_);
   }
 
-  /// The sweeps that `SweepThreading` decides: a lone sweep (`reverse`), the shared-seed pair.
-  enum class SweepKind { Lone, Pair };
-
-  /// How the next lone sweep would use the threads: `handoff` its parameter products, or its
-  /// per-sample loops split; `meets_threads` if either, once the loops are timed.
-  struct LonePlan {
-    bool handoff = false, meets_threads = false;
-  };
-  [[nodiscard]] LonePlan lone_plan() const {
-    // A BatchSimulator's VJPs are never split (only its loss seeds, and those only when told
-    // to split every loop); other simulators' loops are split once timed and found worth it.
-    const bool loops_timed = BatchSimulator<Sim> || !fork_[1].probing();
-    const bool split_loops =
-        BatchSimulator<Sim> ? fork_[1].splits_every_loop() : fork_[1].fork();
-    // Only where the loops are not split: the second thread then has nothing better to do
-    // than the parameter products.
-    const bool handoff = handoff_ != nullptr && loops_timed && !split_loops;
-    return {handoff, pool_ != nullptr && loops_timed && (split_loops || handoff)};
+  [[nodiscard]] detail::LonePlan lone_plan() const {
+    return detail::lone_plan<BatchSimulator<Sim>>(fork_[1], pool_ != nullptr,
+                                                  handoff_ != nullptr);
   }
   /// Whether the pair shares one backward pass and, with threads, splits its steps.
   [[nodiscard]] bool shares_seed() const {
     return SeedScalingController<Ctrl> && sim_.control_dim() == 1;
   }
 
-  detail::SweepThreadingDecision& decision_of(SweepKind kind) {
-    return kind == SweepKind::Lone ? lone_threading_ : pair_threading_;
-  }
-
-  /// `forward`, for a batch whose sweep of kind `kind` follows: when that sweep would meet the
-  /// other thread at every step (or, for a lone sweep, the decision says `Never`), the whole
-  /// batch, this rollout included, goes the way its decision says, timed from here to the
-  /// sweep's end (`finish_batch`), but for the first of its kind at a size, which runs on the
-  /// threads untimed. A rollout in parts leaves half of the trajectory in the other core's
-  /// cache, which a sweep on this thread alone would then read across (docs/design.md).
-  Scalar forward_for(const Matrix<Scalar>& initial_states, SweepKind kind) {
+  /// `forward`, for a batch whose sweep of kind `kind` follows: the whole batch, this rollout
+  /// included, goes the way of that kind's decision when the sweep would meet the other thread
+  /// at every step, or, for a lone sweep, when the decision says `Never` (batch_threading.hpp).
+  Scalar forward_for(const Matrix<Scalar>& initial_states, detail::SweepKind kind) {
     check_initial_states(initial_states, "forward");
-    detail::SweepThreadingDecision& decision = decision_of(kind);
-    const bool never = decision.policy() == SweepThreading::Never;
-    const bool decided = pool_ != nullptr && (kind == SweepKind::Lone
-                                                  ? lone_plan().meets_threads || never
-                                                  : shares_seed());
+    const bool decided =
+        pool_ != nullptr && (kind == detail::SweepKind::Lone
+                                 ? batch_threading_.decides_lone(lone_plan().meets_threads)
+                                 : shares_seed());
     const Index batch = initial_states.cols();
-    // Per kind: each kind's threaded buffers are its own (the hand-off's, the split's).
-    const bool first_at_size = decided && decision.first_at(batch);
-    batch_threaded_ = !decided || decision.next_threaded(first_at_size);
-    batch_way_of_ = awaiting_ = decided ? std::optional<SweepKind>(kind) : std::nullopt;
-    batch_scheduled_ = !first_at_size;
-    batch_start_ = std::chrono::steady_clock::now();
+    const bool threaded = batch_threading_.begin(kind, decided, batch);
     trajectory_.resize(steps_, sim_.state_dim(), sim_.control_dim(), batch);
     forward_non_finite_.reset();
     trajectory_.states[0] = initial_states;
     packed_controller_.pack();
     if constexpr (ColumnSplitController<Ctrl>) {
-      if (pool_ && batch > 1 && batch_threaded_) {
+      if (pool_ && batch > 1 && threaded) {
         forward_in_parts_.run(*this, std::min(threads_, batch));
         return batch_loss();
       }
@@ -390,7 +348,7 @@ private:
       note_non_finite(Quantity::Control, n, trajectory_.controls[i]);
       detail::step_columns(sim_, trajectory_.states[i], trajectory_.controls[i],
                            trajectory_.states[i + 1], [&](auto&& body) {
-        fork_[0].for_samples(pool_.get(), batch, forward_scratch_, batch_threaded_, body);
+        fork_[0].for_samples(pool_.get(), batch, forward_scratch_, threaded, body);
       });
       note_non_finite(Quantity::State, n + 1, trajectory_.states[i + 1]);
     }
@@ -411,25 +369,9 @@ private:
     }
   }
 
-  /// Whether the decision of kind `kind` awaits the end of the current batch; true at most
-  /// once per batch, so that a sweep that throws leaves its batch uncounted.
-  bool claim_batch_end(SweepKind kind) {
-    const bool awaited = awaiting_ == kind;
-    awaiting_.reset();
-    return awaited;
-  }
-
-  /// The end of the current batch, to the decision of kind `kind`: its time per sample, or
-  /// only its way for a batch out of the schedule.
-  void finish_batch(SweepKind kind) {
-    detail::SweepThreadingDecision& decision = decision_of(kind);
-    if (!batch_scheduled_) {
-      decision.count_unscheduled(batch_threaded_);
-      return;
-    }
-    const std::chrono::duration<double, std::nano> took =
-        std::chrono::steady_clock::now() - batch_start_;
-    decision.finished(took.count() / static_cast<double>(trajectory_.batch()));
+  /// The end of the current batch, to the decision of kind `kind`.
+  void finish_batch(detail::SweepKind kind) {
+    batch_threading_.finish(kind, trajectory_.batch());
   }
 
   void finish_pair(GradientPair<Scalar>& result) const {
@@ -445,7 +387,7 @@ private:
     const Scalar w = static_cast<Scalar>(objective_.step_weight);
     const Index first = objective_.timing == LossTiming::Final ? steps_ : 1;
     eval_losses_.setZero(batch);
-    fork_[2].for_samples(pool_.get(), batch, forward_scratch_, batch_threaded_,
+    fork_[2].for_samples(pool_.get(), batch, forward_scratch_, batch_threading_.threaded(),
                          [&](Index b, Scratch& t) {
       for (Index n = first; n <= steps_; ++n) {
         t.x = trajectory_.states[static_cast<std::size_t>(n)].col(b);
@@ -481,14 +423,8 @@ private:
   std::vector<Scratch> forward_scratch_;
   detail::ForwardInParts<Scalar> forward_in_parts_;  ///< `forward` on several threads
   detail::ForkDecision fork_[3];  ///< per-sample loops: simulator step, VJPs, batch loss
-  /// Whether a lone sweep whose threads would meet at every step, and the shared-seed pair,
-  /// use the threads.
-  detail::SweepThreadingDecision lone_threading_, pair_threading_;
-  bool batch_threaded_ = true;  ///< the way of the last forward pass's batch
-  std::optional<SweepKind> batch_way_of_;  ///< the decision that chose it, if one did
-  std::optional<SweepKind> awaiting_;  ///< the decision that awaits that batch's end
-  bool batch_scheduled_ = true;  ///< that batch is in its decision's schedule
-  std::chrono::steady_clock::time_point batch_start_;
+  /// The way of the current batch, and the decisions that choose it.
+  detail::BatchThreading batch_threading_;
   Sweep sweeps_[2];
   /// Each sweep's layer adjoints when it adds its own parameter products (`own_adjoints`).
   typename detail::LayerAdjointsOf<Ctrl>::Type sweep_adjoints_[2];

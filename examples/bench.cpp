@@ -50,8 +50,10 @@
 // process), bench/counting_network.hpp (the GFLOP count), bench/targets.hpp (the targets, met
 // or MISSED, and the CSV); this file keeps the flags and the order of the rows.
 //
-// Usage: bench [--csv FILE] [--repeats R] [--threads N] [--tasks LIST] [--scalars LIST]
-//              [--methods LETTERS]
+// Usage: bench [--csv FILE] [--repeats R] [--threads N] [--sweep-threading WAY] [--tasks LIST]
+//              [--scalars LIST] [--methods LETTERS]
+//   --sweep-threading  timed, always or never: how the N-thread trainer runs a batch whose
+//              sweep meets the other thread at every step (`SweepThreading`; default timed)
 //   --tasks    comma list of cartpole1, cartpole4, cartpole4-auto, cartpole4-ode, guidance,
 //              guidance-auto, guidance-ode, quantum, quantum-nx (default all)
 //   --scalars  comma list of float, double (default both)
@@ -116,6 +118,12 @@ bool parse(int argc, char** argv, Settings& s) {
   cli.path("--csv", s.csv, "also write the rows as CSV here");
   cli.integer("--repeats", s.repeats, 1, 100, "timed epochs per row (the best is kept)");
   cli.integer("--threads", s.threads, 1, 64, "threads of the threaded column");
+  cli.value("--sweep-threading", "WAY",
+            "timed, always or never: whether the threaded trainer runs a batch whose sweep meets "
+            "the other thread at every step on the threads",
+            "timed", [&s](const std::string& text) {
+              s.sweep_threading = sbptt::parse_sweep_threading(text);
+            });
   cli.value("--tasks", "LIST",
             "comma list of cartpole1, cartpole4, cartpole4-auto, cartpole4-ode, guidance, "
             "guidance-auto, guidance-ode, quantum, quantum-nx",
@@ -168,8 +176,10 @@ int main(int argc, char** argv) {
   }
   try {
     std::printf("sbptt bench: %s code on %s, %u hardware threads; epoch = Trainer::train_epoch "
-                "(256 train in batches of 8, + evaluation of 256 train and 256 test)\n",
-                sbptt::instruction_set(), cpu_model().c_str(), std::thread::hardware_concurrency());
+                "(256 train in batches of 8, + evaluation of 256 train and 256 test); "
+                "--sweep-threading %s\n",
+                sbptt::instruction_set(), cpu_model().c_str(), std::thread::hardware_concurrency(),
+                sbptt::to_string(settings.sweep_threading).c_str());
     const double empty_rss = in_child([] {
       RowResult r;
       rusage usage{};

@@ -9,6 +9,7 @@
 
 #include <atomic>
 #include <limits>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -17,7 +18,9 @@
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"
 #include "sbptt/objectives/cartpole.hpp"
+#include "sbptt/optim/adam.hpp"
 #include "sbptt/sim/cartpole.hpp"
+#include "sbptt/train/trainer.hpp"
 
 using namespace sbptt;
 
@@ -214,5 +217,45 @@ TEST_CASE("sweep threading: with Never no simulator call of a training batch lea
     }
     if (policy == SweepThreading::Never) CHECK(sim.elsewhere.load() == 0);
     if (policy == SweepThreading::Always) CHECK(sim.elsewhere.load() > 0);
+  }
+}
+
+TEST_CASE("sweep threading: the trainer's option sets its engine's way", "[bptt][threads]") {
+  const CartPole<double, 2> sim;
+  auto initial = Network<double>::mlp(sim.state_dim(), {16}, 1);
+  Rng rng(7);
+  glorot_uniform(initial, rng);
+  const Matrix<double> train = cartpole_initial_states(sim, rng, 24);
+  const Matrix<double> test = cartpole_initial_states(sim, rng, 8);
+  for (const Method method : {Method::Regular, Method::Combined}) {
+    for (const SweepThreading policy : {SweepThreading::Always, SweepThreading::Never}) {
+      INFO(label(method) << ", " << to_string(policy));
+      auto net = initial;
+      TrainerOptions options;
+      options.method = method;
+      options.threads = 2;
+      options.sweep_threading = policy;
+      Trainer trainer(sim, net, cartpole_objective<double, 2>(), 20,
+                      Adam<double>(AdamOptions<double>{1e-3}), options);
+      trainer.train_epoch(train, test);
+      // Each of the 3 batches of 8 is one lone sweep's or one pair's (one control).
+      const SweepTally tally = trainer.engine().sweep_tally();
+      CHECK(tally.threaded == (policy == SweepThreading::Always ? 3 : 0));
+      CHECK(tally.alone == (policy == SweepThreading::Never ? 3 : 0));
+    }
+  }
+}
+
+TEST_CASE("sweep threading: the ways parse and print", "[bptt][threads]") {
+  for (const SweepThreading way :
+       {SweepThreading::Timed, SweepThreading::Always, SweepThreading::Never}) {
+    CHECK(parse_sweep_threading(to_string(way)) == way);
+  }
+  CHECK(to_string(SweepThreading::Always) == "always");
+  CHECK(parse_sweep_threading("never") == SweepThreading::Never);
+  for (const char* bad : {"Timed", "on", "", "always "}) {
+    CHECK_THROWS_WITH(parse_sweep_threading(bad),
+                      Catch::Contains(std::string("\"") + bad + "\"") &&
+                          Catch::Contains("timed, always, never"));
   }
 }

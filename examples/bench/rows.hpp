@@ -33,6 +33,8 @@ struct Settings {
   std::string csv;
   int repeats = 2;
   Index threads = 2;
+  /// How the threaded trainer runs a batch whose sweep meets the other thread at every step.
+  sbptt::SweepThreading sweep_threading = sbptt::SweepThreading::Timed;
   std::vector<std::string> tasks = {"cartpole1",     "cartpole4",    "cartpole4-auto",
                                     "cartpole4-ode", "guidance",     "guidance-auto",
                                     "guidance-ode",  "quantum",      "quantum-nx"};
@@ -270,19 +272,22 @@ struct CountedTrainer {
   sbptt::Trainer<Sim, CountingNetwork<S>, Loss, sbptt::Adam<S>> trainer;
 
   CountedTrainer(const Sim& sim, const Network<S>& initial, const sbptt::Objective<Loss>& objective,
-                 Index steps, Method method, Index threads)
+                 Index steps, Method method, Index threads,
+                 sbptt::SweepThreading sweep_threading = sbptt::SweepThreading::Timed)
       : net(initial),
         trainer(sim, counted, objective, steps, sbptt::Adam<S>(sbptt::AdamOptions<S>{S(1e-3)}),
-                options(method, threads)) {}
+                options(method, threads, sweep_threading)) {}
   CountedTrainer(const CountedTrainer&) = delete;
   CountedTrainer& operator=(const CountedTrainer&) = delete;
 
 private:
-  static sbptt::TrainerOptions options(Method method, Index threads) {
+  static sbptt::TrainerOptions options(Method method, Index threads,
+                                       sbptt::SweepThreading sweep_threading) {
     sbptt::TrainerOptions options;
     options.method = method;
     options.batch = 8;
     options.threads = threads;
+    options.sweep_threading = sweep_threading;
     return options;
   }
 };
@@ -318,7 +323,8 @@ RowResult measure(const Settings& settings, const Sim& sim,
   r.rss_kib = static_cast<double>(usage.ru_maxrss);
   std::optional<Counted> threaded;  // none with one thread
   if (settings.threads > 1) {
-    threaded.emplace(sim, initial, objective, steps, method, settings.threads);
+    threaded.emplace(sim, initial, objective, steps, method, settings.threads,
+                     settings.sweep_threading);
     epoch(*threaded);  // its warm-up
   }
   std::optional<Counted> regular;  // a C row's R trainer

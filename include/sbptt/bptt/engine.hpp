@@ -89,6 +89,9 @@ public:
   /// does not depend on the number of threads).
   static constexpr Index kEvaluateChunk = 32;
 
+  /// `set_threads`' default `split_above_ns`.
+  static constexpr double kDefaultSplitAboveNs = 4000;
+
   /// \param steps the horizon m (> 0).
   Engine(const Sim& sim, const Ctrl& controller, Objective<Loss> objective, Index steps)
       : sim_(sim), controller_(controller), objective_(std::move(objective)), steps_(steps) {
@@ -148,7 +151,7 @@ public:
   /// \param sweep_threading whether a batch whose sweep meets the other thread at every step
   ///        uses the threads (`SweepThreading`: by default timed against one thread now and
   ///        then).
-  void set_threads(Index threads, double split_above_ns = 4000,
+  void set_threads(Index threads, double split_above_ns = kDefaultSplitAboveNs,
                    SweepThreading sweep_threading = SweepThreading::Timed) {
     detail::require(threads >= 1, "Engine::set_threads: threads = ", threads,
                     "; expected at least 1");

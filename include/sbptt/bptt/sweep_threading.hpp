@@ -2,7 +2,10 @@
 /// \file Whether the reverse sweeps of an `Engine` with several threads hand work from one core
 /// to the other at every step, and the timed decision that chooses it (`SweepThreading`).
 #include <algorithm>
+#include <string>
+#include <string_view>
 
+#include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt {
@@ -27,6 +30,27 @@ enum class SweepThreading {
   /// the calling thread alone, its per-sample loops too, as with one thread.
   Never,
 };
+
+/// "timed", "always" or "never".
+[[nodiscard]] inline std::string to_string(SweepThreading way) {
+  switch (way) {
+    case SweepThreading::Timed: return "timed";
+    case SweepThreading::Always: return "always";
+    case SweepThreading::Never: return "never";
+  }
+  throw InvalidArgument(detail::concat("SweepThreading with value ", static_cast<int>(way),
+                                       " is not one of timed, always, never"));
+}
+
+/// Inverse of `to_string`: accepts exactly "timed", "always", "never"; anything else throws
+/// `InvalidArgument` naming it.
+[[nodiscard]] inline SweepThreading parse_sweep_threading(std::string_view text) {
+  if (text == "timed") return SweepThreading::Timed;
+  if (text == "always") return SweepThreading::Always;
+  if (text == "never") return SweepThreading::Never;
+  throw InvalidArgument(detail::concat("sweep threading \"", text, "\" is not recognised; ",
+                                       "expected one of timed, always, never"));
+}
 
 /// How many of an engine's batches ran each way (`Engine::sweep_tally`).
 struct SweepTally {

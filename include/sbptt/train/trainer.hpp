@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "sbptt/bptt/engine.hpp"
+#include "sbptt/bptt/sweep_threading.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/optim/clip.hpp"
 #include "sbptt/optim/combined_update.hpp"
@@ -51,6 +52,9 @@ struct TrainerOptions {
   /// two sweeps of C at once, and the evaluation in chunks. Results are bitwise identical for
   /// every thread count.
   Index threads = 1;
+  /// With threads, whether a batch whose sweep meets the other thread at every step uses them
+  /// (`SweepThreading`; by default timed against one thread now and then).
+  SweepThreading sweep_threading = SweepThreading::Timed;
 };
 
 /// The part of an epoch that met a non-finite value.
@@ -113,7 +117,8 @@ public:
                     "; expected 0 (none) or a window >= 1");
     detail::require(options.threads >= 1, "Trainer: threads = ", options.threads,
                     "; expected at least 1");
-    engine_.set_threads(options.threads);
+    engine_.set_threads(options.threads, Engine<Sim, Ctrl, Loss>::kDefaultSplitAboveNs,
+                        options.sweep_threading);
   }
 
   /// The trainer keeps references to the simulator and the controller: binding a temporary

@@ -52,8 +52,9 @@
 //
 // Usage: bench [--csv FILE] [--repeats R] [--threads N] [--sweep-threading WAY] [--tasks LIST]
 //              [--scalars LIST] [--methods LETTERS]
-//   --sweep-threading  timed, always or never: how the N-thread trainer runs a batch whose
-//              sweep meets the other thread at every step (`SweepThreading`; default timed)
+//   --sweep-threading  timed, always or never: how the N-thread trainer runs a batch
+//              whose sweep meets the other thread at every step (`SweepThreading`; default
+//              timed; CSV sweep_threading)
 //   --tasks    comma list of cartpole1, cartpole4, cartpole4-auto, cartpole4-ode, guidance,
 //              guidance-auto, guidance-ode, quantum, quantum-nx (default all)
 //   --scalars  comma list of float, double (default both)
@@ -175,11 +176,13 @@ int main(int argc, char** argv) {
     return 1;
   }
   try {
+    const std::string way =
+        settings.threads > 1 ? "; --sweep-threading " + sbptt::to_string(settings.sweep_threading)
+                             : "";
     std::printf("sbptt bench: %s code on %s, %u hardware threads; epoch = Trainer::train_epoch "
-                "(256 train in batches of 8, + evaluation of 256 train and 256 test); "
-                "--sweep-threading %s\n",
+                "(256 train in batches of 8, + evaluation of 256 train and 256 test)%s\n",
                 sbptt::instruction_set(), cpu_model().c_str(), std::thread::hardware_concurrency(),
-                sbptt::to_string(settings.sweep_threading).c_str());
+                way.c_str());
     const double empty_rss = in_child([] {
       RowResult r;
       rusage usage{};

@@ -2,7 +2,9 @@
 // (`SweepThreading`): the timed decision's schedule against its closed form, fed made-up times
 // (three probes on the threads, then three alone; the faster way is kept for `batches_between`
 // batches; then it probes again), and the engine's batches against the way each policy says
-// they ran, the first at a batch shape on the threads, and none on another thread with `Never`.
+// they ran, the first at a batch shape on the threads, and none on another thread with `Never`;
+// the ways' names, both directions. That a trainer's option reaches its engine is
+// tests/test_train_trainer.cpp's.
 // That the results are the same bits either way is tests/test_bptt_threads.cpp's; that neither
 // way allocates after the first batches, tests/test_bptt_no_malloc.cpp's.
 #include <catch2/catch.hpp>
@@ -11,6 +13,7 @@
 #include <limits>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "sbptt/bptt/engine.hpp"
@@ -18,9 +21,7 @@
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"
 #include "sbptt/objectives/cartpole.hpp"
-#include "sbptt/optim/adam.hpp"
 #include "sbptt/sim/cartpole.hpp"
-#include "sbptt/train/trainer.hpp"
 
 using namespace sbptt;
 
@@ -220,39 +221,15 @@ TEST_CASE("sweep threading: with Never no simulator call of a training batch lea
   }
 }
 
-TEST_CASE("sweep threading: the trainer's option sets its engine's way", "[bptt][threads]") {
-  const CartPole<double, 2> sim;
-  auto initial = Network<double>::mlp(sim.state_dim(), {16}, 1);
-  Rng rng(7);
-  glorot_uniform(initial, rng);
-  const Matrix<double> train = cartpole_initial_states(sim, rng, 24);
-  const Matrix<double> test = cartpole_initial_states(sim, rng, 8);
-  for (const Method method : {Method::Regular, Method::Combined}) {
-    for (const SweepThreading policy : {SweepThreading::Always, SweepThreading::Never}) {
-      INFO(label(method) << ", " << to_string(policy));
-      auto net = initial;
-      TrainerOptions options;
-      options.method = method;
-      options.threads = 2;
-      options.sweep_threading = policy;
-      Trainer trainer(sim, net, cartpole_objective<double, 2>(), 20,
-                      Adam<double>(AdamOptions<double>{1e-3}), options);
-      trainer.train_epoch(train, test);
-      // Each of the 3 batches of 8 is one lone sweep's or one pair's (one control).
-      const SweepTally tally = trainer.engine().sweep_tally();
-      CHECK(tally.threaded == (policy == SweepThreading::Always ? 3 : 0));
-      CHECK(tally.alone == (policy == SweepThreading::Never ? 3 : 0));
-    }
-  }
-}
-
 TEST_CASE("sweep threading: the ways parse and print", "[bptt][threads]") {
-  for (const SweepThreading way :
-       {SweepThreading::Timed, SweepThreading::Always, SweepThreading::Never}) {
-    CHECK(parse_sweep_threading(to_string(way)) == way);
+  const std::vector<std::pair<SweepThreading, std::string>> ways = {
+      {SweepThreading::Timed, "timed"},
+      {SweepThreading::Always, "always"},
+      {SweepThreading::Never, "never"}};
+  for (const auto& [way, text] : ways) {
+    CHECK(to_string(way) == text);
+    CHECK(parse_sweep_threading(text) == way);
   }
-  CHECK(to_string(SweepThreading::Always) == "always");
-  CHECK(parse_sweep_threading("never") == SweepThreading::Never);
   for (const char* bad : {"Timed", "on", "", "always "}) {
     CHECK_THROWS_WITH(parse_sweep_threading(bad),
                       Catch::Contains(std::string("\"") + bad + "\"") &&

@@ -1,14 +1,20 @@
 // The trainer on the linear system x' = a x + b c with c = θ x (the LQR-type question of the
 // ICLR review): every method must drive θ to the closed-form optimum, and the bookkeeping of
-// the training log and the non-finite policy must hold.
+// the training log and the non-finite policy must hold. And the threads' options reach the
+// engine, on the cart pole with a network (whose sweeps meet the other thread at every step).
 #include <catch2/catch.hpp>
 
 #include <cmath>
 #include <limits>
 
 #include "sbptt/bptt/losses.hpp"
+#include "sbptt/bptt/sweep_threading.hpp"
+#include "sbptt/nn/init.hpp"
+#include "sbptt/nn/network.hpp"
+#include "sbptt/objectives/cartpole.hpp"
 #include "sbptt/optim/adam.hpp"
 #include "sbptt/optim/sgd.hpp"
+#include "sbptt/sim/cartpole.hpp"
 #include "sbptt/sim/linear.hpp"
 #include "sbptt/train/trainer.hpp"
 #include "polynomial_policy.hpp"
@@ -322,4 +328,39 @@ TEST_CASE("trainer: skip-batch stops when no batch of an epoch was finite", "[tr
   trainer.train_epoch(samples({1e306, -1e306}), samples({1.0}));
   CHECK(trainer.non_finite_events().size() == 2);
   CHECK(trainer.stopped());
+}
+
+TEST_CASE("trainer: the sweep_threading option sets its engine's way", "[train]") {
+  const CartPole<double, 2> sim;
+  auto initial = Network<double>::mlp(sim.state_dim(), {16}, 1);
+  Rng rng(7);
+  glorot_uniform(initial, rng);
+  const Matrix<double> train = cartpole_initial_states(sim, rng, 56);
+  const Matrix<double> test = cartpole_initial_states(sim, rng, 8);
+  // 7 batches of 8, each one lone sweep's (R: the cart pole is a BatchSimulator, so with the
+  // default split every sweep hands its parameter products to the second thread) or one
+  // shared-seed pair's (C: one control). Timed: the first batch at this size on the threads,
+  // untimed, then a probing of 3 on the threads and 3 alone.
+  struct Expected {
+    SweepThreading way;
+    Index threaded, alone;
+  };
+  for (const Method method : {Method::Regular, Method::Combined}) {
+    for (const Expected expected : {Expected{SweepThreading::Always, 7, 0},
+                                    Expected{SweepThreading::Never, 0, 7},
+                                    Expected{SweepThreading::Timed, 4, 3}}) {
+      INFO(label(method) << ", " << to_string(expected.way));
+      auto net = initial;
+      TrainerOptions options;
+      options.method = method;
+      options.threads = 2;
+      options.sweep_threading = expected.way;
+      Trainer trainer(sim, net, cartpole_objective<double, 2>(), 20,
+                      Adam<double>(AdamOptions<double>{1e-3}), options);
+      trainer.train_epoch(train, test);
+      const SweepTally tally = trainer.engine().sweep_tally();
+      CHECK(tally.threaded == expected.threaded);
+      CHECK(tally.alone == expected.alone);
+    }
+  }
 }

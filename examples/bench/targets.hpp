@@ -124,7 +124,8 @@ inline void summarize(const std::vector<Row>& rows, Index threads) {
 inline void write_csv(const Settings& settings, const std::vector<Row>& rows) {
   std::string text =
       "task,scalar,method,nx,steps,params,ms_epoch,gflop_epoch,gflops,peak_gflops,"
-      "fraction_of_peak,ms_epoch_regular_in_turn,threads,ms_epoch_threads,speedup_threads,"
+      "fraction_of_peak,ms_epoch_regular_in_turn,threads,sweep_threading,ms_epoch_threads,"
+      "speedup_threads,"
       "round_trip_ns,other_core_read_ratio,copies_ratio,ms_evaluation,ms_evaluation_threads,"
       "sweeps_threaded,sweeps_alone,sim_ns_per_sample_step,"
       "trajectory_bytes_per_batch,peak_rss_kib\n";
@@ -133,11 +134,12 @@ inline void write_csv(const Settings& settings, const std::vector<Row>& rows) {
     const RowResult& r = row.result;
     if (r.ok == 0) continue;
     std::snprintf(line, sizeof line,
-                  "%s,%s,%s,%lld,%lld,%lld,%.3f,%.6f,%.3f,%.3f,%.4f,%.3f,%lld,%.3f,%.3f,%.0f,"
+                  "%s,%s,%s,%lld,%lld,%lld,%.3f,%.6f,%.3f,%.3f,%.4f,%.3f,%lld,%s,%.3f,%.3f,%.0f,"
                   "%.2f,%.3f,%.3f,%.3f,%lld,%lld,%.1f,%.0f,%.0f\n",
                   row.task.c_str(), row.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
                   r.params, r.ms_epoch, r.gflop, r.gflops(), r.peak_gflops, r.fraction_of_peak(),
-                  r.ms_regular, static_cast<long long>(settings.threads), r.ms_threads,
+                  r.ms_regular, static_cast<long long>(settings.threads),
+                  sbptt::to_string(settings.sweep_threading).c_str(), r.ms_threads,
                   r.ms_epoch / r.ms_threads, r.round_trip_ns, r.other_core_read_ratio,
                   r.copies_ratio, r.ms_evaluation, r.ms_evaluation_threads, r.sweeps_threaded,
                   r.sweeps_alone, r.sim_ns,

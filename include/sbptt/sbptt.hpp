@@ -35,6 +35,7 @@
 #include "sbptt/bptt/gradient_check.hpp"
 #include "sbptt/bptt/losses.hpp"
 #include "sbptt/bptt/objective.hpp"
+#include "sbptt/bptt/sweep_threading.hpp"
 #include "sbptt/bptt/trajectory.hpp"
 #include "sbptt/objectives/cartpole.hpp"
 #include "sbptt/objectives/guidance.hpp"

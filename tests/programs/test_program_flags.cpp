@@ -73,7 +73,8 @@ TEST_CASE("--help of every program lists each flag with its meaning, default and
       {"quantum", {common, timed, {{"--target", true, true}, {"--nx", true, true}}}},
       {"bench",
        {{{"--csv", true, false}, {"--repeats", true, true}, {"--threads", true, true},
-         {"--tasks", true, false}, {"--scalars", true, false}, {"--methods", true, false}}}},
+         {"--sweep-threading", true, false}, {"--tasks", true, false}, {"--scalars", true, false},
+         {"--methods", true, false}}}},
       {"accuracy", {{{"--csv", true, false}}}},
       {"rotation",
        {{{"--k", true, true}, {"--lr", true, true}, {"--iterations", true, true},
@@ -213,6 +214,9 @@ TEST_CASE("numbers beyond the type's range, numbers not in decimals and contradi
              "--clip-threshold 1e-60 does not fit --float"},
         Case{"rotation", "--k", "--k needs a value"},
         Case{"bench", "--repeats 0", "--repeats 0 is out of range; expected an integer in [1, 100]"},
+        Case{"bench", "--sweep-threading on",
+             "--sweep-threading: sweep threading \"on\" is not recognised; expected one of timed, "
+             "always, never"},
         Case{"accuracy", "--frobnicate", "unknown flag '--frobnicate'; accepted flags: --csv"},
         // Decimal numbers only, as in every file the programs read: strtod took 0x10 for 16.
         Case{"toy", "--lr 0x10", "--lr '0x10' is not a number; expected a number in [1e-300, "

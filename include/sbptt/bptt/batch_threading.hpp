@@ -6,8 +6,9 @@
 #include <chrono>
 #include <optional>
 
-#include "sbptt/bptt/engine_buffers.hpp"
+#include "sbptt/bptt/fork_decision.hpp"
 #include "sbptt/bptt/sweep_threading.hpp"
+#include "sbptt/core/types.hpp"
 
 namespace sbptt::detail {
 
@@ -62,7 +63,7 @@ public:
   /// the split's), and sizing them sizes those of the calling thread's way too.
   /// \return whether the batch runs on the threads.
   bool begin(SweepKind kind, bool decided, Index samples) {
-    SweepThreadingDecision& decision = of(kind);
+    SweepThreadingDecision& decision = decision_of(kind);
     const bool first_at_size = decided && decision.first_at(samples);
     threaded_ = !decided || decision.next_threaded(first_at_size);
     way_of_ = decided ? std::optional<SweepKind>(kind) : std::nullopt;
@@ -72,12 +73,13 @@ public:
     return threaded_;
   }
 
-  /// Whether the current batch's forward pass ran on the threads.
+  /// The way of the current batch: of its forward pass, its loss and a shared-seed pair's sweep.
   [[nodiscard]] bool threaded() const { return threaded_; }
 
   /// Whether a lone sweep runs on the threads: the way of its forward pass if the lone
   /// decision chose that, else (its loops were not timed at the forward pass, its batch did not
-  /// meet the threads, or it was a pair's) the lone decision's next way where it decides.
+  /// meet the threads, or it was a pair's) the lone decision's next way where it decides, and
+  /// on the threads where it does not.
   [[nodiscard]] bool lone_sweep_threaded(bool meets_threads) const {
     if (way_of_ == SweepKind::Lone) return threaded_;
     return !decides_lone(meets_threads) || lone_.next_threaded();
@@ -94,7 +96,7 @@ public:
   /// The end of the current batch of `samples`, to the decision of kind `kind`: its time per
   /// sample, or only its way for a batch out of the schedule.
   void finish(SweepKind kind, Index samples) {
-    SweepThreadingDecision& decision = of(kind);
+    SweepThreadingDecision& decision = decision_of(kind);
     if (!scheduled_) {
       decision.count_unscheduled(threaded_);
       return;
@@ -105,12 +107,14 @@ public:
   }
 
 private:
-  SweepThreadingDecision& of(SweepKind kind) { return kind == SweepKind::Lone ? lone_ : pair_; }
+  SweepThreadingDecision& decision_of(SweepKind kind) {
+    return kind == SweepKind::Lone ? lone_ : pair_;
+  }
 
   SweepThreadingDecision lone_, pair_;
   bool threaded_ = true;             ///< the way of the current batch
   std::optional<SweepKind> way_of_;  ///< the decision that chose it, if one did
-  bool end_awaited_ = false;         ///< by that decision
+  bool end_awaited_ = false;         ///< that decision still awaits the batch's end
   bool scheduled_ = true;            ///< the batch is in its decision's schedule
   std::chrono::steady_clock::time_point start_;
 };

@@ -58,11 +58,13 @@
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/bptt/engine_buffers.hpp"
+#include "sbptt/bptt/fork_decision.hpp"
 #include "sbptt/bptt/forward_in_parts.hpp"
 #include "sbptt/bptt/packed_controller.hpp"
 #include "sbptt/bptt/param_handoff.hpp"
 #include "sbptt/bptt/reverse_sweeps.hpp"
 #include "sbptt/bptt/shared_seed_sweeps.hpp"
+#include "sbptt/bptt/sweep_threading.hpp"
 #include "sbptt/core/parallel.hpp"
 
 namespace sbptt {
@@ -90,7 +92,7 @@ public:
   static constexpr Index kEvaluateChunk = 32;
 
   /// `set_threads`' default `split_above_ns`.
-  static constexpr double kDefaultSplitAboveNs = 4000;
+  static constexpr double kDefaultSplitAboveNs = detail::ForkDecision::default_threshold_ns;
 
   /// \param steps the horizon m (> 0).
   Engine(const Sim& sim, const Ctrl& controller, Objective<Loss> objective, Index steps)

@@ -23,13 +23,13 @@ struct LonePlan {
 
 /// The `LonePlan` of an engine whose VJP loops are timed by `vjp_loops`, with `has_pool`
 /// threads and `has_handoff` a hand-off of parameter products.
-template <bool batch_simulator>
+template <bool IsBatchSimulator>
 [[nodiscard]] LonePlan lone_plan(const ForkDecision& vjp_loops, bool has_pool,
                                  bool has_handoff) {
   // A BatchSimulator's VJPs are never split (only its loss seeds, and those only when told to
   // split every loop); other simulators' loops are split once timed and found worth it.
-  const bool loops_timed = batch_simulator || !vjp_loops.probing();
-  const bool split_loops = batch_simulator ? vjp_loops.splits_every_loop() : vjp_loops.fork();
+  const bool loops_timed = IsBatchSimulator || !vjp_loops.probing();
+  const bool split_loops = IsBatchSimulator ? vjp_loops.splits_every_loop() : vjp_loops.fork();
   // Only where the loops are not split: the second thread then has nothing better to do than
   // the parameter products.
   const bool handoff = has_handoff && loops_timed && !split_loops;

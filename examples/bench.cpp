@@ -37,7 +37,12 @@
 //                turn: CSV ms_evaluation, ms_evaluation_threads) and its training batches
 //                (the rest of the epoch), with how many of the N-thread trainer's sweeps
 //                whose threads meet at every step ran on the threads (CSV sweeps_threaded,
-//                sweeps_alone; the rest ran on one thread: `SweepThreading` in the engine)
+//                sweeps_alone; the rest ran on one thread: `SweepThreading` in the engine);
+//                then the speed-up of the epoch of a run that evaluates it on a second
+//                thread while the next epoch trains on the first (`evaluate_beside` of
+//                `run_training`), against the same uncounted trainer's 1-thread epoch (CSV
+//                ms_epoch_beside, ms_epoch_beside_alone), and its bound, epoch / training
+//                batches
 //   sim ns       one simulator step plus one full VJP (Aᵀλ and Bᵀλ) per sample, on the
 //                states of the last training batch (the per-sample work of the engine;
 //                for a BatchSimulator, the batched calls' time over the batch size)

@@ -16,15 +16,15 @@
 #include <vector>
 #include <unistd.h>
 
-#include "sbptt/bptt/losses.hpp"
-#include "sbptt/optim/adam.hpp"
-#include "sbptt/sim/linear.hpp"
 #include "sbptt/train/run.hpp"
 #include "polynomial_policy.hpp"
 #include "support/files.hpp"
+#include "support/linear_trainer.hpp"
 
 using namespace sbptt;
 using sbptt::testing::PolynomialPolicy;
+using sbptt::testing::spread;
+using sbptt::testing::to_origin;
 using sbptt::testing::file_text;
 using sbptt::testing::fresh_directory;
 using sbptt::testing::without_seconds;
@@ -33,50 +33,13 @@ namespace fs = std::filesystem;
 namespace {
 
 template <class Scalar>
-using Sim = LinearSystem<Scalar, 1, 1>;
-template <class Scalar>
-using Loss = SquaredDistanceLoss<typename Sim<Scalar>::State>;
-
-template <class Scalar>
-Objective<Loss<Scalar>> to_origin() {
-  return {Loss<Scalar>{Sim<Scalar>::State::Zero()}, LossTiming::Continuous, 1.0, 0.0};
-}
-
-template <class Scalar>
-Matrix<Scalar> spread(Index count, double first) {
-  Matrix<Scalar> m(1, count);
-  for (Index i = 0; i < count; ++i) m(0, i) = static_cast<Scalar>(first + 0.37 * double(i));
-  return m;
-}
+using Setup = sbptt::testing::LinearTrainer<Scalar>;
 
 /// `name` in a directory of this process, emptied once at the first call.
 fs::path scratch(const std::string& name) {
   static const fs::path dir = fresh_directory("run");
   return dir / name;
 }
-
-/// A trainer of θ (two coefficients) on x' = 1.05 x + 0.5 c.
-template <class Scalar>
-struct Setup {
-  const Sim<Scalar> sim = Sim<Scalar>::scalar(Scalar(1.05), Scalar(0.5));
-  PolynomialPolicy<Scalar> policy{{2, 1}};
-  Trainer<Sim<Scalar>, PolynomialPolicy<Scalar>, Loss<Scalar>, Adam<Scalar>> trainer;
-
-  explicit Setup(Method method, Index batch = 3, double lr = 0.02,
-                 NonFinitePolicy on_non_finite = NonFinitePolicy::Stop)
-      : trainer(sim, policy, to_origin<Scalar>(), 6, Adam<Scalar>(AdamOptions<Scalar>{Scalar(lr)}),
-                options(method, batch, on_non_finite)) {}
-
-  static TrainerOptions options(Method method, Index batch, NonFinitePolicy on_non_finite) {
-    TrainerOptions o;
-    o.method = method;
-    o.batch = batch;
-    o.shuffle = true;
-    o.shuffle_seed = 7;
-    o.on_non_finite = on_non_finite;
-    return o;
-  }
-};
 
 }  // namespace
 

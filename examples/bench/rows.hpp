@@ -54,6 +54,11 @@ struct RowResult {
   /// The epoch's evaluation of the two sets (`Engine::evaluate`), at 1 and at N threads, in
   /// turn with the epochs (0: one thread): the rest of an epoch is its training batches.
   double ms_evaluation = 0, ms_evaluation_threads = 0;
+  /// An epoch whose evaluation runs beside the next epoch's training (`evaluate_beside` of
+  /// `run_training`): the training on one thread, the evaluation of the epoch before on a
+  /// second, timed together; and the same trainer's 1-thread epoch (uncounted network, unlike
+  /// `ms_epoch`); both in turn with the epochs (0: one thread).
+  double ms_beside = 0, ms_beside_alone = 0;
   /// Of the N-thread trainer's sweeps whose threads meet at every step (`SweepThreading`), how
   /// many ran on the threads and how many on one thread, over its timed epochs.
   long long sweeps_threaded = 0, sweeps_alone = 0;
@@ -261,6 +266,24 @@ double concurrent_copies_ratio(Index copies, int repeats, Copy&& copy) {
   return best_together / *std::min_element(alone.begin(), alone.end());
 }
 
+/// The trainer options of every row's trainers: batch 8, the row's method, `threads`.
+inline sbptt::TrainerOptions row_trainer_options(
+    Method method, Index threads,
+    sbptt::SweepThreading sweep_threading = sbptt::SweepThreading::Timed) {
+  sbptt::TrainerOptions options;
+  options.method = method;
+  options.batch = 8;
+  options.threads = threads;
+  options.sweep_threading = sweep_threading;
+  return options;
+}
+
+/// Adam with the paper's rate, 1e-3.
+template <class S>
+sbptt::Adam<S> row_optimizer() {
+  return sbptt::Adam<S>(sbptt::AdamOptions<S>{S(1e-3)});
+}
+
 /// A trainer of a row with a copy of the row's network of its own, counted by a
 /// `CountingNetwork` of its own (Adam, lr 1e-3, batch 8). The trainer keeps references to both,
 /// so they live beside it, and the object is built in place and never moved.
@@ -275,20 +298,45 @@ struct CountedTrainer {
                  Index steps, Method method, Index threads,
                  sbptt::SweepThreading sweep_threading = sbptt::SweepThreading::Timed)
       : net(initial),
-        trainer(sim, counted, objective, steps, sbptt::Adam<S>(sbptt::AdamOptions<S>{S(1e-3)}),
-                options(method, threads, sweep_threading)) {}
+        trainer(sim, counted, objective, steps, row_optimizer<S>(),
+                row_trainer_options(method, threads, sweep_threading)) {}
   CountedTrainer(const CountedTrainer&) = delete;
   CountedTrainer& operator=(const CountedTrainer&) = delete;
 
-private:
-  static sbptt::TrainerOptions options(Method method, Index threads,
-                                       sbptt::SweepThreading sweep_threading) {
-    sbptt::TrainerOptions options;
-    options.method = method;
-    options.batch = 8;
-    options.threads = threads;
-    options.sweep_threading = sweep_threading;
-    return options;
+};
+
+/// A trainer of a row's network, uncounted (its copy for the evaluation must own its
+/// parameters, and a `CountingNetwork` is a view), whose epochs are evaluated beside the next
+/// one's training as `run_training` does with `evaluate_beside`: `epoch()` trains one epoch
+/// while the second thread evaluates the parameters the epoch before left. `epoch_alone()` is
+/// the same trainer's plain 1-thread epoch, which the speed-up is taken against, so that both
+/// sides run the same uncounted network.
+template <class Sim, class Loss>
+struct TrainerBeside {
+  using S = typename Sim::Scalar;
+  using TrainerT = sbptt::Trainer<Sim, Network<S>, Loss, sbptt::Adam<S>>;
+  Network<S> net;
+  TrainerT trainer;
+  sbptt::EvaluationBeside<TrainerT> evaluation{trainer};
+  sbptt::Vector<S> evaluated;
+  sbptt::EpochRecord record;
+  std::vector<sbptt::NonFiniteEvent> events;
+
+  TrainerBeside(const Sim& sim, const Network<S>& initial, const sbptt::Objective<Loss>& objective,
+                Index steps, Method method)
+      : net(initial),
+        trainer(sim, net, objective, steps, row_optimizer<S>(), row_trainer_options(method, 1)) {}
+  TrainerBeside(const TrainerBeside&) = delete;
+  TrainerBeside& operator=(const TrainerBeside&) = delete;
+
+  void epoch(const Matrix<S>& train, const Matrix<S>& test) {
+    evaluated = net.params();
+    events.clear();
+    evaluation.run(evaluated, train, test, record, events,
+                   [&] { trainer.train_epoch(train, test, false); });
+  }
+  void epoch_alone(const Matrix<S>& train, const Matrix<S>& test) {
+    trainer.train_epoch(train, test);
   }
 };
 
@@ -327,13 +375,19 @@ RowResult measure(const Settings& settings, const Sim& sim,
                      settings.sweep_threading);
     epoch(*threaded);  // its warm-up
   }
+  std::optional<TrainerBeside<Sim, Loss>> beside;  // none with one thread
+  if (settings.threads > 1) {
+    beside.emplace(sim, initial, objective, steps, method);
+    beside->epoch(train, test);  // its warm-up
+  }
   std::optional<Counted> regular;  // a C row's R trainer
   if (method == Method::Combined) {
     regular.emplace(sim, initial, objective, steps, Method::Regular, 1);
     epoch(*regular);  // its warm-up
   }
   alone.counted.reset();
-  r.ms_epoch = r.ms_threads = r.ms_regular = r.ms_evaluation = r.ms_evaluation_threads = 1e300;
+  r.ms_epoch = r.ms_threads = r.ms_regular = r.ms_evaluation = r.ms_evaluation_threads =
+      r.ms_beside = r.ms_beside_alone = 1e300;
   const auto keep_fastest = [](double& best, auto&& work) {
     best = std::min(best, timed_ms(work));
   };
@@ -352,12 +406,14 @@ RowResult measure(const Settings& settings, const Sim& sim,
       keep_fastest(r.ms_evaluation, [&] { evaluation(alone); });
       evaluation_macs += alone.counted.macs() - before;
       keep_fastest(r.ms_evaluation_threads, [&] { evaluation(*threaded); });
+      keep_fastest(r.ms_beside, [&] { beside->epoch(train, test); });
+      keep_fastest(r.ms_beside_alone, [&] { beside->epoch_alone(train, test); });
     }
     r.peak_gflops = std::max(r.peak_gflops, measure_peak<typename Sim::Scalar>());
   }
   if (!threaded) {
     r.ms_threads = r.ms_epoch;
-    r.ms_evaluation = r.ms_evaluation_threads = 0;
+    r.ms_evaluation = r.ms_evaluation_threads = r.ms_beside = r.ms_beside_alone = 0;
   }
   if (!regular) r.ms_regular = 0;
   r.gflop = 2.0 * static_cast<double>(alone.counted.macs() - evaluation_macs) /

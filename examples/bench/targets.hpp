@@ -105,6 +105,12 @@ inline void summarize(const std::vector<Row>& rows, Index threads) {
                     (t.ms_epoch - t.ms_evaluation) / (t.ms_threads - t.ms_evaluation_threads),
                     t.sweeps_threaded, t.sweeps_threaded + t.sweeps_alone, t.round_trip_ns,
                     t.other_core_read_ratio, t.copies_ratio, 2 / t.copies_ratio);
+        const double beside = t.ms_beside_alone / t.ms_beside;
+        std::printf("  %-9s float %s: the evaluation beside the next epoch's training (one "
+                    "thread each) %.3fx faster than 1 thread (target >= %.2f): %s (%.1f against "
+                    "%.1f ms, uncounted network; at most epoch / training batches = %.2fx)\n",
+                    task, method, beside, target, verdict(beside >= target), t.ms_beside,
+                    t.ms_beside_alone, t.ms_epoch / (t.ms_epoch - t.ms_evaluation));
       }
     }
   } else {
@@ -127,7 +133,7 @@ inline void write_csv(const Settings& settings, const std::vector<Row>& rows) {
       "fraction_of_peak,ms_epoch_regular_in_turn,threads,sweep_threading,ms_epoch_threads,"
       "speedup_threads,"
       "round_trip_ns,other_core_read_ratio,copies_ratio,ms_evaluation,ms_evaluation_threads,"
-      "sweeps_threaded,sweeps_alone,sim_ns_per_sample_step,"
+      "ms_epoch_beside,ms_epoch_beside_alone,sweeps_threaded,sweeps_alone,sim_ns_per_sample_step,"
       "trajectory_bytes_per_batch,peak_rss_kib\n";
   char line[512];
   for (const auto& row : rows) {
@@ -135,13 +141,15 @@ inline void write_csv(const Settings& settings, const std::vector<Row>& rows) {
     if (r.ok == 0) continue;
     std::snprintf(line, sizeof line,
                   "%s,%s,%s,%lld,%lld,%lld,%.3f,%.6f,%.3f,%.3f,%.4f,%.3f,%lld,%s,%.3f,%.3f,%.0f,"
-                  "%.2f,%.3f,%.3f,%.3f,%lld,%lld,%.1f,%.0f,%.0f\n",
+                  "%.2f,%.3f,%.3f,%.3f,%.3f,%.3f,%lld,%lld,%.1f,%.0f,%.0f\n",
                   row.task.c_str(), row.scalar.c_str(), row.method.c_str(), r.nx, r.steps,
                   r.params, r.ms_epoch, r.gflop, r.gflops(), r.peak_gflops, r.fraction_of_peak(),
                   r.ms_regular, static_cast<long long>(settings.threads),
                   sbptt::to_string(settings.sweep_threading).c_str(), r.ms_threads,
                   r.ms_epoch / r.ms_threads, r.round_trip_ns, r.other_core_read_ratio,
-                  r.copies_ratio, r.ms_evaluation, r.ms_evaluation_threads, r.sweeps_threaded,
+                  r.copies_ratio, r.ms_evaluation, r.ms_evaluation_threads, r.ms_beside,
+                  r.ms_beside_alone,
+                  r.sweeps_threaded,
                   r.sweeps_alone, r.sim_ns,
                   r.trajectory_bytes, r.rss_kib);
     text += line;

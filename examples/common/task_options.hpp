@@ -94,6 +94,7 @@ struct TaskOptions {
   long checkpoint_every = 1;  ///< epochs between checkpoints; 0 = only at the end
   long evaluate_every = 1;    ///< evaluate the train and test sets every k-th epoch and the last
   long patience = 0;          ///< stop after this many evaluations without a better test loss
+  bool evaluate_beside = false;  ///< evaluate on a second thread while the next epoch trains
 };
 
 /// The cart pole's --model: "reference", "physical" (also --physical) or "chain".
@@ -267,6 +268,10 @@ inline void require_float_range(const char* flag, double value) {
               "evaluate the train and test sets every N-th epoch and the last");
   cli.integer("--patience", o.patience, 0, many,
               "stop after N evaluations without a better test loss (0 = never)");
+  cli.flag("--evaluate-beside",
+           "evaluate each epoch on a second thread while the next one trains: the same "
+           "results, one more thread (docs/training.md)",
+           [&] { o.evaluate_beside = true; });
   if (task == Task::CartPole) {
     cli.integer("--poles", o.poles, 1, 4, "number of poles");
   }
@@ -347,7 +352,7 @@ inline void require_float_range(const char* flag, double value) {
     for (const char* flag : {"--epochs", "--csv", "--save-params", "--batch", "--lr", "--shuffle",
                              "--method", "--clip", "--clip-threshold", "--on-nonfinite",
                              "--checkpoint", "--checkpoint-every", "--evaluate-every",
-                             "--patience"})
+                             "--patience", "--evaluate-beside"})
       flags.push_back(flag);
     for (const char* flag : flags)
       detail::require(!cli.given(flag), mode, " ", does, ", so ", flag, " would have no effect; "

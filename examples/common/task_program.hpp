@@ -204,11 +204,12 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
 
   std::fprintf(stderr,
                "%s: method %s, clip %s, %ld epochs, %ld train / %ld test samples, batch %ld, "
-               "%s, %ld parameters, %s, %s code\n",
+               "%s, %ld parameters, %s, %s code%s\n",
                name, std::string(label(o.method)).c_str(), to_string(o.clip).c_str(), o.epochs,
                static_cast<long>(data.train.cols()), static_cast<long>(data.test.cols()), o.batch,
                describe(o.task, o.time).c_str(), static_cast<long>(controller.num_params()),
-               o.use_float ? "float" : "double", instruction_set());
+               o.use_float ? "float" : "double", instruction_set(),
+               o.evaluate_beside ? ", each evaluation beside the next epoch's training" : "");
   RunSettings run;
   run.epochs = o.epochs;
   run.evaluate_every = o.evaluate_every;
@@ -217,6 +218,7 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
   run.checkpoint = o.checkpoint;
   run.checkpoint_every = o.checkpoint_every;
   run.save_params = o.save_params;
+  run.evaluate_beside = o.evaluate_beside;
   run.identity = task_identity(o);
   run.setting_names = {{"method", "--method"},
                        {"clip", "--clip"},

@@ -45,6 +45,7 @@
 #include "sbptt/optim/combined_update.hpp"
 #include "sbptt/optim/sgd.hpp"
 #include "sbptt/train/checkpoint.hpp"
+#include "sbptt/train/evaluation_beside.hpp"
 #include "sbptt/train/method.hpp"
 #include "sbptt/train/run.hpp"
 #include "sbptt/train/states_io.hpp"

@@ -57,7 +57,8 @@ TEST_CASE("--help of every program lists each flag with its meaning, default and
       {"--float", false, false},        {"--double", false, false},
       {"--threads", true, true},        {"--csv", true, false},
       {"--save-params", true, false},   {"--init-params", true, false},
-      {"--init-states", true, false},   {"--dump-gradients", true, false}};
+      {"--init-states", true, false},   {"--dump-gradients", true, false},
+      {"--evaluate-beside", false, false}};
   const std::vector<Flag> timed = {{"--dt", true, true}, {"--T", true, true}};
   struct Program {
     std::string name;
@@ -189,7 +190,8 @@ TEST_CASE("--dump-gradients refuses the flags of training instead of ignoring th
   const std::string dump = "--dump-gradients " + scratch("refused.csv").string();
   for (const std::string& flag : {std::string("--epochs 5"), "--csv " + scratch("refused_log.csv").string(),
                                  "--save-params " + scratch("refused.params").string(),
-                                 std::string("--lr 0.1"), std::string("--method R")}) {
+                                 std::string("--lr 0.1"), std::string("--method R"),
+                                 std::string("--evaluate-beside")}) {
     const Result r = run("toy", dump + " " + flag);
     INFO(flag << "\n" << r.output);
     CHECK(r.status == 2);

@@ -4,6 +4,7 @@
 // test_mujoco_program.cpp).
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -26,6 +27,7 @@ using sbptt::testing::printed_loss;
 using sbptt::testing::Result;
 using sbptt::testing::run;
 using sbptt::testing::scratch;
+using sbptt::testing::without_seconds;
 
 TEST_CASE("every task program runs one short epoch", "[programs]") {
   const fs::path log = scratch("smoke.csv");
@@ -151,6 +153,30 @@ TEST_CASE("--threads 2 trains to the same parameters, bit for bit, as one thread
     CHECK(text.size() > 10000);
     CHECK(text == file_text(two));
   }
+}
+
+TEST_CASE("--evaluate-beside trains and logs the same, bit for bit, as without it",
+          "[programs]") {
+  // Evaluated every epoch, so that each epoch but the last is evaluated beside the next one.
+  const std::string arguments = "--poles 2 --method C --epochs 4 --samples 16 --steps 20";
+  std::string params[2], logs[2];
+  for (int beside : {0, 1}) {
+    const fs::path saved = scratch("beside" + std::to_string(beside) + ".params");
+    const fs::path log = scratch("beside" + std::to_string(beside) + ".csv");
+    const Result r = run("cartpole", arguments + (beside ? " --evaluate-beside" : "") +
+                                         " --csv " + log.string() + " --save-params " +
+                                         saved.string());
+    INFO(r.output);
+    REQUIRE(r.status == 0);
+    CHECK((r.output.find("each evaluation beside the next epoch's training") !=
+           std::string::npos) == (beside == 1));
+    params[beside] = file_text(saved);
+    logs[beside] = without_seconds(file_text(log));
+  }
+  CHECK(params[0].size() > 10000);
+  CHECK(params[1] == params[0]);
+  CHECK(std::count(logs[0].begin(), logs[0].end(), '\n') == 5);  // the header and 4 epochs
+  CHECK(logs[1] == logs[0]);
 }
 
 TEST_CASE("--physical runs the physical variants of the cart pole and guidance", "[programs]") {

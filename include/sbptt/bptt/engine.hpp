@@ -131,6 +131,7 @@ public:
   Engine(const Sim&& temporary_simulator, const Ctrl&& temporary_controller,
          Objective<Loss> objective, Index steps) = delete;
 
+  [[nodiscard]] const Sim& simulator() const { return sim_; }
   [[nodiscard]] Index steps() const { return steps_; }
   [[nodiscard]] const Objective<Loss>& objective() const { return objective_; }
   [[nodiscard]] const Trajectory<Scalar, typename Ctrl::Workspace>& trajectory() const {

@@ -13,6 +13,9 @@
 /// 5. a checkpoint is written when e is a multiple of `checkpoint_every`, when
 ///    `checkpoint_seconds` have passed since the last one, and after the last epoch;
 /// 6. the run stops early after `patience` evaluations without a better loss.
+/// With `evaluate_beside`, an evaluated epoch e (but the last) is evaluated on a second thread
+/// while epoch e+1 trains; steps 2 to 6 of epoch e follow, then those of e+1 unless e ended
+/// the run, in which case e+1 is undone (docs/training.md).
 /// At the end the parameters (the best ones with `restore_best`) are saved, also after a
 /// non-finite stop or a failed log write (`RunEnd::OutputFailed`): one failed output never
 /// loses the trained parameters.
@@ -25,7 +28,9 @@
 /// part of the identity: a finished run can be continued with a larger `epochs`; a smaller
 /// one than the checkpoint's is refused.
 #include <chrono>
+#include <concepts>
 #include <cstdint>
+#include <exception>
 #include <functional>
 #include <type_traits>
 #include <utility>
@@ -37,6 +42,7 @@
 #include "sbptt/core/file_identity.hpp"
 #include "sbptt/nn/parameters_io.hpp"
 #include "sbptt/train/checkpoint.hpp"
+#include "sbptt/train/evaluation_beside.hpp"
 #include "sbptt/train/trainer.hpp"
 #include "sbptt/train/training_log.hpp"
 
@@ -57,6 +63,14 @@ struct RunSettings {
   long checkpoint_every = 1;       ///< epochs between checkpoints; 0 = only by time and at the end
   double checkpoint_seconds = 0;   ///< also after this much wall time since the last; 0 = off
   std::string save_params{};       ///< where the final parameters go; empty = not saved
+  /// Evaluate each evaluated epoch (but the last) on a second thread while the next epoch
+  /// trains (train/evaluation_beside.hpp). The results, log, checkpoints and the trainer's
+  /// parameters, optimizer, epoch and shuffling state are bitwise those without it (the
+  /// seconds column aside), and either way resumes the other's checkpoints. The callbacks of
+  /// epoch e run after epoch e+1 has trained, so the trainer they see is one epoch ahead: a
+  /// callback that changes the trainer does not act as written (docs/training.md). A run that
+  /// ends at epoch e undoes epoch e+1.
+  bool evaluate_beside = false;
   /// Settings of the caller that a checkpoint must share (e.g. the task's flags).
   std::vector<RunSetting> identity{};
   /// The caller's names, in messages, for any setting the checkpoint compares, as pairs
@@ -140,6 +154,37 @@ concept AdamLike = requires(O o, Vector<typename O::Scalar> v) {
   o.restore(v, v, Index{});
 };
 
+/// What `run_training` keeps of a trainer between epochs, to checkpoint or restore it.
+template <class Scalar, class Optimizer>
+struct TrainerState {
+  Vector<Scalar> params;
+  Optimizer optimizer;
+  std::string shuffle_state;
+  long epoch = 0;
+};
+
+template <class TrainerT>
+[[nodiscard]] auto state_of(TrainerT& trainer) {
+  using Optimizer = std::remove_cvref_t<decltype(trainer.optimizer())>;
+  return TrainerState<typename TrainerT::Scalar, Optimizer>{
+      trainer.controller().params(), trainer.optimizer(), trainer.shuffle_state(),
+      trainer.epoch()};
+}
+
+/// The parameters and the optimizer of `state` back in `trainer`.
+template <class TrainerT, class State>
+void restore_trainer_parameters(TrainerT& trainer, const State& state) {
+  trainer.controller().params() = state.params;
+  trainer.optimizer() = state.optimizer;
+}
+
+/// All of `state` back in `trainer`: the next epoch is `state.epoch` + 1.
+template <class TrainerT, class State>
+void restore_trainer(TrainerT& trainer, const State& state) {
+  restore_trainer_parameters(trainer, state);
+  trainer.resume_at(state.epoch, state.shuffle_state);
+}
+
 }  // namespace detail
 
 /// Runs `trainer` from its current state (or from `settings.checkpoint`) to `settings.epochs`
@@ -154,6 +199,7 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
                                                   const RunCallbacks& callbacks = {}) {
   using Scalar = typename TrainerT::Scalar;
   using Optimizer = std::remove_cvref_t<decltype(trainer.optimizer())>;
+  using Ctrl = std::remove_cvref_t<decltype(trainer.controller())>;
   detail::require(settings.epochs >= 0, "run_training: epochs = ", settings.epochs,
                   "; expected >= 0");
   detail::require(settings.evaluate_every >= 1, "run_training: evaluate_every = ",
@@ -169,6 +215,10 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   detail::require(best_by == BestBy::TrainLoss || test.cols() > 0,
                   "run_training: best_by = test loss without a test set; expected a test set "
                   "or BestBy::TrainLoss");
+  if constexpr (!std::copy_constructible<Ctrl>) {
+    detail::require(!settings.evaluate_beside, "run_training: evaluate_beside needs a copy of "
+                                               "the controller; expected a copyable controller");
+  }
   if constexpr (!detail::AdamLike<Optimizer>) {
     detail::require(settings.checkpoint.empty(), "run_training: checkpoints need an optimizer "
                                                  "whose state can be saved (Adam)");
@@ -181,6 +231,13 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   require_distinct_files({{"training log", settings.log_csv, true},
                           {"checkpoint", settings.checkpoint, true},
                           {"parameters file", settings.save_params, true}});
+
+  // Before the log or a checkpoint is touched: it refuses a controller whose copy would share
+  // the parameters.
+  std::optional<EvaluationBeside<TrainerT>> beside;
+  if constexpr (std::copy_constructible<Ctrl>) {
+    if (settings.evaluate_beside) beside.emplace(trainer);
+  }
 
   auto& params = trainer.controller().params();
   const TrainerOptions& o = trainer.options();
@@ -263,11 +320,14 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   }
   if (callbacks.on_start) callbacks.on_start(result.epochs);
 
-  auto write_checkpoint = [&] {
+  // The trainer's state after an epoch, for its checkpoint: the live one, or (with the
+  // evaluation beside) the one kept when the next epoch began.
+  using State = detail::TrainerState<Scalar, Optimizer>;
+  auto write_checkpoint = [&](const State* kept) {
     Checkpoint<Scalar> c;
     c.settings = identity;
     c.epoch = result.epochs;
-    c.shuffle_state = trainer.shuffle_state();
+    c.shuffle_state = kept ? kept->shuffle_state : trainer.shuffle_state();
     if (log) {
       log->sync();
       c.log_bytes = log->size();
@@ -277,42 +337,43 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
     c.best_epoch = result.best_epoch;
     c.best_loss = result.best_loss;
     c.last = result.last;
-    c.params = params;
+    c.params = kept ? kept->params : params;
     c.best_params = result.best_params;
     if constexpr (detail::AdamLike<Optimizer>) {
-      c.adam_t = trainer.optimizer().iterations();
-      c.adam_m = trainer.optimizer().first_moment();
-      c.adam_v = trainer.optimizer().second_moment();
+      const Optimizer& adam = kept ? kept->optimizer : trainer.optimizer();
+      c.adam_t = adam.iterations();
+      c.adam_m = adam.first_moment();
+      c.adam_v = adam.second_moment();
     }
     save_checkpoint(settings.checkpoint, c);
   };
 
   using Clock = std::chrono::steady_clock;
   auto last_checkpoint = Clock::now();
-  const bool patience_spent = settings.patience > 0 && since_best >= settings.patience;
-  if (patience_spent) result.end = RunEnd::EarlyStop;
-  for (long epoch = trainer.epoch() + 1; epoch <= settings.epochs && !patience_spent; ++epoch) {
-    const bool evaluate = epoch % settings.evaluate_every == 0 || epoch == settings.epochs;
-    const EpochRecord record = trainer.train_epoch(train, test, evaluate);
-    for (const NonFiniteEvent& event : trainer.non_finite_events()) {
+  // Steps 2 to 6 of the file comment for the epoch of `record`, trained and evaluated, which
+  // met `events` and ended training when `stopped`. True when the run ends with it.
+  auto conclude = [&](const EpochRecord& record, bool evaluated,
+                      const std::vector<NonFiniteEvent>& events, bool stopped,
+                      const State* kept) {
+    for (const NonFiniteEvent& event : events) {
       const bool skipped =
           event.phase == Phase::Update && o.on_non_finite == NonFinitePolicy::SkipBatch;
       if (skipped) ++result.skipped_batches;
       if (callbacks.on_non_finite) callbacks.on_non_finite(event, skipped);
     }
-    if (trainer.stopped()) {
+    if (stopped) {
       result.end = RunEnd::NonFinite;
-      result.stop_event = trainer.non_finite_events().back();
-      break;
+      result.stop_event = events.back();
+      return true;
     }
-    result.epochs = epoch;
+    result.epochs = record.epoch;
     result.last = record;
-    if (evaluate) {
+    if (evaluated) {
       const double loss = *(best_by == BestBy::TestLoss ? record.test_loss : record.train_loss);
       if (result.best_epoch == 0 || loss < result.best_loss) {
-        result.best_epoch = epoch;
+        result.best_epoch = record.epoch;
         result.best_loss = loss;
-        result.best_params = params;
+        result.best_params = kept ? kept->params : params;
         since_best = 0;
       } else {
         ++since_best;
@@ -329,21 +390,86 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
         stop = true;
       }
       const bool due =
-          (settings.checkpoint_every > 0 && epoch % settings.checkpoint_every == 0) ||
+          (settings.checkpoint_every > 0 && record.epoch % settings.checkpoint_every == 0) ||
           (settings.checkpoint_seconds > 0 &&
            std::chrono::duration<double>(Clock::now() - last_checkpoint).count() >=
                settings.checkpoint_seconds) ||
-          epoch == settings.epochs || stop;
+          record.epoch == settings.epochs || stop;
       if (!settings.checkpoint.empty() && due) {
-        write_checkpoint();
+        write_checkpoint(kept);
         last_checkpoint = Clock::now();
       }
     } catch (const IoError& e) {
       result.end = RunEnd::OutputFailed;
       result.output_error = e.what();
-      break;
+      return true;
     }
-    if (stop) break;
+    return stop;
+  };
+
+  // With the evaluation beside, an evaluated epoch (but the last) waits as `pending` while the
+  // next one trains without its own evaluation: that next epoch is ahead of the run, and is
+  // undone when the pending epoch ends the run.
+  struct Pending {
+    EpochRecord record;
+    std::vector<NonFiniteEvent> events;
+    State before, after;  ///< the trainer before and after the epoch's training
+  };
+  std::optional<Pending> pending;
+  const bool patience_spent = settings.patience > 0 && since_best >= settings.patience;
+  if (patience_spent) result.end = RunEnd::EarlyStop;
+  for (long epoch = trainer.epoch() + 1; epoch <= settings.epochs && !patience_spent; ++epoch) {
+    const bool evaluate = epoch % settings.evaluate_every == 0 || epoch == settings.epochs;
+    const bool ahead = beside && evaluate && epoch < settings.epochs;
+    std::optional<State> before;
+    if (ahead) before = detail::state_of(trainer);
+    EpochRecord record;
+    auto train_this_epoch = [&] { record = trainer.train_epoch(train, test, evaluate && !ahead); };
+    if (pending) {
+      // Without the look-ahead the pending epoch ends before this one starts, and may end the
+      // run: an exception of this epoch's training waits for that end.
+      std::exception_ptr training_failure;
+      const std::size_t update_events = pending->events.size();
+      try {
+        beside->run(pending->after.params, train, test, pending->record, pending->events, [&] {
+          try {
+            train_this_epoch();
+          } catch (...) {
+            training_failure = std::current_exception();
+          }
+        });
+      } catch (...) {  // from the evaluation, where the pending epoch's own would have thrown
+        detail::restore_trainer(trainer, pending->after);
+        throw;
+      }
+      // As in `Trainer::train_epoch`: a non-finite evaluation ends training and rolls its
+      // epoch back.
+      const bool stopped = pending->events.size() > update_events;
+      auto rewind = [&] {
+        detail::restore_trainer(trainer, pending->after);
+        if (stopped) detail::restore_trainer_parameters(trainer, pending->before);
+      };
+      bool ends = false;
+      try {
+        ends = conclude(pending->record, true, pending->events, stopped, &pending->after);
+      } catch (...) {
+        rewind();
+        throw;
+      }
+      if (ends) rewind();
+      pending.reset();
+      if (ends) break;
+      if (training_failure) std::rethrow_exception(training_failure);
+    } else {
+      train_this_epoch();
+    }
+    if (ahead && !trainer.stopped()) {
+      pending = Pending{record, trainer.non_finite_events(), std::move(*before),
+                        detail::state_of(trainer)};
+      continue;
+    }
+    if (conclude(record, evaluate, trainer.non_finite_events(), trainer.stopped(), nullptr))
+      break;
   }
   if (log && result.end != RunEnd::OutputFailed) {
     try {

@@ -95,6 +95,25 @@ struct NonFiniteEvent {
   return text + describe_where(where);
 }
 
+namespace detail {
+
+/// The evaluation of an epoch: the mean loss of `train`, and of `test` unless it is empty,
+/// into `record`; each non-finite rollout goes to `note` as an event of `record.epoch`.
+template <class EngineT, class Scalar, class Note>
+void evaluate_sets(EngineT& engine, const Matrix<Scalar>& train, const Matrix<Scalar>& test,
+                   EpochRecord& record, Note&& note) {
+  auto loss_of = [&](const Matrix<Scalar>& set, Phase phase) {
+    const auto loss = static_cast<double>(engine.evaluate(set));
+    if (engine.forward_non_finite())
+      note(NonFiniteEvent{record.epoch, -1, *engine.forward_non_finite(), phase});
+    return loss;
+  };
+  record.train_loss = loss_of(train, Phase::TrainEvaluation);
+  if (test.cols() > 0) record.test_loss = loss_of(test, Phase::TestEvaluation);
+}
+
+}  // namespace detail
+
 template <class Sim, class Ctrl, class Loss, class Optimizer>
 class Trainer {
 public:
@@ -178,11 +197,8 @@ public:
       record.cos_m_r = cos_sum * per;
       record.agree_fraction = agree_sum * per;
     }
-    if (evaluate) {
-      record.train_loss = this->evaluate(train, record.epoch, Phase::TrainEvaluation);
-      if (test.cols() > 0)
-        record.test_loss = this->evaluate(test, record.epoch, Phase::TestEvaluation);
-    }
+    if (evaluate)
+      detail::evaluate_sets(engine_, train, test, record, [&](const auto& e) { note(e); });
     return stopped_ ? roll_back(record) : record;
   }
 
@@ -254,13 +270,6 @@ private:
     controller_.params() = epoch_params_;
     optimizer() = epoch_optimizer_;
     return record;
-  }
-
-  double evaluate(const Matrix<Scalar>& set, long epoch, Phase phase) {
-    const auto loss = static_cast<double>(engine_.evaluate(set));
-    if (engine_.forward_non_finite())
-      note(NonFiniteEvent{epoch, -1, *engine_.forward_non_finite(), phase});
-    return loss;
   }
 
   /// One optimizer step on one mini-batch; returns the first non-finite value, if any, in

@@ -1,0 +1,437 @@
+// The evaluation beside the next epoch's training (RunSettings::evaluate_beside,
+// train/evaluation_beside.hpp): each run is made twice, with and without it, and everything
+// it leaves must be bitwise the same: what run_training returns or throws, every callback's
+// arguments in order, the log and the checkpoint (their seconds aside), and the trainer's
+// parameters, optimizer, epoch and shuffling state. The runs without it are the truth:
+// test_train_run.cpp checks them against an independent engine. Cases: every epoch
+// evaluated, some, a patience stop, a requested stop, a resume of one way's checkpoint by
+// the other, a non-finite evaluation (train or test set), a non-finite update in the epoch
+// trained ahead, a log that cannot be written, and exceptions from a callback, from the
+// training ahead and from the evaluation beside it.
+#include <catch2/catch.hpp>
+
+#include <sys/resource.h>
+
+#include <csignal>
+#include <filesystem>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "sbptt/train/run.hpp"
+#include "support/files.hpp"
+#include "support/linear_trainer.hpp"
+
+using namespace sbptt;
+using sbptt::testing::file_text;
+using sbptt::testing::fresh_directory;
+using sbptt::testing::LinearTrainer;
+using sbptt::testing::PolynomialPolicy;
+using sbptt::testing::spread;
+using sbptt::testing::without_seconds;
+namespace fs = std::filesystem;
+
+namespace {
+
+/// What the trap of `TrappedPolicy` does once it has sprung.
+enum class Trap { None, NanGradient, ThrowInTraining, ThrowInEvaluation };
+
+/// `PolynomialPolicy` with a trap that springs once |θ| > `radius`: a NaN parameter gradient
+/// or an exception in a training batch's backward pass, or an exception in a forward pass of
+/// more than 3 samples (an evaluation's: the training batches hold 3). So the trap fires at
+/// a chosen epoch of the run, in its training or in its evaluation only.
+class TrappedPolicy {
+public:
+  using Scalar = double;
+  using Workspace = PolynomialPolicy<double>::Workspace;
+  Trap trap = Trap::None;
+  double radius = 0;
+
+  explicit TrappedPolicy(std::vector<int> powers) : policy_(std::move(powers)) {}
+  [[nodiscard]] Index input_dim() const { return policy_.input_dim(); }
+  [[nodiscard]] Index output_dim() const { return policy_.output_dim(); }
+  [[nodiscard]] Index num_params() const { return policy_.num_params(); }
+  [[nodiscard]] const Vector<double>& params() const { return policy_.params(); }
+  [[nodiscard]] Vector<double>& params() { return policy_.params(); }
+  void forward(const Matrix<double>& x, Matrix<double>& y, Workspace& ws) const {
+    if (trap == Trap::ThrowInEvaluation && x.cols() > 3 && sprung())
+      throw std::runtime_error("trapped in an evaluation");
+    policy_.forward(x, y, ws);
+  }
+  void backward(const Workspace& ws, const Matrix<double>& dy, Vector<double>& grad,
+                Matrix<double>* dx) const {
+    policy_.backward(ws, dy, grad, dx);
+    if (trap == Trap::NanGradient && sprung())
+      grad.setConstant(std::numeric_limits<double>::quiet_NaN());
+    if (trap == Trap::ThrowInTraining && sprung())
+      throw std::runtime_error("trapped in a training batch");
+  }
+
+private:
+  [[nodiscard]] bool sprung() const { return policy_.params().norm() > radius; }
+  PolynomialPolicy<double> policy_;
+};
+
+using Setup = LinearTrainer<double, TrappedPolicy>;
+
+fs::path scratch(const std::string& name) {
+  static const fs::path dir = fresh_directory("evaluation_beside");
+  return dir / name;
+}
+
+/// A record as text without its wall time.
+std::string text_of(const EpochRecord& r) {
+  TrainingLog one;
+  EpochRecord timeless = r;
+  timeless.seconds = 0;
+  one.add(timeless);
+  return one.csv();
+}
+
+/// The checkpoint file without the seconds of its last record (the last field of `last`).
+std::string checkpoint_without_seconds(const fs::path& path) {
+  std::istringstream in(file_text(path));
+  std::string out;
+  for (std::string line; std::getline(in, line);)
+    out += (line.rfind("last ", 0) == 0 ? line.substr(0, line.rfind(' ')) : line) + "\n";
+  return out;
+}
+
+/// All that one run left behind.
+struct Trace {
+  std::vector<std::string> calls;  ///< every callback, with its arguments, in order
+  RunResult<double> result;
+  Vector<double> params, adam_m, adam_v;
+  long long adam_t = 0;
+  long trainer_epoch = 0;
+  std::string shuffle_state, log, checkpoint;
+  std::string error;  ///< what the run threw
+  long ahead = 0;     ///< epochs whose on_epoch saw the next epoch trained already
+};
+
+struct Case {
+  Method method = Method::Combined;
+  double lr = 0.02;
+  NonFinitePolicy on_non_finite = NonFinitePolicy::Stop;
+  Matrix<double> train = spread<double>(10, -1.0), test = spread<double>(4, 0.3);
+  RunSettings settings;
+  long stop_at = 0;   ///< should_stop says yes after this epoch (0: never)
+  long throw_at = 0;  ///< on_epoch throws at this epoch (0: never)
+  Trap trap = Trap::None;
+  double radius = 0;
+  long log_limit = 0;  ///< bytes a file may have, as on a full disk (0: no limit)
+};
+
+/// Runs `c` with or without the evaluation beside, from the checkpoint `c.settings` names if
+/// it exists (`keep_checkpoint`), else from scratch.
+Trace run(const Case& c, bool beside, const std::string& name, bool keep_checkpoint = false) {
+  Setup s(c.method, 3, c.lr, c.on_non_finite);
+  s.policy.trap = c.trap;
+  s.policy.radius = c.radius;
+  RunSettings settings = c.settings;
+  settings.evaluate_beside = beside;
+  settings.log_csv = scratch(name + ".csv").string();
+  if (!settings.checkpoint.empty() && !keep_checkpoint) fs::remove(settings.checkpoint);
+  Trace t;
+  RunCallbacks callbacks;
+  callbacks.on_resume = [&](long epoch) { t.calls.push_back("resume " + std::to_string(epoch)); };
+  callbacks.on_start = [&](long epoch) { t.calls.push_back("start " + std::to_string(epoch)); };
+  callbacks.on_epoch = [&](const EpochRecord& r) {
+    t.calls.push_back("epoch " + text_of(r));
+    if (s.trainer.epoch() > r.epoch) ++t.ahead;
+    if (r.epoch == c.throw_at) throw std::runtime_error("thrown by on_epoch");
+  };
+  callbacks.on_non_finite = [&](const NonFiniteEvent& event, bool skipped) {
+    t.calls.push_back(describe(event) + (skipped ? " skipped" : ""));
+  };
+  callbacks.should_stop = [&](const EpochRecord& r) {
+    t.calls.push_back("should_stop " + std::to_string(r.epoch));
+    return r.epoch == c.stop_at;
+  };
+  rlimit unlimited{};
+  REQUIRE(getrlimit(RLIMIT_FSIZE, &unlimited) == 0);
+  const auto old_handler = std::signal(SIGXFSZ, SIG_IGN);
+  rlimit limited = unlimited;
+  if (c.log_limit > 0) limited.rlim_cur = static_cast<rlim_t>(c.log_limit);
+  REQUIRE(setrlimit(RLIMIT_FSIZE, &limited) == 0);
+  try {
+    t.result = run_training(s.trainer, c.train, c.test, settings, callbacks);
+  } catch (const std::runtime_error& e) {
+    t.error = e.what();
+  }
+  REQUIRE(setrlimit(RLIMIT_FSIZE, &unlimited) == 0);
+  std::signal(SIGXFSZ, old_handler);
+  // The two ways write logs of their own names.
+  std::string& message = t.result.output_error;
+  if (const auto at = message.find(settings.log_csv); at != std::string::npos)
+    message.replace(at, settings.log_csv.size(), "<log>");
+  t.params = s.policy.params();
+  t.adam_m = s.trainer.optimizer().first_moment();
+  t.adam_v = s.trainer.optimizer().second_moment();
+  t.adam_t = s.trainer.optimizer().iterations();
+  t.trainer_epoch = s.trainer.epoch();
+  t.shuffle_state = s.trainer.shuffle_state();
+  t.log = without_seconds(file_text(settings.log_csv));
+  if (!settings.checkpoint.empty() && fs::exists(settings.checkpoint))
+    t.checkpoint = checkpoint_without_seconds(settings.checkpoint);
+  return t;
+}
+
+void check_same(const Trace& plain, const Trace& beside) {
+  CHECK(beside.calls == plain.calls);
+  CHECK(beside.error == plain.error);
+  CHECK(beside.result.end == plain.result.end);
+  CHECK(beside.result.resumed_from == plain.result.resumed_from);
+  CHECK(beside.result.epochs == plain.result.epochs);
+  CHECK(beside.result.best_epoch == plain.result.best_epoch);
+  CHECK(beside.result.best_loss == plain.result.best_loss);
+  CHECK(beside.result.best_params == plain.result.best_params);
+  CHECK(beside.result.skipped_batches == plain.result.skipped_batches);
+  CHECK(beside.result.output_error == plain.result.output_error);
+  CHECK(beside.result.saved_params == plain.result.saved_params);
+  CHECK(beside.result.stop_event.has_value() == plain.result.stop_event.has_value());
+  if (beside.result.stop_event && plain.result.stop_event)
+    CHECK(describe(*beside.result.stop_event) == describe(*plain.result.stop_event));
+  CHECK(beside.params == plain.params);
+  CHECK(beside.adam_m == plain.adam_m);
+  CHECK(beside.adam_v == plain.adam_v);
+  CHECK(beside.adam_t == plain.adam_t);
+  CHECK(beside.trainer_epoch == plain.trainer_epoch);
+  CHECK(beside.shuffle_state == plain.shuffle_state);
+  CHECK(beside.log == plain.log);
+  CHECK(beside.checkpoint == plain.checkpoint);
+}
+
+/// Checks that the run with the evaluation beside matches the one without, and returns it.
+Trace check_both_ways(const Case& c) {
+  const Trace plain = run(c, false, "plain");
+  Trace beside = run(c, true, "beside");
+  check_same(plain, beside);
+  CHECK(plain.ahead == 0);
+  return beside;
+}
+
+}  // namespace
+
+TEST_CASE("evaluation beside: every epoch evaluated, with checkpoints", "[train]") {
+  for (Method method : {Method::Regular, Method::Combined}) {
+    INFO("method " << label(method));
+    Case c;
+    c.method = method;
+    c.settings.epochs = 9;
+    c.settings.checkpoint = scratch("every.checkpoint").string();
+    c.settings.checkpoint_every = 2;
+    CHECK(check_both_ways(c).ahead == 8);  // all but the last
+  }
+}
+
+TEST_CASE("evaluation beside: some epochs evaluated, the best restored", "[train]") {
+  Case c;
+  c.settings.epochs = 11;
+  c.settings.evaluate_every = 3;
+  c.settings.restore_best = true;
+  c.settings.checkpoint = scratch("some.checkpoint").string();
+  c.settings.checkpoint_every = 4;
+  CHECK(check_both_ways(c).ahead == 3);  // epochs 3, 6 and 9
+}
+
+TEST_CASE("evaluation beside: a patience stop undoes the epoch trained ahead", "[train]") {
+  // A large rate makes Adam overshoot the optimum, so the loss stops improving.
+  Case c;
+  c.method = Method::Regular;
+  c.lr = 0.5;
+  c.settings.epochs = 400;
+  c.settings.patience = 4;
+  c.settings.checkpoint = scratch("patience.checkpoint").string();
+  c.settings.checkpoint_every = 0;
+  const Trace plain = run(c, false, "plain");
+  REQUIRE(plain.result.end == RunEnd::EarlyStop);
+  REQUIRE(plain.result.epochs < 400);
+  check_same(plain, run(c, true, "beside"));
+  c.settings.restore_best = true;
+  check_same(run(c, false, "plain"), run(c, true, "beside"));
+}
+
+TEST_CASE("evaluation beside: a requested stop, then a resume by the other way", "[train]") {
+  Case c;
+  c.settings.epochs = 12;
+  c.settings.checkpoint = scratch("requested.checkpoint").string();
+  c.settings.checkpoint_every = 5;
+  c.stop_at = 7;
+  const Trace plain = run(c, false, "plain");
+  REQUIRE(plain.result.end == RunEnd::Requested);
+  const Trace beside = run(c, true, "beside");
+  check_same(plain, beside);
+  // Each way's checkpoint of epoch 7 (the same text, checked above) resumed by the other.
+  c.stop_at = 0;
+  const Trace whole = run(c, false, "whole");
+  for (bool first_beside : {false, true}) {
+    INFO("stopped " << (first_beside ? "with" : "without") << " the evaluation beside");
+    c.stop_at = 7;
+    run(c, first_beside, "first");
+    c.stop_at = 0;
+    const Trace resumed = run(c, !first_beside, "first", true);
+    CHECK(resumed.result.resumed_from == 7);
+    CHECK(resumed.params == whole.params);
+    CHECK(resumed.adam_m == whole.adam_m);
+    CHECK(resumed.log == whole.log);
+    CHECK(resumed.checkpoint == whole.checkpoint);
+  }
+}
+
+TEST_CASE("evaluation beside: a non-finite evaluation rolls its epoch back", "[train]") {
+  // One train sample overflows the rollout: its batch is skipped (SkipBatch) and the train
+  // set's evaluation is not finite, which ends the run at the first evaluation, while the
+  // epoch after it has already trained beside it. A test sample that overflows does the same
+  // in the test set's evaluation alone.
+  for (Phase phase : {Phase::TrainEvaluation, Phase::TestEvaluation}) {
+    for (long evaluate_every : {1L, 2L}) {
+      INFO(to_string(phase) << ", evaluate_every " << evaluate_every);
+      Case c;
+      c.on_non_finite = NonFinitePolicy::SkipBatch;
+      (phase == Phase::TrainEvaluation ? c.train : c.test)(0, 1) = 1e300;
+      c.settings.epochs = 6;
+      c.settings.evaluate_every = evaluate_every;
+      c.settings.checkpoint = scratch("non_finite.checkpoint").string();
+      const Trace plain = run(c, false, "plain");
+      REQUIRE(plain.result.end == RunEnd::NonFinite);
+      REQUIRE(plain.result.stop_event->phase == phase);
+      REQUIRE(plain.result.epochs == evaluate_every - 1);
+      check_same(plain, run(c, true, "beside"));
+    }
+  }
+}
+
+namespace {
+
+/// A radius that |θ| passes during the 4th epoch of `c` (or at its end): the trap springs in
+/// that epoch's training, or in its evaluation, with the epoch before it finite.
+double radius_crossed_in_epoch_4(const Case& c) {
+  Setup s(c.method, 3, c.lr, c.on_non_finite);
+  std::vector<double> norms;
+  for (int epoch = 1; epoch <= 4; ++epoch) {
+    s.trainer.train_epoch(c.train, c.test, false);
+    norms.push_back(s.policy.params().norm());
+  }
+  REQUIRE(norms[2] < norms[3]);
+  return (norms[2] + norms[3]) / 2;
+}
+
+}  // namespace
+
+TEST_CASE("evaluation beside: a non-finite update in the epoch trained ahead", "[train]") {
+  // Epoch 3 waits for its evaluation while epoch 4, trained ahead, meets a NaN gradient:
+  // epoch 3 ends as usual, then epoch 4 ends the run (Stop), rolled back.
+  Case c;
+  c.method = Method::Regular;
+  c.settings.epochs = 8;
+  c.trap = Trap::NanGradient;
+  c.radius = radius_crossed_in_epoch_4(c);
+  const Trace plain = run(c, false, "plain");
+  REQUIRE(plain.result.end == RunEnd::NonFinite);
+  REQUIRE(plain.result.stop_event->phase == Phase::Update);
+  REQUIRE(plain.result.stop_event->epoch >= 4);
+  check_same(plain, run(c, true, "beside"));
+}
+
+TEST_CASE("evaluation beside: a log that cannot be written", "[train]") {
+  // The file-size limit makes a write past 700 bytes fail with EFBIG, like a full disk.
+  Case c;
+  c.settings.epochs = 40;
+  c.settings.save_params = scratch("kept.txt").string();
+  c.log_limit = 700;
+  const Trace plain = run(c, false, "plain");
+  REQUIRE(plain.result.end == RunEnd::OutputFailed);
+  REQUIRE(plain.result.epochs > 1);
+  check_same(plain, run(c, true, "beside"));
+}
+
+TEST_CASE("evaluation beside: a callback that throws leaves the trainer at its epoch",
+          "[train]") {
+  Case c;
+  c.settings.epochs = 8;
+  c.throw_at = 3;
+  const Trace plain = run(c, false, "plain");
+  REQUIRE(plain.error == "thrown by on_epoch");
+  REQUIRE(plain.trainer_epoch == 3);
+  check_same(plain, run(c, true, "beside"));
+}
+
+TEST_CASE("evaluation beside: an exception of the training ahead waits for the epoch before",
+          "[train]") {
+  // Epoch 4, trained ahead, throws: the run rethrows it once epoch 3 has ended, as a run
+  // without the look-ahead would, unless epoch 3 ends the run, which then never trains 4.
+  for (long stop_at : {0L, 3L}) {
+    INFO("stop at " << stop_at);
+    Case c;
+    c.settings.epochs = 8;
+    c.settings.checkpoint = scratch("thrown.checkpoint").string();
+    c.trap = Trap::ThrowInTraining;
+    c.radius = radius_crossed_in_epoch_4(c);
+    c.stop_at = stop_at;
+    const Trace plain = run(c, false, "plain");
+    REQUIRE(plain.error == (stop_at == 0 ? "trapped in a training batch" : ""));
+    REQUIRE(plain.result.epochs == stop_at);  // nothing is returned when it throws
+    REQUIRE(plain.trainer_epoch >= (stop_at == 0 ? 4 : 3));
+    check_same(plain, run(c, true, "beside"));
+  }
+}
+
+TEST_CASE("evaluation beside: an exception of the evaluation leaves the trainer at its epoch",
+          "[train]") {
+  Case c;
+  c.settings.epochs = 8;
+  c.trap = Trap::ThrowInEvaluation;
+  c.radius = radius_crossed_in_epoch_4(c);
+  const Trace plain = run(c, false, "plain");
+  REQUIRE(plain.error == "trapped in an evaluation");
+  REQUIRE(plain.trainer_epoch == 4);
+  check_same(plain, run(c, true, "beside"));
+}
+
+namespace {
+
+/// A controller that is a view of a policy: its copies are views of the same parameters.
+struct PolicyView {
+  using Scalar = double;
+  using Workspace = PolynomialPolicy<double>::Workspace;
+  PolynomialPolicy<double>* policy;
+
+  [[nodiscard]] Index input_dim() const { return policy->input_dim(); }
+  [[nodiscard]] Index output_dim() const { return policy->output_dim(); }
+  [[nodiscard]] Index num_params() const { return policy->num_params(); }
+  [[nodiscard]] const Vector<double>& params() const { return policy->params(); }
+  [[nodiscard]] Vector<double>& params() { return policy->params(); }
+  void forward(const Matrix<double>& x, Matrix<double>& y, Workspace& ws) const {
+    policy->forward(x, y, ws);
+  }
+  void backward(const Workspace& ws, const Matrix<double>& dy, Vector<double>& grad,
+                Matrix<double>* dx) const {
+    policy->backward(ws, dy, grad, dx);
+  }
+};
+
+}  // namespace
+
+TEST_CASE("evaluation beside: a controller whose copy is a view is refused before any work",
+          "[train]") {
+  LinearTrainer<double> s(Method::Regular);
+  PolicyView view{&s.policy};
+  Trainer trainer(s.sim, view, sbptt::testing::to_origin<double>(), 6,
+                  Adam<double>(AdamOptions<double>{0.02}),
+                  LinearTrainer<double>::options(Method::Regular, 3, NonFinitePolicy::Stop));
+  const Vector<double> before = s.policy.params();
+  RunSettings settings;
+  settings.epochs = 3;
+  settings.evaluate_beside = true;
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.3);
+  CHECK_THROWS_WITH(run_training(trainer, train, test, settings),
+                    Catch::Contains("evaluate_beside: the copy of the controller shares its "
+                                    "parameters with the trained one"));
+  CHECK(s.policy.params() == before);
+  CHECK(trainer.epoch() == 0);
+  settings.evaluate_beside = false;
+  CHECK(run_training(trainer, train, test, settings).epochs == 3);
+}

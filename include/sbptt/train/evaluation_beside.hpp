@@ -4,9 +4,9 @@
 /// The evaluation of the train and test sets after epoch e reads only the parameters θ_e, and
 /// the training of epoch e+1 reads nothing the evaluation writes. So the two can run at once,
 /// each on a core of its own, the evaluation on a copy of θ_e: an epoch then takes about as
-/// long as its training batches alone. Threads inside a batch meet at every step; these two meet once an
-/// epoch, which pays on hosts where a cache line is slow to cross from core to core
-/// (docs/training.md, "The evaluation beside the next epoch").
+/// long as its training batches alone. Threads inside a batch meet at every step; these two
+/// meet once an epoch, which pays on hosts where a cache line is slow to cross from core to
+/// core (docs/training.md, "The evaluation beside the next epoch").
 ///
 /// The evaluation runs on an engine of its own with one thread, over a copy of the controller:
 /// it gives bitwise the losses and the non-finite events of `Trainer::train_epoch`'s own

@@ -6,15 +6,18 @@
 // test_train_run.cpp checks them against an independent engine. Cases: every epoch
 // evaluated, some, a patience stop, a requested stop, a resume of one way's checkpoint by
 // the other, a non-finite evaluation (train or test set), a non-finite update in the epoch
-// trained ahead, a log that cannot be written, and exceptions from a callback, from the
-// training ahead and from the evaluation beside it.
+// trained ahead, a log that cannot be written, and exceptions: from a callback (also at a
+// rolled-back epoch), from the training ahead (rethrown, or dropped when the epoch before
+// ends the run) and from the evaluation beside it (also while the training ahead throws).
 #include <catch2/catch.hpp>
 
 #include <sys/resource.h>
 
+#include <atomic>
 #include <csignal>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -35,19 +38,22 @@ namespace fs = std::filesystem;
 
 namespace {
 
-/// What the trap of `TrappedPolicy` does once it has sprung.
-enum class Trap { None, NanGradient, ThrowInTraining, ThrowInEvaluation };
+/// What a training batch's backward pass does once |θ| passes `TrappedPolicy`'s radius.
+enum class TrainingTrap { None, NanGradient, Throw };
 
-/// `PolynomialPolicy` with a trap that springs once |θ| > `radius`: a NaN parameter gradient
-/// or an exception in a training batch's backward pass, or an exception in a forward pass of
-/// more than 3 samples (an evaluation's: the training batches hold 3). So the trap fires at
-/// a chosen epoch of the run, in its training or in its evaluation only.
+/// `PolynomialPolicy` with traps that spring once |θ| passes a radius: in a training batch's
+/// backward pass (a NaN parameter gradient, or an exception), and in a forward pass of more
+/// than 3 samples, an evaluation's (the training batches hold 3: an exception). So a trap
+/// fires at a chosen epoch, in its training or in its evaluation only. Each exception is
+/// counted, in a counter its copies share, so that a test sees exceptions a run dropped.
 class TrappedPolicy {
 public:
   using Scalar = double;
   using Workspace = PolynomialPolicy<double>::Workspace;
-  Trap trap = Trap::None;
-  double radius = 0;
+  static constexpr double kNever = std::numeric_limits<double>::infinity();
+  TrainingTrap training_trap = TrainingTrap::None;
+  double training_radius = kNever, evaluation_radius = kNever;
+  std::shared_ptr<std::atomic<int>> thrown = std::make_shared<std::atomic<int>>(0);
 
   explicit TrappedPolicy(std::vector<int> powers) : policy_(std::move(powers)) {}
   [[nodiscard]] Index input_dim() const { return policy_.input_dim(); }
@@ -56,21 +62,24 @@ public:
   [[nodiscard]] const Vector<double>& params() const { return policy_.params(); }
   [[nodiscard]] Vector<double>& params() { return policy_.params(); }
   void forward(const Matrix<double>& x, Matrix<double>& y, Workspace& ws) const {
-    if (trap == Trap::ThrowInEvaluation && x.cols() > 3 && sprung())
-      throw std::runtime_error("trapped in an evaluation");
+    if (x.cols() > 3 && beyond(evaluation_radius)) throw_counted("trapped in an evaluation");
     policy_.forward(x, y, ws);
   }
   void backward(const Workspace& ws, const Matrix<double>& dy, Vector<double>& grad,
                 Matrix<double>* dx) const {
     policy_.backward(ws, dy, grad, dx);
-    if (trap == Trap::NanGradient && sprung())
+    if (!beyond(training_radius)) return;
+    if (training_trap == TrainingTrap::NanGradient)
       grad.setConstant(std::numeric_limits<double>::quiet_NaN());
-    if (trap == Trap::ThrowInTraining && sprung())
-      throw std::runtime_error("trapped in a training batch");
+    if (training_trap == TrainingTrap::Throw) throw_counted("trapped in a training batch");
   }
 
 private:
-  [[nodiscard]] bool sprung() const { return policy_.params().norm() > radius; }
+  [[nodiscard]] bool beyond(double radius) const { return policy_.params().norm() > radius; }
+  void throw_counted(const char* what) const {
+    ++*thrown;
+    throw std::runtime_error(what);
+  }
   PolynomialPolicy<double> policy_;
 };
 
@@ -109,6 +118,7 @@ struct Trace {
   std::string shuffle_state, log, checkpoint;
   std::string error;  ///< what the run threw
   long ahead = 0;     ///< epochs whose on_epoch saw the next epoch trained already
+  int thrown = 0;     ///< exceptions of the traps, dropped or not
 };
 
 struct Case {
@@ -119,17 +129,19 @@ struct Case {
   RunSettings settings;
   long stop_at = 0;   ///< should_stop says yes after this epoch (0: never)
   long throw_at = 0;  ///< on_epoch throws at this epoch (0: never)
-  Trap trap = Trap::None;
-  double radius = 0;
+  TrainingTrap training_trap = TrainingTrap::None;
+  double training_radius = TrappedPolicy::kNever, evaluation_radius = TrappedPolicy::kNever;
   long log_limit = 0;  ///< bytes a file may have, as on a full disk (0: no limit)
+  bool non_finite_throws = false;  ///< on_non_finite throws at an evaluation's event
 };
 
 /// Runs `c` with or without the evaluation beside, from the checkpoint `c.settings` names if
 /// it exists (`keep_checkpoint`), else from scratch.
 Trace run(const Case& c, bool beside, const std::string& name, bool keep_checkpoint = false) {
   Setup s(c.method, 3, c.lr, c.on_non_finite);
-  s.policy.trap = c.trap;
-  s.policy.radius = c.radius;
+  s.policy.training_trap = c.training_trap;
+  s.policy.training_radius = c.training_radius;
+  s.policy.evaluation_radius = c.evaluation_radius;
   RunSettings settings = c.settings;
   settings.evaluate_beside = beside;
   settings.log_csv = scratch(name + ".csv").string();
@@ -145,6 +157,8 @@ Trace run(const Case& c, bool beside, const std::string& name, bool keep_checkpo
   };
   callbacks.on_non_finite = [&](const NonFiniteEvent& event, bool skipped) {
     t.calls.push_back(describe(event) + (skipped ? " skipped" : ""));
+    if (c.non_finite_throws && event.phase != Phase::Update)
+      throw std::runtime_error("thrown by on_non_finite");
   };
   callbacks.should_stop = [&](const EpochRecord& r) {
     t.calls.push_back("should_stop " + std::to_string(r.epoch));
@@ -167,6 +181,7 @@ Trace run(const Case& c, bool beside, const std::string& name, bool keep_checkpo
   std::string& message = t.result.output_error;
   if (const auto at = message.find(settings.log_csv); at != std::string::npos)
     message.replace(at, settings.log_csv.size(), "<log>");
+  t.thrown = *s.policy.thrown;
   t.params = s.policy.params();
   t.adam_m = s.trainer.optimizer().first_moment();
   t.adam_v = s.trainer.optimizer().second_moment();
@@ -249,7 +264,9 @@ TEST_CASE("evaluation beside: a patience stop undoes the epoch trained ahead", "
   const Trace plain = run(c, false, "plain");
   REQUIRE(plain.result.end == RunEnd::EarlyStop);
   REQUIRE(plain.result.epochs < 400);
-  check_same(plain, run(c, true, "beside"));
+  const Trace beside = run(c, true, "beside");
+  check_same(plain, beside);
+  CHECK(beside.ahead == plain.result.epochs);  // the last one's on_epoch too
   c.settings.restore_best = true;
   check_same(run(c, false, "plain"), run(c, true, "beside"));
 }
@@ -264,6 +281,7 @@ TEST_CASE("evaluation beside: a requested stop, then a resume by the other way",
   REQUIRE(plain.result.end == RunEnd::Requested);
   const Trace beside = run(c, true, "beside");
   check_same(plain, beside);
+  CHECK(beside.ahead == 7);  // epoch 7's on_epoch too: 8 was trained, then undone
   // Each way's checkpoint of epoch 7 (the same text, checked above) resumed by the other.
   c.stop_at = 0;
   const Trace whole = run(c, false, "whole");
@@ -306,17 +324,27 @@ TEST_CASE("evaluation beside: a non-finite evaluation rolls its epoch back", "[t
 
 namespace {
 
-/// A radius that |θ| passes during the 4th epoch of `c` (or at its end): the trap springs in
-/// that epoch's training, or in its evaluation, with the epoch before it finite.
-double radius_crossed_in_epoch_4(const Case& c) {
+/// |θ| after each of the first 5 epochs of `c`, traps unset.
+std::vector<double> norms_after_epochs(const Case& c) {
   Setup s(c.method, 3, c.lr, c.on_non_finite);
   std::vector<double> norms;
-  for (int epoch = 1; epoch <= 4; ++epoch) {
+  for (int epoch = 1; epoch <= 5; ++epoch) {
     s.trainer.train_epoch(c.train, c.test, false);
     norms.push_back(s.policy.params().norm());
   }
-  REQUIRE(norms[2] < norms[3]);
-  return (norms[2] + norms[3]) / 2;
+  for (std::size_t e = 1; e < norms.size(); ++e) REQUIRE(norms[e - 1] < norms[e]);
+  return norms;
+}
+
+/// Just above |θ| after `epoch`: a training trap at it springs in the next epoch's training.
+double just_after_epoch(const std::vector<double>& norms, int epoch) {
+  return norms[epoch - 1] + 1e-9 * (norms[epoch] - norms[epoch - 1]);
+}
+
+/// Between |θ| after `epoch` - 1 and after `epoch`: an evaluation trap at it springs in the
+/// evaluation of `epoch`.
+double within_epoch(const std::vector<double>& norms, int epoch) {
+  return (norms[epoch - 2] + norms[epoch - 1]) / 2;
 }
 
 }  // namespace
@@ -327,13 +355,15 @@ TEST_CASE("evaluation beside: a non-finite update in the epoch trained ahead", "
   Case c;
   c.method = Method::Regular;
   c.settings.epochs = 8;
-  c.trap = Trap::NanGradient;
-  c.radius = radius_crossed_in_epoch_4(c);
+  c.training_trap = TrainingTrap::NanGradient;
+  c.training_radius = just_after_epoch(norms_after_epochs(c), 3);
   const Trace plain = run(c, false, "plain");
   REQUIRE(plain.result.end == RunEnd::NonFinite);
   REQUIRE(plain.result.stop_event->phase == Phase::Update);
-  REQUIRE(plain.result.stop_event->epoch >= 4);
-  check_same(plain, run(c, true, "beside"));
+  REQUIRE(plain.result.stop_event->epoch == 4);
+  const Trace beside = run(c, true, "beside");
+  check_same(plain, beside);
+  CHECK(beside.ahead == 3);
 }
 
 TEST_CASE("evaluation beside: a log that cannot be written", "[train]") {
@@ -345,7 +375,9 @@ TEST_CASE("evaluation beside: a log that cannot be written", "[train]") {
   const Trace plain = run(c, false, "plain");
   REQUIRE(plain.result.end == RunEnd::OutputFailed);
   REQUIRE(plain.result.epochs > 1);
-  check_same(plain, run(c, true, "beside"));
+  const Trace beside = run(c, true, "beside");
+  check_same(plain, beside);
+  CHECK(beside.ahead > 0);
 }
 
 TEST_CASE("evaluation beside: a callback that throws leaves the trainer at its epoch",
@@ -356,6 +388,21 @@ TEST_CASE("evaluation beside: a callback that throws leaves the trainer at its e
   const Trace plain = run(c, false, "plain");
   REQUIRE(plain.error == "thrown by on_epoch");
   REQUIRE(plain.trainer_epoch == 3);
+  const Trace beside = run(c, true, "beside");
+  check_same(plain, beside);
+  CHECK(beside.ahead == 3);
+}
+
+TEST_CASE("evaluation beside: a callback that throws at a non-finite evaluation", "[train]") {
+  // Epoch 1's evaluation of the test set is not finite, so epoch 1 is rolled back, and the
+  // callback told of it throws: the trainer holds the parameters from before epoch 1.
+  Case c;
+  c.test(0, 1) = 1e300;
+  c.settings.epochs = 5;
+  c.non_finite_throws = true;
+  const Trace plain = run(c, false, "plain");
+  REQUIRE(plain.error == "thrown by on_non_finite");
+  REQUIRE(plain.params == Vector<double>::Zero(2));
   check_same(plain, run(c, true, "beside"));
 }
 
@@ -368,27 +415,63 @@ TEST_CASE("evaluation beside: an exception of the training ahead waits for the e
     Case c;
     c.settings.epochs = 8;
     c.settings.checkpoint = scratch("thrown.checkpoint").string();
-    c.trap = Trap::ThrowInTraining;
-    c.radius = radius_crossed_in_epoch_4(c);
+    c.training_trap = TrainingTrap::Throw;
+    c.training_radius = just_after_epoch(norms_after_epochs(c), 3);
     c.stop_at = stop_at;
     const Trace plain = run(c, false, "plain");
     REQUIRE(plain.error == (stop_at == 0 ? "trapped in a training batch" : ""));
     REQUIRE(plain.result.epochs == stop_at);  // nothing is returned when it throws
-    REQUIRE(plain.trainer_epoch >= (stop_at == 0 ? 4 : 3));
-    check_same(plain, run(c, true, "beside"));
+    REQUIRE(plain.trainer_epoch == (stop_at == 0 ? 4 : 3));
+    const Trace beside = run(c, true, "beside");
+    check_same(plain, beside);
+    CHECK(beside.thrown == 1);  // with the stop at 3, thrown and dropped
+    CHECK(beside.ahead == 3);
   }
+}
+
+TEST_CASE("evaluation beside: an exception of the training ahead is dropped when the epoch "
+          "before ends the run", "[train]") {
+  // Epoch 4 is the first evaluated one, and its test set's evaluation is not finite, which
+  // ends the run at epoch 3's parameters. Epoch 5, trained ahead, throws: without the
+  // look-ahead it never trained.
+  Case c;
+  c.settings.epochs = 8;
+  c.settings.evaluate_every = 4;
+  c.training_trap = TrainingTrap::Throw;
+  c.training_radius = just_after_epoch(norms_after_epochs(c), 4);
+  c.test(0, 1) = 1e300;
+  const Trace plain = run(c, false, "plain");
+  REQUIRE(plain.error.empty());
+  REQUIRE(plain.result.end == RunEnd::NonFinite);
+  REQUIRE(plain.result.stop_event->epoch == 4);
+  REQUIRE(plain.thrown == 0);
+  const Trace beside = run(c, true, "beside");
+  check_same(plain, beside);
+  CHECK(beside.thrown == 1);
 }
 
 TEST_CASE("evaluation beside: an exception of the evaluation leaves the trainer at its epoch",
           "[train]") {
-  Case c;
-  c.settings.epochs = 8;
-  c.trap = Trap::ThrowInEvaluation;
-  c.radius = radius_crossed_in_epoch_4(c);
-  const Trace plain = run(c, false, "plain");
-  REQUIRE(plain.error == "trapped in an evaluation");
-  REQUIRE(plain.trainer_epoch == 4);
-  check_same(plain, run(c, true, "beside"));
+  // Epoch 4's evaluation throws; in the run with the look-ahead epoch 5's training throws too,
+  // and the evaluation's exception is the one that comes out, as without it.
+  for (bool training_throws_too : {false, true}) {
+    INFO("training throws too: " << training_throws_too);
+    Case c;
+    c.settings.epochs = 8;
+    const std::vector<double> norms = norms_after_epochs(c);
+    c.evaluation_radius = within_epoch(norms, 4);
+    if (training_throws_too) {
+      c.training_trap = TrainingTrap::Throw;
+      c.training_radius = just_after_epoch(norms, 4);
+    }
+    const Trace plain = run(c, false, "plain");
+    REQUIRE(plain.error == "trapped in an evaluation");
+    REQUIRE(plain.trainer_epoch == 4);
+    REQUIRE(plain.thrown == 1);
+    const Trace beside = run(c, true, "beside");
+    check_same(plain, beside);
+    CHECK(beside.thrown == (training_throws_too ? 2 : 1));
+  }
 }
 
 namespace {

@@ -302,7 +302,6 @@ struct CountedTrainer {
                 row_trainer_options(method, threads, sweep_threading)) {}
   CountedTrainer(const CountedTrainer&) = delete;
   CountedTrainer& operator=(const CountedTrainer&) = delete;
-
 };
 
 /// A trainer of a row's network, uncounted (its copy for the evaluation must own its

@@ -148,9 +148,7 @@ inline void write_csv(const Settings& settings, const std::vector<Row>& rows) {
                   sbptt::to_string(settings.sweep_threading).c_str(), r.ms_threads,
                   r.ms_epoch / r.ms_threads, r.round_trip_ns, r.other_core_read_ratio,
                   r.copies_ratio, r.ms_evaluation, r.ms_evaluation_threads, r.ms_beside,
-                  r.ms_beside_alone,
-                  r.sweeps_threaded,
-                  r.sweeps_alone, r.sim_ns,
+                  r.ms_beside_alone, r.sweeps_threaded, r.sweeps_alone, r.sim_ns,
                   r.trajectory_bytes, r.rss_kib);
     text += line;
   }

@@ -10,7 +10,9 @@
 ///
 /// The evaluation runs on an engine of its own with one thread, over a copy of the controller:
 /// it gives bitwise the losses and the non-finite events of `Trainer::train_epoch`'s own
-/// evaluation, because an engine's results do not depend on its number of threads.
+/// evaluation, because an engine's results do not depend on its number of threads. The copy
+/// must own its parameters (checked) and share no mutable state with the original; the
+/// simulator and the loss serve both threads at once, as with `TrainerOptions::threads`.
 #include <concepts>
 #include <type_traits>
 #include <utility>

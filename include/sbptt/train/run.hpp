@@ -173,7 +173,7 @@ template <class TrainerT>
 
 /// The parameters and the optimizer of `state` back in `trainer`.
 template <class TrainerT, class State>
-void restore_trainer_parameters(TrainerT& trainer, const State& state) {
+void restore_parameters_and_optimizer(TrainerT& trainer, const State& state) {
   trainer.controller().params() = state.params;
   trainer.optimizer() = state.optimizer;
 }
@@ -181,7 +181,7 @@ void restore_trainer_parameters(TrainerT& trainer, const State& state) {
 /// All of `state` back in `trainer`: the next epoch is `state.epoch` + 1.
 template <class TrainerT, class State>
 void restore_trainer(TrainerT& trainer, const State& state) {
-  restore_trainer_parameters(trainer, state);
+  restore_parameters_and_optimizer(trainer, state);
   trainer.resume_at(state.epoch, state.shuffle_state);
 }
 
@@ -447,7 +447,7 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
       const bool stopped = pending->events.size() > update_events;
       auto rewind = [&] {
         detail::restore_trainer(trainer, pending->after);
-        if (stopped) detail::restore_trainer_parameters(trainer, pending->before);
+        if (stopped) detail::restore_parameters_and_optimizer(trainer, pending->before);
       };
       bool ends = false;
       try {

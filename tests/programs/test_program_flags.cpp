@@ -2,6 +2,7 @@
 // time-stepping rules of docs/programs.md, the real ranges, and flags that would be ignored.
 #include <catch2/catch.hpp>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -284,6 +285,43 @@ TEST_CASE("every program that prints timings states the instruction set it was b
     CHECK(r.status == 0);
     CHECK(r.output.find(expected) != std::string::npos);
   }
+}
+
+TEST_CASE("bench --threads 2 times the evaluation beside the next epoch's training",
+          "[programs]") {
+  const fs::path csv = scratch("bench_beside.csv");
+  const Result r = run("bench", "--tasks cartpole4 --scalars float --methods R --repeats 1 "
+                                "--threads 2 --csv " + csv.string());
+  INFO(r.output);
+  REQUIRE(r.status == 0);
+  const std::string line = "cartpole4 float R: the evaluation beside the next epoch's training "
+                           "(one thread each) ";
+  const std::size_t at = r.output.find(line);
+  REQUIRE(at != std::string::npos);
+  const double printed = std::strtod(r.output.c_str() + at + line.size(), nullptr);
+  // The CSV's two columns of it: the printed speed-up is their ratio.
+  std::ifstream in(csv);
+  std::string header, row;
+  REQUIRE(std::getline(in, header));
+  REQUIRE(std::getline(in, row));
+  auto column = [](const std::string& text, std::size_t index) {
+    std::istringstream fields(text);
+    std::string field;
+    for (std::size_t i = 0; i <= index; ++i) std::getline(fields, field, ',');
+    return field;
+  };
+  auto index_of = [&](const std::string& name) {
+    for (std::size_t i = 0;; ++i) {
+      const std::string field = column(header, i);
+      if (field == name) return i;
+      REQUIRE(i < 100);
+    }
+  };
+  const double beside = std::stod(column(row, index_of("ms_epoch_beside")));
+  const double alone = std::stod(column(row, index_of("ms_epoch_beside_alone")));
+  REQUIRE(beside > 0);
+  REQUIRE(alone > 0);
+  CHECK(printed == Approx(alone / beside).epsilon(0.01));
 }
 
 TEST_CASE("accuracy runs every study to its end", "[programs][slow]") {

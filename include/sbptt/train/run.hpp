@@ -29,7 +29,6 @@
 /// one than the checkpoint's is refused.
 #include <chrono>
 #include <concepts>
-#include <cstdint>
 #include <exception>
 #include <functional>
 #include <type_traits>
@@ -43,7 +42,9 @@
 #include "sbptt/nn/parameters_io.hpp"
 #include "sbptt/train/checkpoint.hpp"
 #include "sbptt/train/evaluation_beside.hpp"
+#include "sbptt/train/fingerprint.hpp"
 #include "sbptt/train/trainer.hpp"
+#include "sbptt/train/trainer_state.hpp"
 #include "sbptt/train/training_log.hpp"
 
 namespace sbptt {
@@ -114,37 +115,6 @@ struct RunResult {
 
 namespace detail {
 
-/// FNV-1a: `hash` with the `size` bytes at `bytes` folded in.
-[[nodiscard]] inline std::uint64_t fnv1a(const void* bytes, std::size_t size,
-                                         std::uint64_t hash = 1469598103934665603ULL) {
-  const auto* byte = static_cast<const unsigned char*>(bytes);
-  for (std::size_t i = 0; i < size; ++i) hash = (hash ^ byte[i]) * 1099511628211ULL;
-  return hash;
-}
-
-/// FNV-1a of the bytes of a matrix with its shape: equal data gives equal text.
-template <class Derived>
-[[nodiscard]] std::string fingerprint(const Eigen::DenseBase<Derived>& m) {
-  std::uint64_t hash = fnv1a(nullptr, 0);
-  for (Index j = 0; j < m.cols(); ++j) {
-    for (Index i = 0; i < m.rows(); ++i) {
-      const auto value = m(i, j);
-      hash = fnv1a(&value, sizeof value, hash);
-    }
-  }
-  char text[64];
-  std::snprintf(text, sizeof text, "%ldx%ld fnv1a %016llx", static_cast<long>(m.rows()),
-                static_cast<long>(m.cols()), static_cast<unsigned long long>(hash));
-  return text;
-}
-
-template <class Number>
-[[nodiscard]] std::string exact(Number value) {
-  std::string text;
-  append_number(text, value);
-  return text;
-}
-
 template <class O>
 concept AdamLike = requires(O o, Vector<typename O::Scalar> v) {
   o.first_moment();
@@ -153,37 +123,6 @@ concept AdamLike = requires(O o, Vector<typename O::Scalar> v) {
   o.options().learning_rate;
   o.restore(v, v, Index{});
 };
-
-/// What `run_training` keeps of a trainer between epochs, to checkpoint or restore it.
-template <class Scalar, class Optimizer>
-struct TrainerState {
-  Vector<Scalar> params;
-  Optimizer optimizer;
-  std::string shuffle_state;
-  long epoch = 0;
-};
-
-template <class TrainerT>
-[[nodiscard]] auto state_of(TrainerT& trainer) {
-  using Optimizer = std::remove_cvref_t<decltype(trainer.optimizer())>;
-  return TrainerState<typename TrainerT::Scalar, Optimizer>{
-      trainer.controller().params(), trainer.optimizer(), trainer.shuffle_state(),
-      trainer.epoch()};
-}
-
-/// The parameters and the optimizer of `state` back in `trainer`.
-template <class TrainerT, class State>
-void restore_parameters_and_optimizer(TrainerT& trainer, const State& state) {
-  trainer.controller().params() = state.params;
-  trainer.optimizer() = state.optimizer;
-}
-
-/// All of `state` back in `trainer`: the next epoch is `state.epoch` + 1.
-template <class TrainerT, class State>
-void restore_trainer(TrainerT& trainer, const State& state) {
-  restore_parameters_and_optimizer(trainer, state);
-  trainer.resume_at(state.epoch, state.shuffle_state);
-}
 
 }  // namespace detail
 
@@ -421,8 +360,10 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   for (long epoch = trainer.epoch() + 1; epoch <= settings.epochs && !patience_spent; ++epoch) {
     const bool evaluate = epoch % settings.evaluate_every == 0 || epoch == settings.epochs;
     const bool ahead = beside && evaluate && epoch < settings.epochs;
+    // The state before an epoch trained ahead: the pending epoch's `after` when there is one,
+    // taken over once that epoch is concluded.
     std::optional<State> before;
-    if (ahead) before = detail::state_of(trainer);
+    if (ahead && !pending) before = detail::state_of(trainer);
     EpochRecord record;
     auto train_this_epoch = [&] { record = trainer.train_epoch(train, test, evaluate && !ahead); };
     if (pending) {
@@ -457,6 +398,7 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
         throw;
       }
       if (ends) rewind();
+      if (ahead && !ends) before = std::move(pending->after);
       pending.reset();
       if (ends) break;
       if (training_failure) std::rethrow_exception(training_failure);

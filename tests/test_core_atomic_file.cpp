@@ -1,6 +1,7 @@
 // Atomic, durable file writes (core/atomic_file.hpp) and file identity (core/file_identity.hpp):
-// nothing visible before the commit, links followed, mode kept, write-protected files and
-// over-long names refused up front, one file under two spellings recognised.
+// nothing visible before the commit, a killed writer's temporary removed, links followed, mode
+// kept, write-protected files and over-long names refused up front, one file under two
+// spellings recognised.
 #include <catch2/catch.hpp>
 
 #include <sys/stat.h>
@@ -13,6 +14,7 @@
 #include <fstream>
 #include <iterator>
 #include <string>
+#include <vector>
 
 #include "sbptt/core/atomic_file.hpp"
 #include "sbptt/core/file_identity.hpp"
@@ -45,6 +47,34 @@ TEST_CASE("atomic file: nothing is in the directory until the commit", "[core]")
   file.commit();
   CHECK(entries(dir) == 1);
   CHECK(file_text(dir / "out.txt") == "done\n");
+}
+
+TEST_CASE("atomic file: a killed writer's temporary goes at the next write of its file",
+          "[core]") {
+  // A SIGKILL between naming the finished temporary and the rename leaves <name>.tmp.<pid>.<n>.
+  const fs::path dir = fresh_directory("leftover");
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  REQUIRE(child > 0);
+  int status = 0;
+  REQUIRE(::waitpid(child, &status, 0) == child);  // reaped: no process has this pid now
+  const std::string dead = std::to_string(child), alive = std::to_string(::getppid());
+  const std::string own = std::to_string(::getpid());
+  const std::vector<std::string> stale{"out.txt.tmp." + dead + ".0",
+                                       "out.txt.tmp." + dead + ".17"};
+  const std::vector<std::string> kept{
+      "out.txt.tmp." + alive + ".0",     // its writer may still rename it
+      "out.txt.tmp." + own + ".0",       // this process's own, maybe in flight
+      "other.txt.tmp." + dead + ".0",    // another file's
+      "out.txt.tmp." + dead + ".0.bak",  // not a temporary's name
+      "out.txt.tmp." + dead,
+      "out.txt.tmp.x" + dead + ".0"};
+  for (const auto& name : stale) std::ofstream(dir / name) << "stale\n";
+  for (const auto& name : kept) std::ofstream(dir / name) << "kept\n";
+  write_file_atomically((dir / "out.txt").string(), "new\n");
+  CHECK(file_text(dir / "out.txt") == "new\n");
+  for (const auto& name : stale) CHECK_FALSE(fs::exists(dir / name));
+  for (const auto& name : kept) CHECK(file_text(dir / name) == "kept\n");
 }
 
 TEST_CASE("atomic file: a symbolic link is followed, not replaced", "[core]") {

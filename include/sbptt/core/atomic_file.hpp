@@ -10,23 +10,32 @@
 ///    atomic within one file system: a reader sees the old file or the new one);
 /// 3. the directory is fsync'ed, so the rename itself is on disk.
 ///
+/// A process killed between naming and renaming (or, without `O_TMPFILE`, while writing)
+/// leaves its `<name>.tmp.<pid>.<n>`: the first write of that file in a later process removes
+/// every such temporary whose writer no longer runs, so a rerun after a crash cleans up.
+///
 /// A symbolic link is followed: the write replaces the link's final target, not the link.
 /// An existing target keeps its permission bits (and its group and owner where the writer may
 /// set them); a target the writer may not write (a write-protected file) is refused rather
 /// than replaced, and so is a special file (a device, a FIFO). `check_output_path` makes the
 /// same checks up front, before any work.
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <cerrno>
 #include <climits>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <mutex>
 #include <string>
 #include <string_view>
+#include <unordered_set>
 
 #include "sbptt/core/error.hpp"
 
@@ -94,6 +103,50 @@ inline void sync_directory(const std::filesystem::path& directory, const std::st
 [[nodiscard]] inline unsigned long long next_temporary_number() {
   static std::atomic<unsigned long long> counter{0};
   return counter.fetch_add(1, std::memory_order_relaxed);
+}
+
+/// The writer's pid if `entry` is named `<target>.tmp.<pid>.<n>`, else 0.
+[[nodiscard]] inline long temporary_writer(std::string_view entry, std::string_view target) {
+  const auto all_digits = [](std::string_view text) {
+    return !text.empty() && text.size() <= 20 &&
+           std::all_of(text.begin(), text.end(),
+                       [](char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; });
+  };
+  const std::string prefix = concat(target, ".tmp.");
+  if (entry.substr(0, prefix.size()) != prefix) return 0;
+  const std::string_view rest = entry.substr(prefix.size());
+  const std::size_t dot = rest.find('.');
+  if (dot == std::string_view::npos || dot > 10 || !all_digits(rest.substr(0, dot)) ||
+      !all_digits(rest.substr(dot + 1))) {
+    return 0;
+  }
+  const long pid = std::strtol(std::string(rest.substr(0, dot)).c_str(), nullptr, 10);
+  return pid > 0 && pid <= INT_MAX ? pid : 0;
+}
+
+/// Removes the temporaries of `target` left by writers that no longer run (killed between
+/// naming and renaming). Once per target and process: later temporaries are this process's
+/// own. Best effort: a directory that cannot be read is left as it is.
+inline void remove_dead_writers_temporaries(const std::filesystem::path& target) {
+  static std::mutex mutex;
+  static std::unordered_set<std::string> swept;
+  {
+    const std::lock_guard<std::mutex> lock(mutex);
+    if (!swept.insert(target.string()).second) return;
+  }
+  const std::string name = target.filename().string();
+  const long own = ::getpid();
+  std::error_code error;
+  for (std::filesystem::directory_iterator entry(directory_of(target), error), end;
+       !error && entry != end; entry.increment(error)) {
+    const long pid = temporary_writer(entry->path().filename().string(), name);
+    const bool writer_gone = pid != 0 && pid != own &&
+                             ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH;
+    std::error_code ignored;
+    if (writer_gone && entry->is_regular_file(ignored)) {
+      std::filesystem::remove(entry->path(), ignored);
+    }
+  }
 }
 
 }  // namespace detail
@@ -207,6 +260,7 @@ public:
                                    "': ", detail::os_reason(error)));
     }
     temporary_.clear();
+    detail::remove_dead_writers_temporaries(target_);
     detail::sync_directory(directory_, path_);
   }
 

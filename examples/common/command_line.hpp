@@ -82,8 +82,10 @@ public:
     });
   }
 
-  /// A switch without value; `set` runs when it is given.
+  /// A switch without value; `set` runs when it is given. `parse` refuses "--switch=value",
+  /// which CLI11 would read as on or off.
   CLI::Option* flag(const std::string& flag, const std::string& meaning, std::function<void()> set) {
+    switches_.push_back(flag);
     return app_.add_flag_callback(flag, std::move(set), meaning);
   }
 
@@ -100,6 +102,10 @@ public:
       for (const auto& [flag, reason] : refused_)
         if (token == flag || token.rfind(flag + "=", 0) == 0)
           throw InvalidArgument(detail::concat(flag, ": ", reason));
+      for (const std::string& flag : switches_)
+        if (token.rfind(flag + "=", 0) == 0)
+          throw InvalidArgument(detail::concat(token, ": ", flag, " is a switch and takes no "
+                                               "value; expected ", flag, " alone"));
     }
     try {
       app_.parse(argc, argv);
@@ -144,6 +150,7 @@ public:
 private:
   CLI::App app_;
   std::vector<std::pair<std::string, std::string>> refused_;
+  std::vector<std::string> switches_;
 };
 
 }  // namespace sbptt::examples

@@ -201,8 +201,8 @@ TEST_CASE("--dump-gradients refuses the flags of training instead of ignoring th
   }
 }
 
-TEST_CASE("numbers beyond the type's range, numbers not in decimals and contradicting switches "
-          "are refused, naming the flag", "[programs]") {
+TEST_CASE("numbers beyond the type's range, numbers not in decimals, contradicting switches and "
+          "switches with a value are refused, naming the flag", "[programs]") {
   struct Case {
     std::string program, arguments, expected;
   };
@@ -226,6 +226,12 @@ TEST_CASE("numbers beyond the type's range, numbers not in decimals and contradi
                                  "1e+300]"},
         Case{"toy", "--lr=' 1e-3'", "--lr ' 1e-3' is not a number"},
         Case{"cartpole", "--double --float --epochs 1", "--float and --double both given"},
+        // CLI11 read "=0" as "off" and "=foo" as "Could not convert"; a switch takes no value.
+        Case{"cartpole", "--evaluate-beside=0 --epochs 1",
+             "--evaluate-beside=0: --evaluate-beside is a switch and takes no value; expected "
+             "--evaluate-beside alone"},
+        Case{"cartpole", "--shuffle=foo --epochs 1", "--shuffle=foo: --shuffle is a switch"},
+        Case{"reproduce", "--dry-run=1", "--dry-run=1: --dry-run is a switch"},
         // The --model callback ran after --physical's whatever the order given and reset it:
         // both ran the model of --model, --physical silently dropped.
         Case{"cartpole", "--physical --model reference --epochs 1",

@@ -293,10 +293,14 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                                 o.on_non_finite == NonFinitePolicy::SkipBatch
                             ? " (no batch of it was finite)"
                             : "";
-      const std::string kept =
-          result.stop_event->epoch == 1 ? std::string("it started from")
-                             : detail::concat("of epoch ", result.epochs,
-                                              ", the last whose evaluation was finite");
+      const std::string last =
+          result.epochs % o.evaluate_every == 0
+              ? std::string("the last whose evaluation was finite")
+              : detail::concat("the last trained (not evaluated: --evaluate-every ",
+                               o.evaluate_every, ")");
+      const std::string kept = result.stop_event->epoch == 1
+                                   ? std::string("it started from")
+                                   : detail::concat("of epoch ", result.epochs, ", ", last);
       std::fprintf(stderr, "%s: training stopped in epoch %ld%s; keeping the parameters %s\n",
                    name, result.stop_event->epoch, why, kept.c_str());
       return 3;

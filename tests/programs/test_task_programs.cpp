@@ -332,6 +332,23 @@ TEST_CASE("skip-batch reports each skipped batch and never ends silently on NaN"
   CHECK(sbptt::load_parameters<double>(params, 10701).allFinite());  // load rejects NaN/Inf
 }
 
+TEST_CASE("a stop names the kept epoch as evaluated only if it was", "[programs]") {
+  // With --evaluate-every 3 the epoch before the stop may have been trained and not evaluated;
+  // the message called it "the last whose evaluation was finite" all the same.
+  const Result r = run("cartpole", "--float --poles 2 --epochs 20 --lr 30 --evaluate-every 3 "
+                                   "--on-nonfinite skip-batch --samples 64");
+  INFO(r.output);
+  CHECK(r.status == 3);
+  std::smatch kept;
+  REQUIRE(std::regex_search(r.output, kept,
+                            std::regex(R"(keeping the parameters of epoch (\d+), ([^\n]*))")));
+  const std::string why = kept[2];
+  if (std::stol(kept[1]) % 3 == 0)
+    CHECK(why == "the last whose evaluation was finite");
+  else
+    CHECK(why == "the last trained (not evaluated: --evaluate-every 3)");
+}
+
 TEST_CASE("a non-finite evaluation stops training at that epoch", "[programs]") {
   // One batch per epoch: the update is finite, the evaluation after it is not (of either sign,
   // as above).

@@ -4,6 +4,8 @@
 // spellings recognised.
 #include <catch2/catch.hpp>
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -69,12 +71,21 @@ TEST_CASE("atomic file: a killed writer's temporary goes at the next write of it
       "out.txt.tmp." + dead + ".0.bak",  // not a temporary's name
       "out.txt.tmp." + dead,
       "out.txt.tmp.x" + dead + ".0"};
+  // A writer whose pid this process does not see (another pid namespace, another NFS client)
+  // still holds the lock on its temporary.
+  const std::string locked = "out.txt.tmp." + dead + ".5";
   for (const auto& name : stale) std::ofstream(dir / name) << "stale\n";
   for (const auto& name : kept) std::ofstream(dir / name) << "kept\n";
+  std::ofstream(dir / locked) << "kept\n";
+  const int writer = ::open((dir / locked).c_str(), O_RDONLY | O_CLOEXEC);
+  REQUIRE(writer >= 0);
+  REQUIRE(::flock(writer, LOCK_EX | LOCK_NB) == 0);
   write_file_atomically((dir / "out.txt").string(), "new\n");
+  ::close(writer);
   CHECK(file_text(dir / "out.txt") == "new\n");
   for (const auto& name : stale) CHECK_FALSE(fs::exists(dir / name));
   for (const auto& name : kept) CHECK(file_text(dir / name) == "kept\n");
+  CHECK(file_text(dir / locked) == "kept\n");
 }
 
 TEST_CASE("atomic file: a symbolic link is followed, not replaced", "[core]") {

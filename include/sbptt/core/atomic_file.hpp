@@ -11,8 +11,11 @@
 /// 3. the directory is fsync'ed, so the rename itself is on disk.
 ///
 /// A process killed between naming and renaming (or, without `O_TMPFILE`, while writing)
-/// leaves its `<name>.tmp.<pid>.<n>`: the first write of that file in a later process removes
-/// every such temporary whose writer no longer runs, so a rerun after a crash cleans up.
+/// leaves its `<name>.tmp.<pid>.<n>`. Each process, at its first successful write of a file,
+/// removes every such temporary whose writer is gone, so a rerun after a crash cleans up. Gone
+/// means both: no process with that pid (as this process sees pids), and no lock on the file
+/// (a writer holds `flock` on its temporary until the rename, which also covers a writer in
+/// another pid namespace or on another NFS client).
 ///
 /// A symbolic link is followed: the write replaces the link's final target, not the link.
 /// An existing target keeps its permission bits (and its group and owner where the writer may
@@ -21,6 +24,7 @@
 /// same checks up front, before any work.
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -105,15 +109,15 @@ inline void sync_directory(const std::filesystem::path& directory, const std::st
   return counter.fetch_add(1, std::memory_order_relaxed);
 }
 
-/// The writer's pid if `entry` is named `<target>.tmp.<pid>.<n>`, else 0.
-[[nodiscard]] inline long temporary_writer(std::string_view entry, std::string_view target) {
+/// The writer's pid if `entry` starts with `prefix` (`<target>.tmp.`) and goes on as
+/// `<pid>.<n>`, else 0.
+[[nodiscard]] inline long temporary_writer(std::string_view entry, std::string_view prefix) {
   const auto all_digits = [](std::string_view text) {
     return !text.empty() && text.size() <= 20 &&
            std::all_of(text.begin(), text.end(),
                        [](char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; });
   };
-  const std::string prefix = concat(target, ".tmp.");
-  if (entry.substr(0, prefix.size()) != prefix) return 0;
+  if (!entry.starts_with(prefix)) return 0;
   const std::string_view rest = entry.substr(prefix.size());
   const std::size_t dot = rest.find('.');
   if (dot == std::string_view::npos || dot > 10 || !all_digits(rest.substr(0, dot)) ||
@@ -124,28 +128,42 @@ inline void sync_directory(const std::filesystem::path& directory, const std::st
   return pid > 0 && pid <= INT_MAX ? pid : 0;
 }
 
-/// Removes the temporaries of `target` left by writers that no longer run (killed between
-/// naming and renaming). Once per target and process: later temporaries are this process's
-/// own. Best effort: a directory that cannot be read is left as it is.
-inline void remove_dead_writers_temporaries(const std::filesystem::path& target) {
-  static std::mutex mutex;
-  static std::unordered_set<std::string> swept;
-  {
-    const std::lock_guard<std::mutex> lock(mutex);
-    if (!swept.insert(target.string()).second) return;
-  }
-  const std::string name = target.filename().string();
-  const long own = ::getpid();
-  std::error_code error;
-  for (std::filesystem::directory_iterator entry(directory_of(target), error), end;
-       !error && entry != end; entry.increment(error)) {
-    const long pid = temporary_writer(entry->path().filename().string(), name);
-    const bool writer_gone = pid != 0 && pid != own &&
-                             ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH;
-    std::error_code ignored;
-    if (writer_gone && entry->is_regular_file(ignored)) {
-      std::filesystem::remove(entry->path(), ignored);
+/// Whether the regular file at `path` can be locked now, that is no writer holds it.
+[[nodiscard]] inline bool unlocked_regular_file(const std::filesystem::path& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) return false;
+  struct stat status {};
+  const bool unlocked = ::fstat(fd, &status) == 0 && S_ISREG(status.st_mode) &&
+                        ::flock(fd, LOCK_EX | LOCK_NB) == 0;
+  ::close(fd);
+  return unlocked;
+}
+
+/// Removes the temporaries of `target` whose writers are gone (see the file comment). Once per
+/// target and process, as a directory scan at every write would cost a checkpoint per epoch
+/// more than the write. Never throws: the write it follows has succeeded.
+inline void remove_dead_writers_temporaries(const std::filesystem::path& target) noexcept {
+  try {
+    static std::mutex mutex;
+    static std::unordered_set<std::string> swept;
+    {
+      const std::lock_guard<std::mutex> lock(mutex);
+      if (!swept.insert(target.string()).second) return;
     }
+    const std::string prefix = concat(target.filename().string(), ".tmp.");
+    const long own = ::getpid();
+    std::error_code error;
+    for (std::filesystem::directory_iterator entry(directory_of(target), error), end;
+         !error && entry != end; entry.increment(error)) {
+      const long pid = temporary_writer(entry->path().filename().string(), prefix);
+      const bool writer_gone = pid != 0 && pid != own &&
+                               ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH;
+      if (writer_gone && unlocked_regular_file(entry->path())) {
+        std::error_code ignored;
+        std::filesystem::remove(entry->path(), ignored);
+      }
+    }
+  } catch (...) {  // a failed cleanup leaves a file behind, no more
   }
 }
 
@@ -221,6 +239,9 @@ public:
       throw IoError(detail::concat("cannot write '", path_, "' (in directory '",
                                    directory_.string(), "'): ", detail::os_reason(errno)));
     }
+    // Held until the rename: no other process's cleanup takes a live temporary (a file system
+    // without locks fails here and keeps its temporaries instead).
+    [[maybe_unused]] const int locked = ::flock(fd_, LOCK_EX | LOCK_NB);
     keep_owner_and_mode();
   }
   AtomicFile(const AtomicFile&) = delete;
@@ -250,8 +271,6 @@ public:
         fail("naming the temporary file for", errno);
       }
     }
-    ::close(fd_);
-    fd_ = -1;
     if (std::rename(temporary_.c_str(), target_.c_str()) != 0) {
       const int error = errno;
       const std::string temporary = temporary_;  // discard() forgets it
@@ -259,6 +278,8 @@ public:
       throw IoError(detail::concat("cannot rename '", temporary, "' to '", path_,
                                    "': ", detail::os_reason(error)));
     }
+    ::close(fd_);  // only now: it holds the lock
+    fd_ = -1;
     temporary_.clear();
     detail::remove_dead_writers_temporaries(target_);
     detail::sync_directory(directory_, path_);

@@ -293,8 +293,10 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                                 o.on_non_finite == NonFinitePolicy::SkipBatch
                             ? " (no batch of it was finite)"
                             : "";
+      // The kept epoch's own record: an epoch that was the last of an earlier run, resumed
+      // from its checkpoint, was evaluated whatever --evaluate-every is now.
       const std::string last =
-          result.epochs % o.evaluate_every == 0
+          result.last && result.last->train_loss
               ? std::string("the last whose evaluation was finite")
               : detail::concat("the last trained (not evaluated: --evaluate-every ",
                                o.evaluate_every, ")");

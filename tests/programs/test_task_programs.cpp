@@ -332,21 +332,40 @@ TEST_CASE("skip-batch reports each skipped batch and never ends silently on NaN"
   CHECK(sbptt::load_parameters<double>(params, 10701).allFinite());  // load rejects NaN/Inf
 }
 
-TEST_CASE("a stop names the kept epoch as evaluated only if it was", "[programs]") {
-  // With --evaluate-every 3 the epoch before the stop may have been trained and not evaluated;
-  // the message called it "the last whose evaluation was finite" all the same.
-  const Result r = run("cartpole", "--float --poles 2 --epochs 20 --lr 30 --evaluate-every 3 "
-                                   "--on-nonfinite skip-batch --samples 64");
-  INFO(r.output);
-  CHECK(r.status == 3);
-  std::smatch kept;
-  REQUIRE(std::regex_search(r.output, kept,
-                            std::regex(R"(keeping the parameters of epoch (\d+), ([^\n]*))")));
-  const std::string why = kept[2];
-  if (std::stol(kept[1]) % 3 == 0)
-    CHECK(why == "the last whose evaluation was finite");
-  else
-    CHECK(why == "the last trained (not evaluated: --evaluate-every 3)");
+TEST_CASE("a stop names the kept epoch as evaluated only if its log row has losses",
+          "[programs]") {
+  // With --evaluate-every > 1 the epoch before the stop may have been trained and not
+  // evaluated; the message called it "the last whose evaluation was finite" all the same.
+  const std::string settings = "--float --poles 2 --lr 30 --evaluate-every 1000 "
+                               "--on-nonfinite stop --samples 64";
+  const fs::path log = scratch("kept.csv"), checkpoint = scratch("kept.checkpoint");
+  fs::remove(log);
+  fs::remove(checkpoint);
+  const Result fresh = run("cartpole", settings + " --epochs 20 --csv " + log.string());
+  INFO(fresh.output);
+  REQUIRE(fresh.status == 3);
+  std::smatch stop;
+  REQUIRE(std::regex_search(fresh.output, stop, std::regex(R"(training stopped in epoch (\d+))")));
+  const std::string kept = std::to_string(std::stol(stop[1]) - 1);
+  REQUIRE(kept != "0");
+  // The log's last row is the kept epoch's, and its empty train_loss says it was not evaluated.
+  const std::string rows = file_text(log);
+  const std::string last_row = rows.substr(rows.rfind('\n', rows.size() - 2) + 1);
+  CHECK(last_row.rfind(kept + ",", 0) == 0);
+  CHECK(last_row.find(",,,") != std::string::npos);  // epoch,batch_loss,,,update_norm2,...
+  CHECK(fresh.output.find("keeping the parameters of epoch " + kept +
+                          ", the last trained (not evaluated: --evaluate-every 1000)") !=
+        std::string::npos);
+  // The same epoch as the last of an earlier run was evaluated; a run resumed from it says so.
+  const Result first = run("cartpole", settings + " --epochs " + kept + " --checkpoint " +
+                                           checkpoint.string());
+  REQUIRE(first.status == 0);
+  const Result resumed = run("cartpole", settings + " --epochs 20 --checkpoint " +
+                                             checkpoint.string());
+  INFO(resumed.output);
+  CHECK(resumed.status == 3);
+  CHECK(resumed.output.find("keeping the parameters of epoch " + kept +
+                            ", the last whose evaluation was finite") != std::string::npos);
 }
 
 TEST_CASE("a non-finite evaluation stops training at that epoch", "[programs]") {

@@ -140,8 +140,8 @@ inline void sync_directory(const std::filesystem::path& directory, const std::st
 }
 
 /// Removes the temporaries of `target` whose writers are gone (see the file comment). Once per
-/// target and process, as a directory scan at every write would cost a checkpoint per epoch
-/// more than the write. Never throws: the write it follows has succeeded.
+/// target and process: a scan at every write would add a directory read to every epoch's
+/// checkpoint. Never throws: the write it follows has succeeded.
 inline void remove_dead_writers_temporaries(const std::filesystem::path& target) noexcept {
   try {
     static std::mutex mutex;

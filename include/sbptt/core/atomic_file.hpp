@@ -30,10 +30,9 @@
 
 #include <algorithm>
 #include <atomic>
-#include <cctype>
+#include <charconv>
 #include <cerrno>
 #include <climits>
-#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <mutex>
@@ -112,20 +111,20 @@ inline void sync_directory(const std::filesystem::path& directory, const std::st
 /// The writer's pid if `entry` starts with `prefix` (`<target>.tmp.`) and goes on as
 /// `<pid>.<n>`, else 0.
 [[nodiscard]] inline long temporary_writer(std::string_view entry, std::string_view prefix) {
-  const auto all_digits = [](std::string_view text) {
-    return !text.empty() && text.size() <= 20 &&
-           std::all_of(text.begin(), text.end(),
-                       [](char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; });
+  const auto whole_number = [](std::string_view text, unsigned long long& value) {
+    const char* last = text.data() + text.size();
+    const auto [end, error] = std::from_chars(text.data(), last, value);
+    return !text.empty() && error == std::errc() && end == last;
   };
   if (!entry.starts_with(prefix)) return 0;
   const std::string_view rest = entry.substr(prefix.size());
   const std::size_t dot = rest.find('.');
-  if (dot == std::string_view::npos || dot > 10 || !all_digits(rest.substr(0, dot)) ||
-      !all_digits(rest.substr(dot + 1))) {
+  unsigned long long pid = 0, counter = 0;
+  if (dot == std::string_view::npos || !whole_number(rest.substr(0, dot), pid) ||
+      !whole_number(rest.substr(dot + 1), counter) || pid > INT_MAX) {
     return 0;
   }
-  const long pid = std::strtol(std::string(rest.substr(0, dot)).c_str(), nullptr, 10);
-  return pid > 0 && pid <= INT_MAX ? pid : 0;
+  return static_cast<long>(pid);
 }
 
 /// Whether the regular file at `path` can be locked now, that is no writer holds it.

@@ -230,7 +230,8 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                        {"on_non_finite", "--on-nonfinite"},
                        {"evaluate_every", "--evaluate-every"},
                        {"patience", "--patience"},
-                       {"learning_rate", "--lr"}};
+                       {"learning_rate", "--lr"},
+                       {"epochs", "--epochs"}};
   // Skipped batches are listed up to this many, then counted, so that a diverging run does
   // not flood stderr.
   constexpr long shown_skips = 5;

@@ -286,22 +286,27 @@ template <class Scalar>
   return c;
 }
 
+/// The caller's name for the setting `name` if `caller_names` (pairs {name, caller's name})
+/// lists it, e.g. a program's flag; else `name`.
+[[nodiscard]] inline std::string caller_name(const std::vector<RunSetting>& caller_names,
+                                             const std::string& name) {
+  for (const RunSetting& n : caller_names)
+    if (n.name == name) return n.value;
+  return name;
+}
+
 /// Throws `InvalidArgument` naming the first setting in which the checkpoint at `path`
 /// differs from this run (`expected`), or one that only one of them has. A setting listed in
-/// `caller_names` (its name, the caller's) goes by the caller's name, e.g. a program's flag.
+/// `caller_names` goes by the caller's name (`caller_name`).
 inline void require_same_settings(const std::vector<RunSetting>& expected,
                                   const std::vector<RunSetting>& found, const std::string& path,
                                   const std::vector<RunSetting>& caller_names = {}) {
-  auto named = [&](const std::string& name) -> const std::string& {
-    for (const RunSetting& n : caller_names)
-      if (n.name == name) return n.value;
-    return name;
-  };
+  auto named = [&](const std::string& name) { return caller_name(caller_names, name); };
   for (const RunSetting& want : expected) {
     const RunSetting* have = nullptr;
     for (const RunSetting& f : found)
       if (f.name == want.name) have = &f;
-    const std::string& name = named(want.name);
+    const std::string name = named(want.name);
     detail::require(have != nullptr, "checkpoint '", path, "' has no setting ", name,
                     " (this run has ", name, " = ", want.value,
                     "); expected a checkpoint of this run (remove it to start over)");

@@ -74,8 +74,9 @@ struct RunSettings {
   bool evaluate_beside = false;
   /// Settings of the caller that a checkpoint must share (e.g. the task's flags).
   std::vector<RunSetting> identity{};
-  /// The caller's names, in messages, for any setting the checkpoint compares, as pairs
-  /// {setting, caller's name} (e.g. {"shuffle_seed", "--seed"}); the others keep their own.
+  /// The caller's names, in messages, for any setting the checkpoint compares and for
+  /// "epochs", as pairs {setting, caller's name} (e.g. {"shuffle_seed", "--seed"}); the others
+  /// keep their own.
   std::vector<RunSetting> setting_names{};
 };
 
@@ -219,13 +220,13 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
                                 " parameters; expected ", params.size());
     // Resumed, it would end at once and hand back the parameters of the later epoch as if
     // they were those of `epochs`.
-    detail::require(resumed->epoch <= settings.epochs, "run_training: checkpoint '",
-                    settings.checkpoint, "' is at epoch ", resumed->epoch, ", past epochs = ",
-                    settings.epochs, "; expected epochs >= ", resumed->epoch,
-                    " (a run is not wound back: for ", settings.epochs,
-                    " epochs, start without this checkpoint)");
+    const std::string epochs = caller_name(settings.setting_names, "epochs");
+    detail::require(resumed->epoch <= settings.epochs, "checkpoint '", settings.checkpoint,
+                    "' is at epoch ", resumed->epoch, ", past ", epochs, " = ", settings.epochs,
+                    "; expected ", epochs, " >= ", resumed->epoch, " (a run is not wound back: "
+                    "for ", settings.epochs, " epochs, start without this checkpoint)");
     // A setting of the run that differs, like those above: refused before the resume begins.
-    detail::require(settings.log_csv.empty() || resumed->log_bytes >= 0, "run_training: "
+    detail::require(settings.log_csv.empty() || resumed->log_bytes >= 0,
                     "checkpoint '", settings.checkpoint, "' was made without a training log; "
                     "expected one (the run would have a log without its first epochs)");
     if constexpr (detail::AdamLike<Optimizer>) {

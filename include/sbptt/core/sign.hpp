@@ -9,6 +9,7 @@
 /// Two zeros agree; one zero and one non-zero do not. NaN never agrees: for g_R this is what TF
 /// does (an overflowing component is masked out); for g_M it keeps a NaN out of the optimizer.
 /// An empty pair of vectors has nothing that disagrees, hence 1.
+#include <bit>
 #include <cmath>
 #include <concepts>
 #include <type_traits>

@@ -1,10 +1,10 @@
 // Whether the batches whose sweeps meet the other thread at every step use the threads
 // (`SweepThreading`): the timed decision's schedule against its closed form, fed made-up times
-// (three probes on the threads, then three alone; the faster way is kept for `batches_between`
-// batches; then it probes again), and the engine's batches against the way each policy says
-// they ran, the first at a batch shape on the threads, and none on another thread with `Never`;
-// the ways' names, both directions. That a trainer's option reaches its engine is
-// tests/test_train_trainer.cpp's.
+// (three probes on the threads, then three alone; the faster way is kept for 8 batches, twice
+// as many after each probing that keeps it, up to 256; then it probes again), and the engine's
+// batches against the way each policy says they ran, the first at a batch shape on the threads,
+// and none on another thread with `Never`; the ways' names, both directions. That a trainer's
+// option reaches its engine is tests/test_train_trainer.cpp's.
 // That the results are the same bits either way is tests/test_bptt_threads.cpp's; that neither
 // way allocates after the first batches, tests/test_bptt_no_malloc.cpp's.
 #include <catch2/catch.hpp>
@@ -56,14 +56,17 @@ void follow(Decision& decision, int count, bool threaded) {
 }  // namespace
 
 TEST_CASE("sweep threading: the timed decision keeps the faster way by its best probe, and "
-          "probes again after batches_between batches", "[bptt][threads]") {
+          "probes again sooner after it changes", "[bptt][threads]") {
+  constexpr int shortest = Decision::shortest_between;
   Decision decision;
   // The threaded way's best (8) is slower than the other's (7), though its mean is not.
   probe(decision, {8, 9, 8}, {7, 20, 20});
-  follow(decision, Decision::batches_between, false);
-  // Now the threaded way's best is the faster.
+  follow(decision, shortest, false);
+  probe(decision, {8, 8, 8}, {7, 7, 7});  // the same way again: twice as long until the next
+  follow(decision, 2 * shortest, false);
+  // Now the threaded way's best is the faster: the shortest interval again.
   probe(decision, {5, 6, 6}, {6, 6, 6});
-  follow(decision, Decision::batches_between, true);
+  follow(decision, shortest, true);
   probe(decision, {4, 4, 4}, {4, 5, 5});  // a tie: the threads are kept only when faster
   follow(decision, 3, false);
   decision.count_unscheduled(true);  // a batch at a new size, out of the schedule
@@ -72,8 +75,43 @@ TEST_CASE("sweep threading: the timed decision keeps the faster way by its best 
   CHECK_FALSE(decision.first_at(8));
   CHECK(decision.first_at(7));
   const SweepTally tally = decision.tally();
-  CHECK(tally.threaded == 3 * Decision::probes + Decision::batches_between + 1);
-  CHECK(tally.alone == 3 * Decision::probes + Decision::batches_between + 4);
+  CHECK(tally.threaded == 4 * Decision::probes + shortest + 1);
+  CHECK(tally.alone == 4 * Decision::probes + 3 * shortest + 4);
+}
+
+TEST_CASE("sweep threading: while the choice holds the interval doubles up to the longest",
+          "[bptt][threads]") {
+  Decision decision;
+  int between = Decision::shortest_between;
+  int probings = 0;
+  for (; between < Decision::longest_between; between *= 2, ++probings) {
+    probe(decision, {5, 5, 5}, {6, 6, 6});
+    follow(decision, between, true);
+  }
+  CHECK(probings == 5);  // 8, 16, 32, 64, 128
+  for (int k = 0; k < 3; ++k) {
+    probe(decision, {5, 5, 5}, {6, 6, 6});
+    follow(decision, Decision::longest_between, true);
+  }
+  CHECK(decision.tally().alone == (probings + 3) * Decision::probes);
+}
+
+TEST_CASE("sweep threading: a first probing misled by a slow start is corrected within a few "
+          "dozen batches", "[bptt][threads]") {
+  // The cart pole's C batches on the family-26 host (docs/benchmark-runs.md, fifty-seventh
+  // run): the first probing, in the engine's first epoch, timed the threads at 72.9 µs per
+  // sample at best and the calling thread at 58.6; one probing later 41.4 and 60.6.
+  Decision decision;
+  probe(decision, {20, 20, 20}, {10, 10, 10});
+  // From here on the threads take 5 per sample and the calling thread alone 10.
+  int alone = 0;
+  for (int k = 0; k < 64; ++k) {
+    const bool threaded = decision.next_threaded();
+    alone += threaded ? 0 : 1;
+    decision.finished(threaded ? 5.0 : 10.0);
+  }
+  CHECK(alone <= 20);
+  CHECK(decision.next_threaded());
 }
 
 TEST_CASE("sweep threading: Always and Never are never timed", "[bptt][threads]") {
@@ -81,9 +119,10 @@ TEST_CASE("sweep threading: Always and Never are never timed", "[bptt][threads]"
     const bool threaded = policy == SweepThreading::Always;
     Decision decision(policy);
     CHECK(decision.next_threaded(true) == threaded);
-    follow(decision, kProbing + Decision::batches_between + 1, threaded);
-    CHECK(decision.tally().threaded == (threaded ? kProbing + Decision::batches_between + 1 : 0));
-    CHECK(decision.tally().alone == (threaded ? 0 : kProbing + Decision::batches_between + 1));
+    constexpr int batches = kProbing + Decision::longest_between + 1;
+    follow(decision, batches, threaded);
+    CHECK(decision.tally().threaded == (threaded ? batches : 0));
+    CHECK(decision.tally().alone == (threaded ? 0 : batches));
   }
 }
 

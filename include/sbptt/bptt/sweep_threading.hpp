@@ -22,8 +22,9 @@ namespace sbptt {
 /// their threads meet once per call. Results are the same bits whichever way a batch runs.
 enum class SweepThreading {
   /// 3 batches on the threads, then 3 alone, timed; the faster way kept, and timed again after
-  /// a few hundred batches. The first batch of each kind at a batch size runs on the threads,
-  /// untimed: the buffers of that way include those of the other, so that it sizes both.
+  /// 8 batches, then after twice as many each time the choice holds, up to 256. The first batch
+  /// of each kind at a batch size runs on the threads, untimed: the buffers of that way include
+  /// those of the other, so that it sizes both.
   Timed,
   Always,  ///< every such batch on the threads
   /// Every batch of `forward` and `reverse`, and of a pair that shares its backward pass, on
@@ -62,14 +63,20 @@ namespace detail {
 
 /// `SweepThreading::Timed` for one kind of sweep: a probing runs `probes` batches on the
 /// threads, then `probes` on the calling thread, then keeps the way with the least time per
-/// sample (the best of its probes) for `batches_between` batches; then it probes again. The
-/// engine times a batch from its forward pass to the end of its sweep. The threaded probes
+/// sample (the best of its probes) for the next `shortest_between` batches; then it probes
+/// again. Each probing that keeps the previous one's way doubles the batches until the next,
+/// up to `longest_between`; one that changes it goes back to the shortest. A probing can be
+/// misled by a few slow batches (an engine's first probing has timed the threads at 1.76
+/// times their time one probing later, docs/design.md): the short first interval lets the
+/// next probing undo that early, and the longest keeps the probes' cost small in a long run.
+/// The engine times a batch from its forward pass to the end of its sweep. The threaded probes
 /// come in a row so that only the first of them meets workers that slept through batches run
 /// alone (`ThreadPool`'s workers sleep when idle), and the best of three drops that one.
 class SweepThreadingDecision {
 public:
   static constexpr int probes = 3;
-  static constexpr int batches_between = 256;
+  static constexpr int shortest_between = 8;
+  static constexpr int longest_between = 256;
 
   explicit SweepThreadingDecision(SweepThreading policy = SweepThreading::Timed)
       : policy_(policy) {}
@@ -92,9 +99,9 @@ public:
     if (probing()) {
       double& best = best_ns_[threaded ? 1 : 0];
       best = batches_ % probes == 0 ? ns_per_sample : std::min(best, ns_per_sample);
-      if (batches_ + 1 == 2 * probes) threaded_ = best_ns_[1] < best_ns_[0];
+      if (batches_ + 1 == 2 * probes) choose(best_ns_[1] < best_ns_[0]);
     }
-    if (++batches_ == 2 * probes + batches_between) batches_ = 0;
+    if (++batches_ == 2 * probes + between_) batches_ = 0;
   }
 
   /// Counts a batch that ran outside the schedule, `threaded` or not.
@@ -113,11 +120,20 @@ public:
 private:
   [[nodiscard]] bool probing() const { return batches_ < 2 * probes; }
 
+  void choose(bool threaded) {
+    between_ = chosen_ && threaded == threaded_ ? std::min(2 * between_, longest_between)
+                                                : shortest_between;
+    threaded_ = threaded;
+    chosen_ = true;
+  }
+
   SweepThreading policy_;
   SweepTally tally_;
   Index samples_ = 0;       ///< the size of the last batch
   int batches_ = 0;         ///< of the schedule, since the last probing began
   bool threaded_ = true;    ///< the last probing's choice
+  bool chosen_ = false;     ///< a probing has ended
+  int between_ = shortest_between;  ///< batches from the last probing's end to the next
   double best_ns_[2] = {};  ///< per sample, alone and threaded, in the current probing
 };
 

@@ -121,10 +121,8 @@ private:
   [[nodiscard]] bool probing() const { return batches_ < 2 * probes; }
 
   void choose(bool threaded) {
-    between_ = chosen_ && threaded == threaded_ ? std::min(2 * between_, longest_between)
-                                                : shortest_between;
+    between_ = threaded == threaded_ ? std::min(2 * between_, longest_between) : shortest_between;
     threaded_ = threaded;
-    chosen_ = true;
   }
 
   SweepThreading policy_;
@@ -132,8 +130,9 @@ private:
   Index samples_ = 0;       ///< the size of the last batch
   int batches_ = 0;         ///< of the schedule, since the last probing began
   bool threaded_ = true;    ///< the last probing's choice
-  bool chosen_ = false;     ///< a probing has ended
-  int between_ = shortest_between;  ///< batches from the last probing's end to the next
+  /// Batches from the last probing's end to the next; half the shortest before the first
+  /// probing, so that the first ends at the shortest whichever way it chooses.
+  int between_ = shortest_between / 2;
   double best_ns_[2] = {};  ///< per sample, alone and threaded, in the current probing
 };
 

@@ -5,9 +5,10 @@
 # libqhull-dev: Debian's CMake package of MuJoCo names /usr/include/libqhull_r/ as an include
 # directory of mujoco::mujoco without depending on the package that creates it, and CMake
 # refuses a downstream target that links it while the directory is missing.
+# locales: the sources of the German locale that test_train_locale makes with localedef.
 set -euo pipefail
 packages=(cmake make g++ libeigen3-dev catch2 libcli11-dev libmujoco-dev libqhull-dev python3
-          python3-matplotlib "$@")
+          python3-matplotlib locales "$@")
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

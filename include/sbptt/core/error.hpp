@@ -1,6 +1,7 @@
 #pragma once
 /// \file Exception types. The library never prints and never exits: every failure is one of
 /// these, with a message that names the offending value and what was expected.
+#include <locale>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -40,10 +41,13 @@ public:
 
 namespace detail {
 
-/// Streams every argument into one string: `concat("batch = ", b, ", expected > 0")`.
+/// Streams every argument into one string: `concat("batch = ", b, ", expected > 0")`. In the
+/// classic locale, whatever the global one: checkpoints are written with it, and a locale that
+/// groups thousands would write "epoch 1.200".
 template <class... Parts>
 [[nodiscard]] std::string concat(Parts&&... parts) {
   std::ostringstream out;
+  out.imbue(std::locale::classic());
   out.precision(17);
   (out << ... << std::forward<Parts>(parts));
   return out.str();

@@ -103,13 +103,22 @@ template <class Scalar>
   return value;
 }
 
+/// Appends `value` as printf would in the "C" locale with `format` and `precision` (general:
+/// %.<precision>g, fixed: %.<precision>f), whatever the process's locale. The buffer holds any
+/// double in fixed format with up to 8 decimals (a sign, 309 digits, a point).
+template <class Scalar>
+void append_formatted(std::string& out, Scalar value, std::chars_format format, int precision) {
+  char buffer[320];
+  const auto result = std::to_chars(buffer, buffer + sizeof buffer, value, format, precision);
+  require(result.ec == std::errc(), "append_formatted: ", value, " does not fit ", sizeof buffer,
+          " characters with precision ", precision);
+  out.append(buffer, result.ptr);
+}
+
 /// Appends `value` in round-trip precision to `out`.
 template <class Scalar>
 void append_number(std::string& out, Scalar value) {
-  char buffer[64];
-  const auto result = std::to_chars(buffer, buffer + sizeof buffer, value,
-                                    std::chars_format::general, round_trip_digits<Scalar>);
-  out.append(buffer, result.ptr);
+  append_formatted(out, value, std::chars_format::general, round_trip_digits<Scalar>);
 }
 
 }  // namespace sbptt::detail

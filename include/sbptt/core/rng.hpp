@@ -6,6 +6,7 @@
 /// specified `std::mt19937_64` engine and converts the bits itself.
 #include <cmath>
 #include <cstdint>
+#include <locale>
 #include <numbers>
 #include <random>
 #include <sstream>
@@ -35,9 +36,11 @@ public:
   /// The raw 64-bit engine output (for seeding child generators).
   std::uint64_t bits() { return engine_(); }
 
-  /// The engine's whole state as text (the standard's decimal words), for checkpoints.
+  /// The engine's whole state as text (the standard's decimal words, in the classic locale
+  /// whatever the global one), for checkpoints.
   [[nodiscard]] std::string state() const {
     std::ostringstream out;
+    out.imbue(std::locale::classic());
     out << engine_;
     return out.str();
   }
@@ -45,6 +48,7 @@ public:
   /// words after the state included.
   [[nodiscard]] bool restore(const std::string& state) {
     std::istringstream in(state);
+    in.imbue(std::locale::classic());
     std::mt19937_64 engine;
     in >> engine;
     if (in.fail() || !(in >> std::ws).eof()) return false;

@@ -20,13 +20,14 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <cstdio>
+#include <charconv>
 #include <optional>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "sbptt/core/atomic_file.hpp"
+#include "sbptt/core/number_text.hpp"
 
 namespace sbptt {
 
@@ -46,18 +47,26 @@ struct EpochRecord {
 inline constexpr const char* training_log_header =
     "epoch,batch_loss,train_loss,test_loss,update_norm2,cos_m_r,agree_fraction,seconds";
 
-/// One CSV row of the log, with its newline.
+/// One CSV row of the log, with its newline: the epoch, then %.17g, %.17g, %.17g, %.9g, %.9g,
+/// %.9g and %.6f as printf writes them in the "C" locale, whatever the process's locale (a
+/// decimal comma would break the CSV).
 [[nodiscard]] inline std::string training_log_row(const EpochRecord& r) {
-  auto field = [](const std::optional<double>& v, const char* format) {
-    char text[40] = "";
-    if (v) std::snprintf(text, sizeof text, format, *v);
-    return std::string(text);
+  using detail::append_formatted;
+  constexpr auto general = std::chars_format::general;
+  std::string line = std::to_string(r.epoch);
+  auto field = [&](const std::optional<double>& v, int digits) {
+    line += ',';
+    if (v) append_formatted(line, *v, general, digits);
   };
-  char line[512];
-  std::snprintf(line, sizeof line, "%ld,%.17g,%s,%s,%.9g,%s,%s,%.6f\n", r.epoch, r.batch_loss,
-                field(r.train_loss, "%.17g").c_str(), field(r.test_loss, "%.17g").c_str(),
-                r.update_norm2, field(r.cos_m_r, "%.9g").c_str(),
-                field(r.agree_fraction, "%.9g").c_str(), r.seconds);
+  field(r.batch_loss, 17);
+  field(r.train_loss, 17);
+  field(r.test_loss, 17);
+  field(r.update_norm2, 9);
+  field(r.cos_m_r, 9);
+  field(r.agree_fraction, 9);
+  line += ',';
+  append_formatted(line, r.seconds, std::chars_format::fixed, 6);
+  line += '\n';
   return line;
 }
 

@@ -296,6 +296,60 @@ TEST_CASE("run: a checkpoint of other settings is refused, naming the setting", 
                     Catch::Contains("train set"));
 }
 
+TEST_CASE("run: a set of the wrong shape is refused before the log is replaced or on_start",
+          "[train]") {
+  const fs::path log = scratch("shape.csv");
+  const std::string earlier = "a log of another run\n";
+  RunSettings settings;
+  settings.log_csv = log.string();
+  RunCallbacks callbacks;
+  bool started = false;
+  callbacks.on_start = [&](long) { started = true; };
+  const Matrix<double> good = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  const Matrix<double> two_rows = Matrix<double>::Constant(2, 6, 0.5);  // the state is 1 × 1
+  for (const long epochs : {3L, 0L}) {  // with no epoch to run, too
+    settings.epochs = epochs;
+    std::ofstream(log, std::ios::binary | std::ios::trunc) << earlier;
+    Setup<double> s(Method::Regular);
+    CHECK_THROWS_WITH(run_training(s.trainer, two_rows, test, settings, callbacks),
+                      "run_training: the train set has 2 rows; expected the state dimension 1");
+    CHECK_THROWS_WITH(run_training(s.trainer, good, two_rows, settings, callbacks),
+                      "run_training: the test set has 2 rows; expected the state dimension 1");
+    CHECK_THROWS_WITH(run_training(s.trainer, Matrix<double>(1, 0), test, settings, callbacks),
+                      "run_training: the train set has 0 samples; expected at least 1");
+    CHECK_FALSE(started);
+    CHECK(file_text(log) == earlier);
+  }
+}
+
+TEST_CASE("run: a double checkpoint resumed in float is refused for its scalar, not parsed",
+          "[train]") {
+  // Adam's second moments of vanishing gradients can be far below float's range (1e-50); a
+  // float run must name the setting that differs, not call the number out of range.
+  const fs::path checkpoint = scratch("scalar.checkpoint");
+  fs::remove(checkpoint);
+  RunSettings settings;
+  settings.epochs = 2;
+  settings.checkpoint = checkpoint.string();
+  Setup<double> first(Method::Regular, 3);
+  run_training(first.trainer, spread<double>(6, -1.0), spread<double>(2, 0.2), settings);
+  std::string text = file_text(checkpoint);
+  const std::size_t moments = text.find("\nadam_v ");
+  REQUIRE(moments != std::string::npos);
+  const std::size_t value = text.find('\n', moments + 1) + 1;
+  text.replace(value, text.find('\n', value) - value, "1e-50");
+  std::ofstream(checkpoint, std::ios::binary | std::ios::trunc) << text;
+  REQUIRE_NOTHROW(parse_checkpoint<double>(file_text(checkpoint), "scalar.checkpoint"));
+
+  Setup<float> resumed(Method::Regular, 3);
+  CHECK_THROWS_AS(run_training(resumed.trainer, spread<float>(6, -1.0f), spread<float>(2, 0.2f),
+                               settings),
+                  InvalidArgument);
+  CHECK_THROWS_WITH(run_training(resumed.trainer, spread<float>(6, -1.0f),
+                                 spread<float>(2, 0.2f), settings),
+                    Catch::Contains("was made with scalar = double; this run has scalar = float"));
+}
+
 TEST_CASE("run: a checkpoint or log changed by hand is refused before any work, naming what",
           "[train]") {
   // A run of 4 epochs with its checkpoint and log; each case edits one line of the checkpoint

@@ -26,6 +26,7 @@
 #include <cerrno>
 #include <cstdint>
 #include <cstdio>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <string>
@@ -204,9 +205,17 @@ template <class Scalar>
   return text + "end\n";
 }
 
-/// Parses `checkpoint_text`; `path` names the file in errors (`ParseError`).
+/// What a caller checks of a checkpoint's settings before its numbers are read: a checkpoint of
+/// another run is refused for the setting that differs (the scalar type, say), not for a number
+/// that the other run could write and this one cannot read.
+using CheckpointSettingsCheck = std::function<void(const std::vector<RunSetting>&)>;
+
+/// Parses `checkpoint_text`; `path` names the file in errors (`ParseError`). `check_settings`,
+/// if set, sees the settings before any number is parsed.
 template <class Scalar>
-[[nodiscard]] Checkpoint<Scalar> parse_checkpoint(std::string_view text, const std::string& path) {
+[[nodiscard]] Checkpoint<Scalar> parse_checkpoint(std::string_view text, const std::string& path,
+                                                  const CheckpointSettingsCheck& check_settings =
+                                                      {}) {
   detail::CheckpointReader in(text, path);
   detail::require<ParseError>(in.next() == detail::checkpoint_magic, "'", path,
                               "' is not an sbptt checkpoint (its first line is not '",
@@ -220,6 +229,7 @@ template <class Scalar>
     c.settings.push_back(
         {std::string(setting.substr(0, equals)), std::string(setting.substr(equals + 1))});
   }
+  if (check_settings) check_settings(c.settings);
   c.epoch = in.integer("epoch");
   c.shuffle_state = std::string(in.value("shuffle"));
   detail::require<ParseError>(Rng(0).restore(c.shuffle_state), in.where(),
@@ -330,9 +340,11 @@ void save_checkpoint(const std::string& path, const Checkpoint<Scalar>& c) {
 }
 
 /// Loads the checkpoint at `path`, or nothing when no file is there. Throws `IoError` when it
-/// cannot be read and `ParseError` when it is not a complete checkpoint.
+/// cannot be read and `ParseError` when it is not a complete checkpoint; `check_settings` as in
+/// `parse_checkpoint`.
 template <class Scalar>
-[[nodiscard]] std::optional<Checkpoint<Scalar>> load_checkpoint(const std::string& path) {
+[[nodiscard]] std::optional<Checkpoint<Scalar>> load_checkpoint(
+    const std::string& path, const CheckpointSettingsCheck& check_settings = {}) {
   std::FILE* file = std::fopen(path.c_str(), "rb");
   if (file == nullptr && errno == ENOENT) return std::nullopt;
   detail::require<IoError>(file != nullptr, "cannot read checkpoint '", path, "': ",
@@ -344,7 +356,7 @@ template <class Scalar>
   const bool failed = std::ferror(file) != 0;
   std::fclose(file);
   detail::require<IoError>(!failed, "reading checkpoint '", path, "' failed");
-  return parse_checkpoint<Scalar>(text, path);
+  return parse_checkpoint<Scalar>(text, path, check_settings);
 }
 
 }  // namespace sbptt

@@ -140,6 +140,7 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   using Scalar = typename TrainerT::Scalar;
   using Optimizer = std::remove_cvref_t<decltype(trainer.optimizer())>;
   using Ctrl = std::remove_cvref_t<decltype(trainer.controller())>;
+  trainer.check_sets(train, test, "run_training");
   detail::require(settings.epochs >= 0, "run_training: epochs = ", settings.epochs,
                   "; expected >= 0");
   detail::require(settings.evaluate_every >= 1, "run_training: evaluate_every = ",
@@ -211,10 +212,13 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   long since_best = 0;
   std::optional<TrainingLogFile> log;
   std::optional<Checkpoint<Scalar>> resumed;
-  if (!settings.checkpoint.empty()) resumed = load_checkpoint<Scalar>(settings.checkpoint);
+  if (!settings.checkpoint.empty()) {
+    resumed = load_checkpoint<Scalar>(settings.checkpoint, [&](const auto& found) {
+      require_same_settings(identity, found, settings.checkpoint, settings.setting_names);
+    });
+  }
   if (resumed) {
     const bool fresh = trainer.epoch() == 0;
-    require_same_settings(identity, resumed->settings, settings.checkpoint, settings.setting_names);
     detail::require<ParseError>(resumed->params.size() == params.size(), "checkpoint '",
                                 settings.checkpoint, "' has ", resumed->params.size(),
                                 " parameters; expected ", params.size());

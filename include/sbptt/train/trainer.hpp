@@ -157,8 +157,7 @@ public:
   /// epoch.
   EpochRecord train_epoch(const Matrix<Scalar>& train, const Matrix<Scalar>& test,
                           bool evaluate = true) {
-    check_set(train, "train", 1);
-    check_set(test, "test", 0);
+    check_sets(train, test, "Trainer::train_epoch");
     EpochRecord record;
     record.epoch = ++epoch_;
     events_.clear();
@@ -234,14 +233,22 @@ public:
   }
   [[nodiscard]] const TrainerOptions& options() const { return options_; }
 
-private:
-  void check_set(const Matrix<Scalar>& set, const char* name, Index min_samples) const {
-    detail::require(set.cols() >= min_samples, "Trainer::train_epoch: the ", name,
-                    " set has ", set.cols(), " samples; expected at least ", min_samples);
-    detail::require(set.cols() == 0 || set.rows() == state_dim_,
-                    "Trainer::train_epoch: the ", name, " set has ", set.rows(),
-                    " rows; expected the state dimension ", state_dim_);
+  /// Throws `InvalidArgument`, in `caller`'s name, unless `train` is state_dim × N with N ≥ 1
+  /// and `test` state_dim × M (M = 0: no test set), as `train_epoch` needs them.
+  void check_sets(const Matrix<Scalar>& train, const Matrix<Scalar>& test,
+                  const char* caller) const {
+    auto check = [&](const Matrix<Scalar>& set, const char* name, Index min_samples) {
+      detail::require(set.cols() >= min_samples, caller, ": the ", name, " set has ", set.cols(),
+                      " samples; expected at least ", min_samples);
+      detail::require(set.cols() == 0 || set.rows() == state_dim_, caller, ": the ", name,
+                      " set has ", set.rows(), " rows; expected the state dimension ",
+                      state_dim_);
+    };
+    check(train, "train", 1);
+    check(test, "test", 0);
   }
+
+private:
 
   void gather(const Matrix<Scalar>& set, Index k, Matrix<Scalar>& out) const {
     const Index first = k * options_.batch;

@@ -280,7 +280,10 @@ TEST_CASE("trainer: a skipped batch leaves no trace in the parameters or in Adam
   const EpochRecord record = with_skip.train_epoch(samples({0.5, -1.0, 1.5}), samples({1.0}));
   without.train_epoch(samples({0.5, 1.5}), samples({1.0}));
   REQUIRE(with_skip.last_non_finite());
-  CHECK(with_skip.last_non_finite()->where.quantity == Quantity::Gradient);
+  // The gradient was finite: the step made the parameter infinite, and the report says so.
+  CHECK(with_skip.last_non_finite()->where.quantity == Quantity::Parameter);
+  CHECK(describe(*with_skip.last_non_finite()) ==
+        "non-finite parameter (inf) in epoch 1, batch 1, parameter 0");
   CHECK(with_skip.last_non_finite()->where.sample == 0);
   CHECK(with_skip.last_non_finite()->batch == 1);
   CHECK_FALSE(with_skip.stopped());

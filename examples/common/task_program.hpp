@@ -89,7 +89,7 @@ int dump_gradients(const TaskOptions& o, const Sim& sim, Ctrl& controller,
   const std::pair<const char*, const Vector<Scalar>*> columns[] = {
       {"R", &regular}, {"M", &modified}, {"C", &combined}, {"S", &stopped}, {"N", &network}};
   for (const auto& [column, values] : columns)
-    if (const auto where = detail::first_non_finite_component(*values))
+    if (const auto where = detail::first_non_finite_component(*values, Quantity::Gradient))
       return refuse(detail::concat(column, " gradient"), "in the reverse sweep", *where);
   std::string text = "param,R,M,C,S,N\n";
   for (Index p = 0; p < regular.size(); ++p) {

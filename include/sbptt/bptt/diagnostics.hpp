@@ -12,8 +12,9 @@
 
 namespace sbptt {
 
-/// The kind of value that first turned NaN or Inf.
-enum class Quantity { Loss, State, Control, Adjoint, Gradient };
+/// The kind of value that first turned NaN or Inf. `Parameter`: a parameter that the
+/// optimizer's step made NaN or Inf from a finite gradient (a learning rate too large, say).
+enum class Quantity { Loss, State, Control, Adjoint, Gradient, Parameter };
 
 [[nodiscard]] constexpr std::string_view to_string(Quantity quantity) {
   switch (quantity) {
@@ -22,12 +23,14 @@ enum class Quantity { Loss, State, Control, Adjoint, Gradient };
     case Quantity::Control: return "control";
     case Quantity::Adjoint: return "adjoint";
     case Quantity::Gradient: return "gradient";
+    case Quantity::Parameter: return "parameter";
   }
   return "?";
 }
 
 /// Where the first non-finite value appeared. `step` is the time index n of the state x_n,
-/// control c_n or adjoint λ_n; for a Gradient it is -1 and `sample` is the parameter index.
+/// control c_n or adjoint λ_n; for a Gradient or a Parameter it is -1 and `sample` is the
+/// parameter index.
 struct NonFinite {
   Quantity quantity = Quantity::Loss;
   Index step = -1;

@@ -53,12 +53,13 @@ template <class Part>
   return first != nullptr ? first->value : std::nullopt;
 }
 
-/// The first non-finite component of a gradient or parameter vector (step −1, `sample` =
-/// parameter index).
+/// The first non-finite component of a gradient or parameter vector, reported as `quantity`
+/// (step −1, `sample` = parameter index).
 template <class Scalar>
-[[nodiscard]] std::optional<NonFinite> first_non_finite_component(const Vector<Scalar>& g) {
+[[nodiscard]] std::optional<NonFinite> first_non_finite_component(const Vector<Scalar>& g,
+                                                                  Quantity quantity) {
   if (const auto at = first_non_finite(g))
-    return NonFinite{Quantity::Gradient, -1, at->row, static_cast<double>(g(at->row))};
+    return NonFinite{quantity, -1, at->row, static_cast<double>(g(at->row))};
   return std::nullopt;
 }
 
@@ -97,7 +98,7 @@ struct SweepBuffers {
     const Scalar squares = gradient.squaredNorm();
     diagnostics.grad_norm2 = static_cast<double>(squares);
     if (!diagnostics.first_non_finite && !squares_show_all_finite(squares))
-      diagnostics.first_non_finite = first_non_finite_component(gradient);
+      diagnostics.first_non_finite = first_non_finite_component(gradient, Quantity::Gradient);
   }
 };
 

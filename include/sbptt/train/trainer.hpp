@@ -73,13 +73,13 @@ enum class Phase { Update, TrainEvaluation, TestEvaluation };
 struct NonFiniteEvent {
   long epoch = 0;
   Index batch = 0;  ///< index of the mini-batch within the epoch; -1 in an evaluation
-  NonFinite where;  ///< quantity, step and sample (for a gradient: the parameter index)
+  NonFinite where;  ///< quantity, step and sample (for a gradient or a parameter: its index)
   Phase phase = Phase::Update;
 };
 
-/// ", step 9, sample 0", or ", parameter 3" for a gradient.
+/// ", step 9, sample 0", or ", parameter 3" for a gradient or a parameter.
 [[nodiscard]] inline std::string describe_where(const NonFinite& where) {
-  return where.quantity == Quantity::Gradient
+  return where.quantity == Quantity::Gradient || where.quantity == Quantity::Parameter
              ? detail::concat(", parameter ", where.sample)
              : detail::concat(", step ", where.step, ", sample ", where.sample);
 }
@@ -308,7 +308,9 @@ private:
         last_norm2_ = clipped_.last_norm2();
       }
     }
-    if (!bad) bad = detail::first_non_finite_component(controller_.params());
+    if (!bad) {
+      bad = detail::first_non_finite_component(controller_.params(), Quantity::Parameter);
+    }
     if (bad) {
       controller_.params() = backup_;
       optimizer() = saved_optimizer_;

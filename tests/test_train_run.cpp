@@ -296,6 +296,37 @@ TEST_CASE("run: a checkpoint of other settings is refused, naming the setting", 
                     Catch::Contains("train set"));
 }
 
+TEST_CASE("run: the skipped batches of an epoch that ends the run are not counted",
+          "[train]") {
+  // With skip-batch an epoch whose evaluation is non-finite after a skipped batch ends the
+  // run, undone: the result counts the skipped batches of the completed epochs only, as it
+  // counts their epochs.
+  RunSettings settings;
+  settings.epochs = 20;
+  std::vector<NonFiniteEvent> events;
+  std::vector<bool> skipped;
+  RunCallbacks callbacks;
+  callbacks.on_non_finite = [&](const NonFiniteEvent& e, bool was_skipped) {
+    events.push_back(e);
+    skipped.push_back(was_skipped);
+  };
+  Setup<double> s(Method::Regular, 3, 1e6, NonFinitePolicy::SkipBatch);
+  const auto result =
+      run_training(s.trainer, spread<double>(6, -1.0), spread<double>(2, 0.2), settings, callbacks);
+  REQUIRE(result.end == RunEnd::NonFinite);
+  const long last = result.stop_event->epoch;
+  long batches_in_last = 0, counted = 0;
+  for (std::size_t i = 0; i < events.size(); ++i) {
+    if (events[i].epoch == last && events[i].phase == Phase::Update) {
+      CHECK(skipped[i]);  // the batch was skipped; the stop follows
+      ++batches_in_last;
+    }
+    if (skipped[i] && events[i].epoch != last) ++counted;
+  }
+  REQUIRE(batches_in_last >= 1);  // the case this test is about
+  CHECK(result.skipped_batches == counted);
+}
+
 TEST_CASE("run: a set of the wrong shape is refused before the log is replaced or on_start",
           "[train]") {
   const fs::path log = scratch("shape.csv");

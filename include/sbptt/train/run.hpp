@@ -84,7 +84,9 @@ struct RunSettings {
 struct RunCallbacks {
   std::function<void(long epoch)> on_resume{};  ///< a checkpoint of `epoch` epochs was loaded
   std::function<void(const EpochRecord&)> on_epoch{};  ///< after the row of each epoch is logged
-  /// Each non-finite event; `skipped` says that the batch was skipped and training goes on.
+  /// Each non-finite event; `skipped` says that the batch was skipped. Training goes on unless
+  /// the epoch then ends the run (`RunEnd::NonFinite`: no batch of it was finite, or its
+  /// evaluation was not), which undoes the epoch.
   std::function<void(const NonFiniteEvent&, bool skipped)> on_non_finite{};
   /// Asked after each epoch; true ends the run (`RunEnd::Requested`) after its checkpoint.
   std::function<bool(const EpochRecord&)> should_stop{};
@@ -108,7 +110,7 @@ struct RunResult {
   long best_epoch = 0;                ///< 0 when nothing was evaluated
   double best_loss = 0;
   Vector<Scalar> best_params;         ///< empty when nothing was evaluated
-  long skipped_batches = 0;
+  long skipped_batches = 0;           ///< of the completed epochs (not of an undone one)
   std::optional<NonFiniteEvent> stop_event;  ///< the event that stopped the run (NonFinite)
   std::string output_error;           ///< what failed to be written (OutputFailed)
   std::string saved_params;           ///< path the final parameters were saved to, if any
@@ -302,7 +304,8 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
     for (const NonFiniteEvent& event : events) {
       const bool skipped =
           event.phase == Phase::Update && o.on_non_finite == NonFinitePolicy::SkipBatch;
-      if (skipped) ++result.skipped_batches;
+      // A stopped epoch is undone, like its count of skipped batches.
+      if (skipped && !stopped) ++result.skipped_batches;
       if (callbacks.on_non_finite) callbacks.on_non_finite(event, skipped);
     }
     if (stopped) {

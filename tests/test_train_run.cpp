@@ -226,6 +226,29 @@ TEST_CASE("checkpoint: an epoch whose squared update norm overflowed reads back"
   CHECK_THROWS_AS(parse_checkpoint<double>(checkpoint_text(c), "test.checkpoint"), ParseError);
 }
 
+TEST_CASE("checkpoint: the last record's epoch is a whole number in range, or refused",
+          "[train]") {
+  // 1.5 was read as epoch 1, and 1e300 converted to a long out of its range (undefined).
+  Checkpoint<double> c;
+  c.shuffle_state = Rng(1).state();
+  c.epoch = 1;
+  c.last = EpochRecord{};
+  c.last->epoch = 1;
+  const std::string text = checkpoint_text(c);
+  REQUIRE_NOTHROW(parse_checkpoint<double>(text, "test.checkpoint"));
+  for (const auto& [epoch, expected] :
+       {std::pair{"1.5", "expected a whole number for 'epoch of last'"},
+        std::pair{"1e300", "e+300; expected 0 to 1000000000000000"},
+        std::pair{"-1e300", "e+300; expected 0 to 1000000000000000"},
+        std::pair{"1e19", "epoch of last 1e+19; expected 0 to 1000000000000000"}}) {
+    std::string spoiled = text;
+    spoiled.replace(spoiled.find("\nlast 1 ") + 6, 1, epoch);
+    INFO(spoiled.substr(spoiled.find("\nlast"), 40));
+    CHECK_THROWS_WITH(parse_checkpoint<double>(spoiled, "test.checkpoint"),
+                      Catch::Contains(expected));
+  }
+}
+
 TEST_CASE("checkpoint: an error names the line that is wrong, whichever it is", "[train]") {
   // Every line but the first (the magic line has its own message) is spoiled in turn: a
   // number becomes 'x', a key's value becomes 'x'. The message must name that line; numbers

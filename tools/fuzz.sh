@@ -23,7 +23,7 @@ if [ -z "${FUZZ_CXX:-}" ]; then bash tools/setup.sh clang-14 libclang-rt-14-dev;
 cmake -S . -B "$build" -DCMAKE_CXX_COMPILER="$cxx" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -gline-tables-only" \
   -DSBPTT_FUZZ=ON -DSBPTT_BUILD_TESTS=OFF -DSBPTT_BUILD_EXAMPLES=OFF >/dev/null
-targets=(fuzz_parameters fuzz_states)
+targets=(fuzz_parameters fuzz_states fuzz_checkpoint)
 cmake --build "$build" -j "$jobs" --target "${targets[@]}"
 
 export ASAN_OPTIONS="detect_leaks=1:abort_on_error=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}"
@@ -31,10 +31,13 @@ export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1${UBSAN_OPTIONS:+:$UBSAN
 mkdir -p "$build/fuzz/artifacts"
 run() {  # run <target>: fuzz one target for $seconds, log to <build>/fuzz/<target>.log
   local target=$1 name=${1#fuzz_}
+  # A checkpoint holds the shuffling generator's 313 numbers (about 6.5 KB) before the rest.
+  local max_len=4096
+  [ "$name" = checkpoint ] && max_len=16384
   mkdir -p "$build/fuzz/corpus/$name"
   "$build/tests/fuzz/$target" "$build/fuzz/corpus/$name" "$root/tests/fuzz/corpus/$name" \
     -dict="$root/tests/fuzz/numbers.dict" -max_total_time="$seconds" -timeout=10 \
-    -max_len=4096 -rss_limit_mb=2048 -print_final_stats=1 \
+    -max_len="$max_len" -rss_limit_mb=2048 -print_final_stats=1 \
     -artifact_prefix="$build/fuzz/artifacts/$target-" >"$build/fuzz/$target.log" 2>&1
 }
 

@@ -24,6 +24,7 @@
 /// and on disk, or not there.
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <functional>
@@ -84,6 +85,18 @@ inline void append_optional(std::string& text, const std::optional<double>& valu
   }
 }
 
+/// `text` as a whole number in [low, high] (`name` names it in errors): the range is checked
+/// before the conversion, which is undefined for a double beyond a long's range.
+inline long whole_number(std::string_view text, const std::string& where, std::string_view name,
+                         double low, double high) {
+  const double number = parse_finite<double>(text, where);
+  require<ParseError>(number == std::floor(number), where, ": expected a whole number for '",
+                      name, "'");
+  require<ParseError>(number >= low && number <= high, where, ": ", name, " ", number,
+                      "; expected ", low, " to ", high);
+  return static_cast<long>(number);
+}
+
 /// Reads a checkpoint's lines in order, with errors naming the file and the line.
 class CheckpointReader {
 public:
@@ -114,12 +127,7 @@ public:
   /// A whole number in [low, high]: a value the run could not have written is damage.
   long integer(std::string_view key, double low = 0, double high = 1e15) {
     const std::string_view text = value(key);
-    const double number = parse_finite<double>(text, where());
-    require<ParseError>(number == static_cast<double>(static_cast<long long>(number)), where(),
-                        ": expected a whole number for '", key, "'");
-    require<ParseError>(number >= low && number <= high, where(), ": ", key, " ", number,
-                        "; expected ", low, " to ", high);
-    return static_cast<long>(number);
+    return whole_number(text, where(), key, low, high);
   }
 
   template <class Scalar>
@@ -252,7 +260,7 @@ template <class Scalar>
                                 " fields; expected 8");
     EpochRecord r;
     const std::string where = in.where();
-    r.epoch = static_cast<long>(detail::parse_finite<double>(fields[0], where));
+    r.epoch = detail::whole_number(fields[0], where, "epoch of last", 0, 1e15);
     r.batch_loss = detail::parse_finite<double>(fields[1], where);
     r.train_loss = detail::optional_field(fields[2], where);
     r.test_loss = detail::optional_field(fields[3], where);

@@ -11,7 +11,9 @@
 /// 3. the best loss so far is updated (test loss, or train loss without a test set);
 /// 4. the row is appended to the log, then `on_epoch` is called;
 /// 5. a checkpoint is written when e is a multiple of `checkpoint_every`, when
-///    `checkpoint_seconds` have passed since the last one, and after the last epoch;
+///    `checkpoint_seconds` have passed since the last one, when the run stops early (patience,
+///    `should_stop`), and after the last epoch (not after a non-finite stop: the checkpoint
+///    before it stays);
 /// 6. the run stops early after `patience` evaluations without a better loss.
 /// With `evaluate_beside`, an evaluated epoch e (but the last) is evaluated on a second thread
 /// while epoch e+1 trains; steps 2 to 6 of epoch e follow, then those of e+1 unless e ended

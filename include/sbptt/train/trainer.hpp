@@ -49,8 +49,9 @@ struct TrainerOptions {
   Index truncation = 0;           ///< window K of the reverse sweep; 0 = none
   NonFinitePolicy on_non_finite = NonFinitePolicy::Stop;
   /// Threads of the engine (≥ 1, see `Engine::set_threads`): per-sample simulator work, the
-  /// two sweeps of C at once, and the evaluation in chunks. Results are bitwise identical for
-  /// every thread count.
+  /// two sweeps of C at once (or, with one control, their shared backward passes split by
+  /// steps), and the evaluation in chunks. Results are bitwise identical for every thread
+  /// count.
   Index threads = 1;
   /// With threads, whether a batch whose sweep meets the other thread at every step uses them
   /// (`SweepThreading`; by default timed against one thread now and then).

@@ -194,7 +194,8 @@ inline void require_float_range(const char* flag, double value) {
       task == Task::Mujoco ? "the MuJoCo scene of --model (docs/mujoco.md)" : "the paper's task",
       " with the chosen gradient (docs/programs.md). Exit codes: 0 success, 1 error, 2 bad "
       "flag, 3 a non-finite value stopped training",
-      task == Task::Mujoco ? " or --check-derivatives found an error that is not finite." : "."));
+      task == Task::Mujoco ? " or --check-derivatives found an error that is not finite" : "",
+      ", 130 after SIGINT and 143 after SIGTERM stopped training (its checkpoint kept)."));
   cli.value("--method", "R|M|C|S|N",
             "gradient: regular, modified, combined, stopped, network-only (long names and "
             "full/physics/stop work too)", "C",
@@ -221,8 +222,9 @@ inline void require_float_range(const char* flag, double value) {
                                                         "' is unknown; expected stop or skip-batch"));
             });
   cli.value("--steps", "N",
-            detail::concat("time steps; alone it keeps dt and changes T; an integer in [1, ", many,
-                           "]"),
+            detail::concat(task == Task::Toy ? "steps of the map, the horizon"
+                                             : "time steps; alone it keeps dt and changes T",
+                           "; an integer in [1, ", many, "]"),
             std::to_string(paper.steps),
             [&](const std::string& text) { steps = parse_integer("--steps", text, 1, many); });
   if (task == Task::Toy) {
@@ -359,7 +361,7 @@ inline void require_float_range(const char* flag, double value) {
                       "expected ", mode, " without ", flag);
   };
   if (!o.dump_gradients.empty())
-    refuse("--dump-gradients", "evaluates the parameters without training", {});
+    refuse("--dump-gradients", "evaluates the parameters without training", {"--threads"});
   if (o.check_derivatives)
     refuse("--check-derivatives", "checks the model's Jacobians at 5 states without a controller",
            {"--dump-gradients", "--init-params", "--init-states", "--target", "--samples",

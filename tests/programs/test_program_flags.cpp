@@ -186,13 +186,25 @@ TEST_CASE("--dump-gradients of a blown-up state reports it, exits 3 and writes n
   CHECK(!fs::exists(dump));
 }
 
+TEST_CASE("--help of the task programs lists every exit code they can end with",
+          "[programs]") {
+  for (const std::string program : {"toy", "cartpole", "guidance", "quantum", "mujoco"}) {
+    const Result r = run(program, "--help");
+    INFO(program << " --help\n" << r.output);
+    REQUIRE(r.status == 0);
+    for (const std::string code : {"0 success", "1 error", "2 bad flag", "3 a non-finite value",
+                                   "130 after SIGINT", "143 after SIGTERM"})
+      CHECK(r.output.find(code) != std::string::npos);
+  }
+}
+
 TEST_CASE("--dump-gradients refuses the flags of training instead of ignoring them",
           "[programs]") {
   const std::string dump = "--dump-gradients " + scratch("refused.csv").string();
   for (const std::string& flag : {std::string("--epochs 5"), "--csv " + scratch("refused_log.csv").string(),
                                  "--save-params " + scratch("refused.params").string(),
                                  std::string("--lr 0.1"), std::string("--method R"),
-                                 std::string("--evaluate-beside")}) {
+                                 std::string("--evaluate-beside"), std::string("--threads 2")}) {
     const Result r = run("toy", dump + " " + flag);
     INFO(flag << "\n" << r.output);
     CHECK(r.status == 2);

@@ -193,7 +193,7 @@ TEST_CASE("--help of the task programs lists every exit code they can end with",
     INFO(program << " --help\n" << r.output);
     REQUIRE(r.status == 0);
     for (const std::string code : {"0 success", "1 error", "2 bad flag", "3 a non-finite value",
-                                   "130 after SIGINT", "143 after SIGTERM"})
+                                   "130 and 143 after SIGINT and SIGTERM"})
       CHECK(r.output.find(code) != std::string::npos);
   }
 }

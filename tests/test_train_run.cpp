@@ -350,6 +350,31 @@ TEST_CASE("run: the skipped batches of an epoch that ends the run are not counte
   CHECK(result.skipped_batches == counted);
 }
 
+TEST_CASE("run: a checkpoint cut among its settings is incomplete, not another run's",
+          "[train]") {
+  // The settings are compared before the numbers are read; a file cut among them must still
+  // be called incomplete (exit 1 in the programs), not a checkpoint of other settings (exit 2).
+  const fs::path checkpoint = scratch("cut_settings.checkpoint");
+  fs::remove(checkpoint);
+  RunSettings settings;
+  settings.epochs = 2;
+  settings.checkpoint = checkpoint.string();
+  settings.identity = {{"--poles", "2"}};
+  Setup<double> first(Method::Regular, 3);
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  run_training(first.trainer, train, test, settings);
+  const std::string whole = file_text(checkpoint);
+  const std::size_t settings_end = whole.find("\nepoch ") + 1;
+  for (std::size_t cut = whole.find('\n') + 1; cut < settings_end; cut += 7) {
+    std::ofstream(checkpoint, std::ios::binary | std::ios::trunc) << whole.substr(0, cut);
+    INFO("cut after " << cut << " bytes: '" << whole.substr(0, cut) << "'");
+    Setup<double> again(Method::Regular, 3);
+    RunSettings longer = settings;
+    longer.epochs = 3;
+    CHECK_THROWS_AS(run_training(again.trainer, train, test, longer), ParseError);
+  }
+}
+
 TEST_CASE("run: a set of the wrong shape is refused before the log is replaced or on_start",
           "[train]") {
   const fs::path log = scratch("shape.csv");

@@ -237,6 +237,9 @@ template <class Scalar>
     c.settings.push_back(
         {std::string(setting.substr(0, equals)), std::string(setting.substr(equals + 1))});
   }
+  // The settings are whole only where the epoch line follows them: a file cut among them is
+  // incomplete (value throws), not a checkpoint of other settings.
+  if (!in.at("epoch")) (void)in.value("epoch");
   if (check_settings) check_settings(c.settings);
   c.epoch = in.integer("epoch");
   c.shuffle_state = std::string(in.value("shuffle"));

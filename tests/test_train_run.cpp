@@ -350,6 +350,34 @@ TEST_CASE("run: the skipped batches of an epoch that ends the run are not counte
   CHECK(result.skipped_batches == counted);
 }
 
+TEST_CASE("files opened while stderr is closed do not take its number", "[train]") {
+  // A program started with `2>&-`: the first file it opened got fd 2, and every message meant
+  // for stderr landed in its training log (found by a fault probe of the task programs).
+  const fs::path log = scratch("closed_stderr.csv"), other = scratch("closed_stderr.txt");
+  fs::remove(log);
+  const int saved = ::dup(2);
+  REQUIRE(saved >= 0);
+  ::close(2);
+  bool wrote = false;
+  try {
+    TrainingLogFile file = TrainingLogFile::create(log.string());
+    AtomicFile atomic(other.string());
+    const char message[] = "a message for stderr\n";
+    wrote = ::write(2, message, sizeof message - 1) > 0;
+    atomic.write("content\n");
+    atomic.commit();
+  } catch (...) {
+    ::dup2(saved, 2);
+    ::close(saved);
+    throw;
+  }
+  ::dup2(saved, 2);
+  ::close(saved);
+  CHECK_FALSE(wrote);
+  CHECK(file_text(log) == std::string(training_log_header) + "\n");
+  CHECK(file_text(other) == "content\n");
+}
+
 TEST_CASE("run: a checkpoint cut among its settings is incomplete, not another run's",
           "[train]") {
   // The settings are compared before the numbers are read; a file cut among them must still

@@ -187,7 +187,8 @@ private:
     const auto argv = command_line(run, bin_dir_, runs_, options_.threads);
     // Like the CSV, the log gets its final name only when the run has finished.
     const fs::path log = run_file(runs_, run, ".partial.log");
-    const int log_fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    const int log_fd = sbptt::detail::open_above_standard_streams(
+        log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (log_fd < 0) throw sbptt::IoError(concat("cannot write '", log.string(), "'"));
     std::string command = "#";
     for (const auto& a : argv) command += " " + a;

@@ -14,6 +14,7 @@
 #include <string>
 #include <utility>
 
+#include <sbptt/core/atomic_file.hpp>
 #include <sbptt/core/error.hpp>
 
 #include "text.hpp"
@@ -40,7 +41,8 @@ public:
   /// holds it.
   static FileLock take(const fs::path& path, bool wait) {
     FileLock lock;
-    lock.fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    lock.fd_ = sbptt::detail::open_above_standard_streams(path.c_str(),
+                                                          O_RDWR | O_CREAT | O_CLOEXEC, 0644);
     if (lock.fd_ < 0)
       throw sbptt::IoError(concat("cannot open the lock file '", path.string(), "': ",
                                   std::strerror(errno)));

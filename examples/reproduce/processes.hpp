@@ -22,6 +22,8 @@
 #include <string>
 #include <vector>
 
+#include <sbptt/core/atomic_file.hpp>
+
 #include "stop_signals.hpp"
 #include "text.hpp"
 
@@ -48,7 +50,7 @@ inline pid_t spawn(const std::vector<std::string>& argv, int log_fd, bool search
   std::vector<char*> pointers;
   for (const auto& a : argv) pointers.push_back(const_cast<char*>(a.c_str()));
   pointers.push_back(nullptr);
-  const int null_fd = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
+  const int null_fd = sbptt::detail::open_above_standard_streams("/dev/null", O_RDONLY | O_CLOEXEC);
   const pid_t parent = ::getpid();
   const pid_t pid = ::fork();
   if (pid == 0) {
@@ -61,10 +63,15 @@ inline pid_t spawn(const std::vector<std::string>& argv, int log_fd, bool search
     struct sigaction action {};
     action.sa_handler = SIG_DFL;
     for (int s : {SIGINT, SIGTERM, SIGHUP}) ::sigaction(s, &action, nullptr);
-    if (null_fd >= 0) ::dup2(null_fd, 0);
+    // dup2 onto the same number leaves close-on-exec set: clear it instead.
+    const auto onto = [](int from, int to) {
+      if (from != to) ::dup2(from, to);
+      else ::fcntl(to, F_SETFD, ::fcntl(to, F_GETFD) & ~FD_CLOEXEC);
+    };
+    if (null_fd >= 0) onto(null_fd, 0);
     if (log_fd >= 0) {
-      ::dup2(log_fd, 1);
-      ::dup2(error_fd >= 0 ? error_fd : log_fd, 2);
+      onto(log_fd, 1);
+      onto(error_fd >= 0 ? error_fd : log_fd, 2);
     }
     if (search_path) ::execvp(pointers[0], pointers.data());
     else ::execv(pointers[0], pointers.data());
@@ -79,7 +86,7 @@ inline pid_t spawn(const std::vector<std::string>& argv, int log_fd, bool search
 /// Runs a command to completion; returns its exit code (-1 when it did not exit normally).
 inline int run_command(const std::vector<std::string>& argv, bool quiet) {
   int log_fd = -1;
-  if (quiet) log_fd = ::open("/dev/null", O_WRONLY | O_CLOEXEC);
+  if (quiet) log_fd = sbptt::detail::open_above_standard_streams("/dev/null", O_WRONLY | O_CLOEXEC);
   const pid_t pid = spawn(argv, log_fd, true);
   if (log_fd >= 0) ::close(log_fd);
   if (pid < 0) return -1;
@@ -117,7 +124,7 @@ inline bool is_executable(const fs::path& path) {
 inline std::string output_of(const std::vector<std::string>& argv) {
   int ends[2];
   if (::pipe2(ends, O_CLOEXEC) != 0) return {};
-  const int null_fd = ::open("/dev/null", O_WRONLY | O_CLOEXEC);
+  const int null_fd = sbptt::detail::open_above_standard_streams("/dev/null", O_WRONLY | O_CLOEXEC);
   const pid_t pid = spawn(argv, ends[1], false, null_fd);
   ::close(ends[1]);
   if (null_fd >= 0) ::close(null_fd);

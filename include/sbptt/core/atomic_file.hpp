@@ -67,6 +67,20 @@ inline constexpr std::size_t temporary_suffix_bytes = 36;
   throw IoError(concat("'", path.string(), "': too many levels of symbolic links"));
 }
 
+/// `::open(path, flags, mode)`, the descriptor moved above 2 when it took the number of a
+/// standard stream that was closed (a program started with `2>&-`): a file on fd 2 would
+/// receive every message meant for stderr. −1 with errno set when either call fails.
+[[nodiscard]] inline int open_above_standard_streams(const char* path, int flags,
+                                                     ::mode_t mode = 0) {
+  const int fd = ::open(path, flags, mode);
+  if (fd < 0 || fd > 2) return fd;
+  const int moved = ::fcntl(fd, F_DUPFD_CLOEXEC, 3);
+  const int error = errno;
+  ::close(fd);
+  errno = error;
+  return moved;
+}
+
 /// The directory a file at `target` lives in ("." for a bare name).
 [[nodiscard]] inline std::filesystem::path directory_of(const std::filesystem::path& target) {
   return target.has_parent_path() ? target.parent_path() : std::filesystem::path(".");
@@ -75,7 +89,8 @@ inline constexpr std::size_t temporary_suffix_bytes = 36;
 /// Flushes a directory's entries (a rename in it) to disk. File systems that cannot sync a
 /// directory (EINVAL) are not an error.
 inline void sync_directory(const std::filesystem::path& directory, const std::string& for_path) {
-  const int fd = ::open(directory.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  const int fd =
+      open_above_standard_streams(directory.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (fd < 0) {
     throw IoError(concat("cannot open directory '", directory.string(), "' to sync '", for_path,
                          "': ", os_reason(errno)));
@@ -129,7 +144,8 @@ inline void sync_directory(const std::filesystem::path& directory, const std::st
 
 /// Whether the regular file at `path` can be locked now, that is no writer holds it.
 [[nodiscard]] inline bool unlocked_regular_file(const std::filesystem::path& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
+  const int fd =
+      open_above_standard_streams(path.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
   if (fd < 0) return false;
   struct stat status {};
   const bool unlocked = ::fstat(fd, &status) == 0 && S_ISREG(status.st_mode) &&
@@ -219,7 +235,8 @@ public:
         directory_(detail::directory_of(target_)) {
     detail::require<IoError>(!path.empty(), "cannot write a file at an empty path");
 #ifdef O_TMPFILE
-    fd_ = ::open(directory_.c_str(), O_TMPFILE | O_WRONLY | O_CLOEXEC, 0666);
+    fd_ = detail::open_above_standard_streams(directory_.c_str(), O_TMPFILE | O_WRONLY | O_CLOEXEC,
+                                              0666);
     unnamed_ = fd_ >= 0 && ::access("/proc/self/fd", X_OK) == 0;
     if (fd_ >= 0 && !unnamed_) {
       ::close(fd_);
@@ -229,7 +246,8 @@ public:
     if (!unnamed_) {
       for (int attempt = 0; fd_ < 0 && attempt < 100; ++attempt) {
         temporary_ = temporary_name();
-        fd_ = ::open(temporary_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+        fd_ = detail::open_above_standard_streams(temporary_.c_str(),
+                                                  O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
         if (fd_ < 0 && errno != EEXIST) break;
       }
     }

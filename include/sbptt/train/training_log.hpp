@@ -126,8 +126,9 @@ public:
                              "training log '", path, "' does not start with the header '",
                              training_log_header, "'");
     log.require_rows(size, rows);
-    detail::require<IoError>(::ftruncate(log.fd_, size) == 0, "cannot cut training log '",
-                             path, "' back to ", size, " bytes: ", detail::os_reason(errno));
+    const bool cut = ::ftruncate(log.fd_, size) == 0;  // before errno is read
+    detail::require<IoError>(cut, "cannot cut training log '", path, "' back to ", size,
+                             " bytes: ", detail::os_reason(errno));
     log.size_ = size;
     return log;
   }
@@ -169,7 +170,8 @@ public:
 
   /// Makes every appended row durable (before a checkpoint records `size()`).
   void sync() {
-    detail::require<IoError>(::fsync(fd_) == 0, "cannot sync training log '", path_, "': ",
+    const bool synced = ::fsync(fd_) == 0;  // before errno is read
+    detail::require<IoError>(synced, "cannot sync training log '", path_, "': ",
                              detail::os_reason(errno));
   }
 
@@ -208,7 +210,7 @@ private:
   }
 
   explicit TrainingLogFile(const std::string& path) : path_(path) {
-    fd_ = ::open(path.c_str(), O_RDWR | O_APPEND | O_CLOEXEC);
+    fd_ = detail::open_above_standard_streams(path.c_str(), O_RDWR | O_APPEND | O_CLOEXEC);
     detail::require<IoError>(fd_ >= 0, "cannot open training log '", path, "': ",
                              detail::os_reason(errno));
   }

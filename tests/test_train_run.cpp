@@ -507,6 +507,9 @@ TEST_CASE("run: a checkpoint or log changed by hand is refused before any work, 
            // Adam::restore without the file, the second took other bias corrections.
            Case{false, "adam_t ", "adam_t 0", "adam_t 0 with 2 numbers in adam_m", false},
            Case{false, "adam_t ", "adam_t 9", "adam_t 9 after 4 epochs", false},
+           // More skipped batches than the epochs had: "expected at most -992" steps before.
+           Case{false, "skipped_batches ", "skipped_batches 1000",
+                "skipped_batches 1000 after 4 epochs of 2 batches; expected at most 8", false},
            // The generator's state, refused by Trainer::resume_at without the file.
            Case{false, "shuffle ", "shuffle 42 1 2 3", "not a state of the shuffling", false},
            Case{true, "3,", "7,", "row 3 is missing or does not start with '3,'", true}}) {

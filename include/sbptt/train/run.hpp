@@ -242,6 +242,11 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
       // or a callback that resets it): more would resume with bias corrections the run never
       // had. A trainer that had trained before this call has counts of its own.
       const long long batches = (train.cols() + o.batch - 1) / o.batch;
+      detail::require<ParseError>(resumed->skipped_batches <= resumed->epoch * batches,
+                                  "checkpoint '", settings.checkpoint, "': skipped_batches ",
+                                  resumed->skipped_batches, " after ", resumed->epoch,
+                                  " epochs of ", batches, " batches; expected at most ",
+                                  resumed->epoch * batches);
       const long long steps = resumed->epoch * batches - resumed->skipped_batches;
       detail::require<ParseError>(
           !fresh || resumed->adam_t <= steps, "checkpoint '", settings.checkpoint, "': adam_t ",

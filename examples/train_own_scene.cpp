@@ -1,7 +1,7 @@
 // A user's own scene (the point mass of point_mass.hpp) trained with the library's driver:
 // combined update, a test set, a CSV log, the best parameters kept, early stop, checkpoints.
-// Rerun it after a kill and it resumes from the checkpoint. A template to copy: it and
-// point_mass.hpp need only the installed headers.
+// Rerun it after a kill and it resumes from the checkpoint, and says so. A template to copy:
+// it and point_mass.hpp need only the installed headers.
 //   train_own_scene [DIRECTORY]      (writes log.csv, run.checkpoint, best.params there;
 //                                     in the working directory without one)
 #include <csignal>
@@ -36,10 +36,13 @@ int run_in(const std::filesystem::path& dir) {
       {.epochs = 200, .evaluate_every = 5, .patience = 10, .restore_best = true,
        .log_csv = (dir / "log.csv").string(), .checkpoint = (dir / "run.checkpoint").string(),
        .save_params = (dir / "best.params").string()},
-      {.on_epoch = [](const sbptt::EpochRecord& r) {
-        if (r.test_loss && r.epoch % 50 == 0)
-          std::printf("epoch %3ld  test loss %.3e\n", r.epoch, *r.test_loss);
-      }});
+      {.on_resume = [](long epoch) {
+         std::printf("resumed from the checkpoint of epoch %ld\n", epoch);
+       },
+       .on_epoch = [](const sbptt::EpochRecord& r) {
+         if (r.test_loss && r.epoch % 50 == 0)
+           std::printf("epoch %3ld  test loss %.3e\n", r.epoch, *r.test_loss);
+       }});
   switch (result.end) {
     case sbptt::RunEnd::NonFinite:
       std::fprintf(stderr, "train_own_scene: stopped: %s\n",

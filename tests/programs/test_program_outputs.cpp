@@ -393,6 +393,22 @@ TEST_CASE("a run started with SIGINT ignored, as a shell starts a background job
   CHECK(without_seconds(file_text(log_path)) == without_seconds(log));
 }
 
+TEST_CASE("train_own_scene rerun in its directory says that it resumed, and from which epoch",
+          "[programs]") {
+  const fs::path dir = fresh_directory("own_scene_resume");
+  const Outcome first = launch("train_own_scene", dir.string());
+  REQUIRE(first.status == 0);
+  CHECK_FALSE(contains(first.output, "resumed"));
+  const std::string checkpoint = file_text(dir / "run.checkpoint");
+  const std::size_t epoch_line = checkpoint.find("\nepoch ") + 7;
+  const std::string epoch =
+      checkpoint.substr(epoch_line, checkpoint.find('\n', epoch_line) - epoch_line);
+  const Outcome again = launch("train_own_scene", dir.string());
+  INFO(again.output);
+  CHECK(again.status == 0);
+  CHECK(contains(again.output, "resumed from the checkpoint of epoch " + epoch + "\n"));
+}
+
 TEST_CASE("a checkpoint of other settings is refused, naming the setting", "[programs]") {
   const fs::path dir = fresh_directory("settings");
   const std::string checkpoint = "--epochs 2 --checkpoint " + (dir / "c").string();

@@ -41,6 +41,16 @@ fs::path scratch(const std::string& name) {
   return dir / name;
 }
 
+/// Settings of a run of `epochs` epochs with the checkpoint `name` in the scratch directory,
+/// none there yet.
+RunSettings fresh_checkpoint_run(const std::string& name, long epochs) {
+  fs::remove(scratch(name));
+  RunSettings settings;
+  settings.epochs = epochs;
+  settings.checkpoint = scratch(name).string();
+  return settings;
+}
+
 }  // namespace
 
 TEST_CASE("run: the log holds exactly the returned rows, evaluated on schedule", "[train]") {
@@ -382,11 +392,8 @@ TEST_CASE("run: a checkpoint cut among its settings is incomplete, not another r
           "[train]") {
   // The settings are compared before the numbers are read; a file cut among them must still
   // be called incomplete (exit 1 in the programs), not a checkpoint of other settings (exit 2).
-  const fs::path checkpoint = scratch("cut_settings.checkpoint");
-  fs::remove(checkpoint);
-  RunSettings settings;
-  settings.epochs = 2;
-  settings.checkpoint = checkpoint.string();
+  RunSettings settings = fresh_checkpoint_run("cut_settings.checkpoint", 2);
+  const fs::path checkpoint = settings.checkpoint;
   settings.identity = {{"--poles", "2"}};
   Setup<double> first(Method::Regular, 3);
   const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
@@ -433,11 +440,8 @@ TEST_CASE("run: a double checkpoint resumed in float is refused for its scalar, 
           "[train]") {
   // Adam's second moments of vanishing gradients can be far below float's range (1e-50); a
   // float run must name the setting that differs, not call the number out of range.
-  const fs::path checkpoint = scratch("scalar.checkpoint");
-  fs::remove(checkpoint);
-  RunSettings settings;
-  settings.epochs = 2;
-  settings.checkpoint = checkpoint.string();
+  const RunSettings settings = fresh_checkpoint_run("scalar.checkpoint", 2);
+  const fs::path checkpoint = settings.checkpoint;
   Setup<double> first(Method::Regular, 3);
   run_training(first.trainer, spread<double>(6, -1.0), spread<double>(2, 0.2), settings);
   std::string text = file_text(checkpoint);

@@ -250,7 +250,6 @@ public:
   }
 
 private:
-
   void gather(const Matrix<Scalar>& set, Index k, Matrix<Scalar>& out) const {
     const Index first = k * options_.batch;
     const Index count = std::min(options_.batch, set.cols() - first);

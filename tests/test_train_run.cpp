@@ -219,83 +219,6 @@ TEST_CASE("run: a checkpoint after skipped batches resumes as one run", "[train]
   CHECK(second.policy.params() == whole.policy.params());
 }
 
-TEST_CASE("checkpoint: an epoch whose squared update norm overflowed reads back", "[train]") {
-  // A double gradient of norm 1e200 is finite and clips correctly; its square is +inf, and the
-  // log says so. The checkpoint written after that epoch must still resume the run.
-  Checkpoint<double> c;
-  c.shuffle_state = Rng(1).state();
-  c.epoch = 7;
-  c.last = EpochRecord{};
-  c.last->epoch = 7;
-  c.last->update_norm2 = std::numeric_limits<double>::infinity();
-  const Checkpoint<double> back = parse_checkpoint<double>(checkpoint_text(c), "test.checkpoint");
-  REQUIRE(back.last);
-  CHECK(back.last->epoch == 7);
-  CHECK(back.last->update_norm2 == std::numeric_limits<double>::infinity());
-  c.last->update_norm2 = std::numeric_limits<double>::quiet_NaN();  // never a squared norm
-  CHECK_THROWS_AS(parse_checkpoint<double>(checkpoint_text(c), "test.checkpoint"), ParseError);
-}
-
-TEST_CASE("checkpoint: the last record's epoch is a whole number in range, or refused",
-          "[train]") {
-  // 1.5 was read as epoch 1, and 1e300 converted to a long out of its range (undefined).
-  Checkpoint<double> c;
-  c.shuffle_state = Rng(1).state();
-  c.epoch = 1;
-  c.last = EpochRecord{};
-  c.last->epoch = 1;
-  const std::string text = checkpoint_text(c);
-  REQUIRE_NOTHROW(parse_checkpoint<double>(text, "test.checkpoint"));
-  for (const auto& [epoch, expected] :
-       {std::pair{"1.5", "expected a whole number for 'epoch of last'"},
-        std::pair{"1e300", "e+300; expected 0 to 1000000000000000"},
-        std::pair{"-1e300", "e+300; expected 0 to 1000000000000000"},
-        std::pair{"1e19", "epoch of last 1e+19; expected 0 to 1000000000000000"}}) {
-    std::string spoiled = text;
-    spoiled.replace(spoiled.find("\nlast 1 ") + 6, 1, epoch);
-    INFO(spoiled.substr(spoiled.find("\nlast"), 40));
-    CHECK_THROWS_WITH(parse_checkpoint<double>(spoiled, "test.checkpoint"),
-                      Catch::Contains(expected));
-  }
-}
-
-TEST_CASE("checkpoint: an error names the line that is wrong, whichever it is", "[train]") {
-  // Every line but the first (the magic line has its own message) is spoiled in turn: a
-  // number becomes 'x', a key's value becomes 'x'. The message must name that line; numbers
-  // were reported one line early (the line was counted after the message was made).
-  Checkpoint<double> c;
-  c.settings = {{"method", "C"}};
-  c.shuffle_state = Rng(1).state();
-  c.epoch = 3;
-  c.adam_t = 6;
-  c.params = Vector<double>::Constant(3, 0.5);
-  c.best_params = c.params;
-  c.adam_m = Vector<double>::Constant(3, 0.25);
-  c.adam_v = c.adam_m;
-  c.last = EpochRecord{};
-  c.last->epoch = 3;
-  const std::string text = checkpoint_text(c);
-  std::vector<std::string> lines;
-  std::istringstream in(text);
-  for (std::string line; std::getline(in, line);) lines.push_back(line);
-  REQUIRE(lines.size() > 20);
-  for (std::size_t k = 1; k < lines.size(); ++k) {
-    std::vector<std::string> spoiled = lines;
-    const std::size_t space = spoiled[k].find(' ');
-    spoiled[k] = space == std::string::npos ? "x" : spoiled[k].substr(0, space + 1) + "x";
-    std::string broken;
-    for (const auto& line : spoiled) broken += line + "\n";
-    const std::string line_number = "line " + std::to_string(k + 1) + ":";
-    INFO("line " << k + 1 << " '" << lines[k] << "' spoiled as '" << spoiled[k] << "'");
-    CHECK_THROWS_WITH(parse_checkpoint<double>(broken, "test.checkpoint"),
-                      Catch::Contains("checkpoint 'test.checkpoint', " + line_number));
-  }
-  // A last line without its end names that line, not the one before.
-  const std::string cut = text.substr(0, text.size() - 1);
-  CHECK_THROWS_WITH(parse_checkpoint<double>(cut, "test.checkpoint"),
-                    Catch::Contains("line " + std::to_string(lines.size()) + ": the line has no end"));
-}
-
 // Under -Wextra -Werror a string member without an initializer would stop this compiling.
 [[maybe_unused]] const RunSettings designated_with_defaults{.epochs = 3};
 
@@ -358,34 +281,6 @@ TEST_CASE("run: the skipped batches of an epoch that ends the run are not counte
   }
   REQUIRE(batches_in_last >= 1);  // the case this test is about
   CHECK(result.skipped_batches == counted);
-}
-
-TEST_CASE("files opened while stderr is closed do not take its number", "[train]") {
-  // A program started with `2>&-`: the first file it opened got fd 2, and every message meant
-  // for stderr landed in its training log (found by a fault probe of the task programs).
-  const fs::path log = scratch("closed_stderr.csv"), other = scratch("closed_stderr.txt");
-  fs::remove(log);
-  const int saved = ::dup(2);
-  REQUIRE(saved >= 0);
-  ::close(2);
-  bool wrote = false;
-  try {
-    TrainingLogFile file = TrainingLogFile::create(log.string());
-    AtomicFile atomic(other.string());
-    const char message[] = "a message for stderr\n";
-    wrote = ::write(2, message, sizeof message - 1) > 0;
-    atomic.write("content\n");
-    atomic.commit();
-  } catch (...) {
-    ::dup2(saved, 2);
-    ::close(saved);
-    throw;
-  }
-  ::dup2(saved, 2);
-  ::close(saved);
-  CHECK_FALSE(wrote);
-  CHECK(file_text(log) == std::string(training_log_header) + "\n");
-  CHECK(file_text(other) == "content\n");
 }
 
 TEST_CASE("run: a checkpoint cut among its settings is incomplete, not another run's",

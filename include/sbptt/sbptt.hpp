@@ -49,6 +49,7 @@
 #include "sbptt/train/fingerprint.hpp"
 #include "sbptt/train/method.hpp"
 #include "sbptt/train/run.hpp"
+#include "sbptt/train/run_settings.hpp"
 #include "sbptt/train/states_io.hpp"
 #include "sbptt/train/trainer.hpp"
 #include "sbptt/train/trainer_state.hpp"

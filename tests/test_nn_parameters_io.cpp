@@ -114,7 +114,7 @@ TEMPLATE_TEST_CASE("the text is printf %.17g (double) / %.9g (float), one per li
 TEST_CASE("loading accepts blanks and CRLF, and numbers from other writers", "[nn][io]") {
   TempDir dir;
   const fs::path file = dir.path / "theta.txt";
-  write_text(file, "  1.5\t\r\n+2\n-3e-2 \n4.\n.5\n1E+2");  // no final newline
+  write_text(file, "  1.5\t\r\n+2\n-3e-2 \n4.\n.5\n1E+2\n");
   const auto theta = sbptt::load_parameters<double>(file, 6);
   CHECK(theta(0) == 1.5);
   CHECK(theta(1) == 2.0);
@@ -187,6 +187,22 @@ TEST_CASE("a trailing blank line is accepted in parameters files, as in states f
   // In the middle a blank line still means a missing number.
   write_text(file, "1.5\n\n-2\n");
   REQUIRE_THROWS_WITH(sbptt::load_parameters<double>(file, 2), Contains("line 2: empty"));
+}
+
+TEST_CASE("a parameters file whose last number has no newline after it is refused as cut",
+          "[nn][io]") {
+  // save_parameters ends every line with a newline. A copy cut inside its last number
+  // ("0.123456789" → "0.1234") would otherwise load as a different controller.
+  TempDir dir;
+  const fs::path file = dir.path / "cut.txt";
+  write_text(file, "1.5\n-2\n0.1234");
+  REQUIRE_THROWS_AS(sbptt::load_parameters<double>(file, 3), sbptt::ParseError);
+  REQUIRE_THROWS_WITH(sbptt::load_parameters<double>(file, 3),
+                      Contains("cut.txt', line 3") && Contains("'0.1234'") &&
+                          Contains("no newline") && Contains("cut short"));
+  // Blanks after the last newline lose nothing: accepted, as trailing blank lines are.
+  write_text(file, "1.5\n-2\n0.1234\n  ");
+  CHECK(sbptt::load_parameters<double>(file, 3)(2) == 0.1234);
 }
 
 TEST_CASE("a parameters file that cannot be opened says why", "[nn][io]") {

@@ -52,6 +52,20 @@ TEST_CASE("states file: every malformed input names its line and what was expect
   REQUIRE_THROWS_WITH(parse("1,2,1e999\n"), Contains("out of range"));
 }
 
+TEST_CASE("states file: a last row with no newline after it is refused as cut", "[io]") {
+  // save_states ends every row with a newline; a copy cut inside its last number would
+  // otherwise load a different state for that sample.
+  const auto path = std::filesystem::temp_directory_path() / "sbptt_states_cut.csv";
+  std::ofstream(path, std::ios::binary) << "1,2,3\n4,5,0.25";
+  REQUIRE_THROWS_AS(load_states<double>(path, 3), ParseError);
+  REQUIRE_THROWS_WITH(load_states<double>(path, 3),
+                      Contains("sbptt_states_cut.csv', line 2") && Contains("'4,5,0.25'") &&
+                          Contains("no newline") && Contains("cut short"));
+  std::ofstream(path, std::ios::binary) << "1,2,3\n4,5,0.25\n\t";
+  CHECK(load_states<double>(path, 3)(2, 1) == 0.25);
+  std::filesystem::remove(path);
+}
+
 TEST_CASE("states file: unreadable paths are IoErrors naming the path", "[io]") {
   REQUIRE_THROWS_AS(load_states<double>("/nonexistent/states.csv", 2), IoError);
   // A read that fails after the open (EIO from /proc/self/mem at offset 0).

@@ -9,9 +9,10 @@
 // Invariants checked:
 //   * an accepted line is finite and has the bits strtod/strtof give for it;
 //   * load_parameters(path, n) succeeds iff every line is accepted (and at most
-//     max_number_chars long, the format's line bound) and n is the line count
-//     (std::getline's count: a final newline does not start another line), and then returns
-//     exactly the line parser's values; with n + 1 it throws ParseError;
+//     max_number_chars long, the format's line bound), the last one is ended by a newline
+//     (without one it may be a cut copy's), and n is the line count (std::getline's count: a
+//     final newline does not start another line), and then returns exactly the line parser's
+//     values; with n + 1 it throws ParseError;
 //   * save_parameters -> load_parameters reproduces the values bit for bit.
 #include <cmath>
 #include <cstddef>
@@ -65,6 +66,8 @@ void check(std::string_view text, const std::vector<std::string_view>& lines,
       all_accepted = false;
     }
   }
+
+  if (!text.empty() && text.back() != '\n') all_accepted = false;
 
   // 2. The file function on the same bytes.
   const auto input_file = scratch.file("input.txt");

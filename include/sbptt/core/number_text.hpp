@@ -53,8 +53,10 @@ inline constexpr std::size_t max_number_chars = 64;
   return shown;
 }
 
-/// What `read_bounded_line` found.
-enum class LineRead { Line, End, TooLong };
+/// What `read_bounded_line` found. `Unended` is a last line with no '\n' after it: every
+/// file the library writes ends its lines, so in one of them such a line is where a copy was
+/// cut short, possibly inside a number.
+enum class LineRead { Line, Unended, End, TooLong };
 
 /// Reads one line (without its '\n') of at most `max_chars` characters into `line`. Returns
 /// End at the end of the input, TooLong as soon as the line exceeds `max_chars` (the rest is
@@ -73,10 +75,21 @@ enum class LineRead { Line, End, TooLong };
       line += Traits::to_char_type(c);
       c = in.sbumpc();
     }
+    if (Traits::eq_int_type(c, Traits::eof())) return LineRead::Unended;
   } catch (const std::ios_base::failure& e) {
     throw IoError(concat("reading ", file, " failed: ", e.what()));
   }
   return LineRead::Line;
+}
+
+/// Refuses a non-blank last line that `read_bounded_line` found `Unended`; `where` names the
+/// file and line, `writer` the function whose files end every line.
+inline void require_line_ended(LineRead read, std::string_view line, const std::string& where,
+                               std::string_view writer) {
+  require<ParseError>(read != LineRead::Unended || trim_blanks(line).empty(), where, ": '",
+                      printable(line), "' has no newline at its end, so the file may have been",
+                      " cut short; expected every line to end with one, as ", writer,
+                      " writes them (add one if you wrote the file by hand)");
 }
 
 /// Parses one finite number; `where` prefixes every error ("file 'p', line 3").

@@ -6,8 +6,8 @@
 ///
 /// Loading is strict, because a silently misread controller is worse than a refused one:
 /// each line is one finite number with optional surrounding blanks (spaces, tabs, a CR from a
-/// Windows editor); anything else is a `ParseError` naming the file, the 1-based line and the
-/// text. Writing goes to a temporary file beside the target, renamed over it at the end, so a
+/// Windows editor), ended by a newline (without one, the last number may be a cut copy's);
+/// anything else is a `ParseError` naming the file, the 1-based line and the text. Writing goes to a temporary file beside the target, renamed over it at the end, so a
 /// crash never leaves a half-written parameters file.
 #include <cmath>
 #include <filesystem>
@@ -63,9 +63,10 @@ template <class Scalar>
         detail::read_bounded_line(*in.rdbuf(), line, detail::max_number_chars, file);
     if (read == detail::LineRead::End) break;
     ++line_number;
-    detail::require<ParseError>(read == detail::LineRead::Line, where(), ": longer than ",
+    detail::require<ParseError>(read != detail::LineRead::TooLong, where(), ": longer than ",
                                 detail::max_number_chars, " characters (it starts '",
                                 detail::printable(line), "'); expected one number per line");
+    detail::require_line_ended(read, line, where(), "save_parameters");
     if (detail::trim_blanks(line).empty()) {  // allowed only at the end of the file
       if (blank_run_start == 0) blank_run_start = line_number;
       continue;

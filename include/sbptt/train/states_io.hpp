@@ -76,8 +76,9 @@ template <class Scalar>
 }
 
 /// Reads a states file; throws IoError if unreadable (with the system's reason), ParseError if
-/// malformed. Reading is bounded: a line longer than `state_dim` numbers can be is refused as
-/// soon as it is, without reading the rest.
+/// malformed, or if its last row has no newline after it (a copy cut inside a number). Reading
+/// is bounded: a line longer than `state_dim` numbers can be is refused as soon as it is,
+/// without reading the rest.
 template <class Scalar>
 [[nodiscard]] Matrix<Scalar> load_states(const std::filesystem::path& path, Index state_dim) {
   std::ifstream in = detail::open_for_reading(path, "load_states: ", "a CSV file of states");
@@ -91,9 +92,10 @@ template <class Scalar>
     if (read == detail::LineRead::End) break;
     ++line_number;
     const std::string where = detail::concat(file, ", line ", line_number);
-    detail::require<ParseError>(read == detail::LineRead::Line, where, ": longer than ",
+    detail::require<ParseError>(read != detail::LineRead::TooLong, where, ": longer than ",
                                 longest, " characters (it starts '", detail::printable(line),
                                 "'); expected a row of ", state_dim, " numbers");
+    detail::require_line_ended(read, line, where, "save_states");
     if (detail::parse_state_row(line, state_dim, where, values)) ++rows;
   }
   detail::require<IoError>(!in.bad(), "reading states file '", path.string(),

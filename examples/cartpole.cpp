@@ -17,7 +17,9 @@ int run(const TaskOptions& o) {
   if (o.physical) options.model = CartPoleModel::Physical;
   const CartPole<Scalar, Poles> sim(options);
   Rng data_rng(o.seed);
-  auto data = examples::split_half<Scalar>(cartpole_initial_states(sim, data_rng, 2 * o.samples));
+  auto data = examples::generated_sets<Scalar>(o, sim.state_dim(), [&](Index count) {
+    return cartpole_initial_states(sim, data_rng, count);
+  });
   auto network = Network<Scalar>::mlp(sim.state_dim(), {100, 100}, 1);
   Rng init_rng(o.seed + 1);
   glorot_uniform(network, init_rng, {.zero_last_kernel = true});
@@ -31,8 +33,9 @@ template <class Scalar, int Links>
 int run_chain(const TaskOptions& o) {
   const CartChain<Scalar, Links> sim(CartChainModel<Links>{}, static_cast<Scalar>(o.time.dt));
   Rng data_rng(o.seed);
-  auto data = examples::split_half<Scalar>(
-      cartpole_initial_states<Scalar>(Links, data_rng, 2 * o.samples));
+  auto data = examples::generated_sets<Scalar>(o, sim.state_dim(), [&](Index count) {
+    return cartpole_initial_states<Scalar>(Links, data_rng, count);
+  });
   auto network = Network<Scalar>::mlp(sim.state_dim(), {100, 100}, 1);
   Rng init_rng(o.seed + 1);
   glorot_uniform(network, init_rng, {.zero_last_kernel = true});

@@ -16,7 +16,8 @@ int run(const TaskOptions& o) {
   options.steps = o.time.steps;
   const Schrodinger1D<Scalar, Nx> sim(o.nx, options);
   Rng data_rng(o.seed);
-  auto data = examples::split_half<Scalar>(sim.initial_states(data_rng, 2 * o.samples));
+  auto data = examples::generated_sets<Scalar>(
+      o, sim.state_dim(), [&](Index count) { return sim.initial_states(data_rng, count); });
   const Conv1d first{o.nx, 2, 60, 3, 2, Activation::Tanh};
   const Conv1d second{first.output_length(), 60, 60, 3, 2, Activation::Tanh};
   Network<Scalar> network({first, second, Dense{second.output_length() * 60, 1}});

@@ -26,6 +26,7 @@
 
 #include <sbptt/sbptt.hpp>
 
+#include "memory_budget.hpp"
 #include "standard_streams.hpp"
 #include "stop_signals.hpp"
 #include "task_options.hpp"
@@ -52,13 +53,19 @@ inline std::string describe(Task task, const Horizon& time) {
   return detail::concat(time.steps, " steps of dt ", shown(time.dt), ", T ", shown(time.horizon()));
 }
 
-/// Splits 2N generated samples into the first N (train) and last N (test), as the reference.
+/// The train and test sets of --samples each.
 template <class Scalar>
 struct DataSplit {
   Matrix<Scalar> train, test;
 };
-template <class Scalar>
-DataSplit<Scalar> split_half(const Matrix<Scalar>& states) {
+
+/// 2 × --samples states from `generate(count)`, the first half the train set and the second
+/// the test set, as the reference splits them; refused before anything is generated when the
+/// states cannot fit in memory (memory_budget.hpp).
+template <class Scalar, class Generate>
+DataSplit<Scalar> generated_sets(const TaskOptions& o, Index state_dim, Generate&& generate) {
+  require_memory_for_states<Scalar>(o, state_dim);
+  const Matrix<Scalar> states = generate(Index{2} * o.samples);
   const Index n = states.cols() / 2;
   return {states.leftCols(n), states.rightCols(n)};
 }

@@ -16,6 +16,8 @@
 #include <utility>
 #include <vector>
 
+#include <unistd.h>
+
 #include "programs/program_runner.hpp"
 #include "sbptt/nn/parameters_io.hpp"
 #include "support/address_sanitizer.hpp"
@@ -304,12 +306,43 @@ TEST_CASE("a parameters or states file without newlines is refused at once", "[p
 TEST_CASE("running out of memory names the sizes asked for", "[programs]") {
   // Under ASan the programs cannot even start in 2 GB of address space (its shadow memory).
   if (sbptt::testing::address_sanitizer) return;
-  // 2 × 1e6 samples of 2 × 1024 numbers (32 GB) cannot fit under a 2 GB address-space limit.
-  const Result r = run("quantum", "--samples 1000000 --nx 1024 --epochs 1", "ulimit -v 2000000; ");
+  // The states fit in 2 GB of address space; a batch of 256 trajectories of 128 steps does
+  // not: the convolutions' activations, 46,000 numbers a sample-step at --nx 1024, about 12 GB.
+  const Result r = run("quantum", "--samples 256 --batch 256 --nx 1024 --epochs 1",
+                       "ulimit -v 2000000; ");
   INFO(r.output);
   CHECK(r.status == 1);
-  CHECK(r.output.find("out of memory for --samples 1000000") != std::string::npos);
+  CHECK(r.output.find("out of memory for --samples 256") != std::string::npos);
   CHECK(r.output.find("--nx 1024") != std::string::npos);
+}
+
+TEST_CASE("sizes whose states cannot fit in memory are refused before any work",
+          "[programs]") {
+  if (sbptt::testing::address_sanitizer) return;
+  const fs::path log = scratch("too_big.csv");
+  fs::remove(log);
+  // Under a 2 GB address-space limit: 2 × 1e6 samples of 2 × 1024 doubles are 32 GB.
+  Result r = run("quantum", "--samples 1000000 --nx 1024 --epochs 1 --csv " + log.string(),
+                 "ulimit -v 2000000; ");
+  INFO(r.output);
+  CHECK(r.status == 2);
+  CHECK(r.output.find("--samples 1000000 (and as many test samples) with --nx 1024") !=
+        std::string::npos);
+  // 2048 × 8 bytes × (4 × 1e6 samples + 129 states × batch 8) = 61.05 GiB
+  CHECK(r.output.find("need at least 61.1 GiB") != std::string::npos);
+  CHECK(r.output.find("more than the 1.9 GiB this process may use (ulimit -v)") !=
+        std::string::npos);
+  CHECK_FALSE(fs::exists(log));
+  // With no limit set: states beyond the machine's memory are refused too, not left to the
+  // kernel's out-of-memory killer. The largest sizes the flags allow generate 131 GB at once;
+  // on a machine with less than that (so that the old code failed at once too).
+  const double memory = static_cast<double>(sysconf(_SC_PHYS_PAGES)) *
+                        static_cast<double>(sysconf(_SC_PAGE_SIZE));
+  if (memory >= 2e6 * 8192 * 8) return;
+  r = run("quantum", "--samples 1000000 --nx 4096 --epochs 1");
+  INFO(r.output);
+  CHECK(r.status == 2);
+  CHECK(r.output.find("this process may use (physical memory)") != std::string::npos);
 }
 
 TEST_CASE("skip-batch reports each skipped batch and never ends silently on NaN",

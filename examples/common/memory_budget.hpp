@@ -1,0 +1,114 @@
+#pragma once
+// The memory a task program may use, and the refusal of sizes whose states alone exceed it.
+//
+// Linux lets a process allocate more than the machine has and kills it with SIGKILL when the
+// pages are touched: no message, no exit code of the program's own. So the sizes are checked
+// against the least of the machine's memory, the process's cgroup limit (Slurm's, a
+// container's) and ulimit -v / -d before anything is generated. What is counted is a lower
+// bound (the generated set, its two halves and the trajectories' states), so no size that
+// fits is refused; a run that passes here and still runs out gets the out-of-memory message
+// of `task_main`.
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <exception>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <utility>
+
+#include <sbptt/core/error.hpp>
+#include <sbptt/core/types.hpp>
+
+#include "task_options.hpp"
+
+namespace sbptt::examples {
+
+/// A number of bytes and what sets it ("physical memory", "ulimit -v", …).
+struct MemoryBound {
+  double bytes;
+  std::string source;
+};
+
+namespace detail_memory {
+
+/// The number in `path` (a cgroup's limit file), or none for "max", a missing file or a
+/// value that means no limit (cgroup v1 writes 2⁶³ rounded down to a page).
+inline std::optional<double> cgroup_limit(const std::string& path) {
+  std::ifstream in(path);
+  std::string text;
+  if (!(in >> text) || text == "max") return std::nullopt;
+  try {
+    const double bytes = std::stod(text);
+    if (bytes >= 1e18) return std::nullopt;
+    return bytes;
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+}
+
+/// The memory limit of this process's cgroup, v2 (`0::/path`) or v1 (`N:memory:/path`).
+inline std::optional<double> own_cgroup_limit() {
+  std::ifstream in("/proc/self/cgroup");
+  std::optional<double> least;
+  for (std::string line; std::getline(in, line);) {
+    std::optional<double> limit;
+    if (line.rfind("0::", 0) == 0) {
+      limit = cgroup_limit("/sys/fs/cgroup" + line.substr(3) + "/memory.max");
+    } else if (const auto at = line.find(":memory:"); at != std::string::npos) {
+      limit = cgroup_limit("/sys/fs/cgroup/memory" + line.substr(at + 8) +
+                           "/memory.limit_in_bytes");
+    }
+    if (limit && (!least || *limit < *least)) least = limit;
+  }
+  return least;
+}
+
+}  // namespace detail_memory
+
+/// The least of the bounds on what this process can hold.
+inline MemoryBound usable_memory() {
+  MemoryBound bound{static_cast<double>(sysconf(_SC_PHYS_PAGES)) *
+                        static_cast<double>(sysconf(_SC_PAGE_SIZE)),
+                    "physical memory"};
+  const auto lower = [&](double bytes, const char* source) {
+    if (bytes < bound.bytes) bound = {bytes, source};
+  };
+  if (const auto limit = detail_memory::own_cgroup_limit())
+    lower(*limit, "the memory limit of its cgroup");
+  for (const auto& [resource, source] : {std::pair{RLIMIT_AS, "ulimit -v"},
+                                         std::pair{RLIMIT_DATA, "ulimit -d"}}) {
+    rlimit limit{};
+    if (getrlimit(resource, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY)
+      lower(static_cast<double>(limit.rlim_cur), source);
+  }
+  return bound;
+}
+
+/// Throws `InvalidArgument` naming the size flags when the states of a run (the generated
+/// 2 × --samples, the train and test halves copied from them, and one batch's trajectory of
+/// states) cannot fit in `usable_memory()`.
+template <class Scalar>
+void require_memory_for_states(const TaskOptions& o, Index state_dim) {
+  const double numbers =
+      static_cast<double>(state_dim) *
+      (4.0 * static_cast<double>(o.samples) +
+       static_cast<double>(o.time.steps + 1) * static_cast<double>(o.batch));
+  const double bytes = numbers * static_cast<double>(sizeof(Scalar));
+  const MemoryBound usable = usable_memory();
+  if (bytes <= usable.bytes) return;
+  const auto gib = [](double b) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.1f GiB", b / (1024.0 * 1024.0 * 1024.0));
+    return std::string(text);
+  };
+  const std::string nx = o.task == Task::Quantum ? detail::concat(" with --nx ", o.nx) : "";
+  throw InvalidArgument(detail::concat(
+      "--samples ", o.samples, " (and as many test samples)", nx, ", --batch ", o.batch,
+      " and --steps ", o.time.steps, " need at least ", gib(bytes), " for their states (",
+      sizeof(Scalar) == 4 ? "float" : "double", "), more than the ", gib(usable.bytes),
+      " this process may use (", usable.source, "); expected smaller sizes"));
+}
+
+}  // namespace sbptt::examples

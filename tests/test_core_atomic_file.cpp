@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -182,6 +183,43 @@ TEST_CASE("atomic file: a write-protected file is refused and left as it was", "
   }));
   CHECK(file_text(dir / "p.txt") == "keep\n");
   CHECK(entries(dir) == 1);
+}
+
+TEST_CASE("atomic file: an append-only file or directory (chattr +a) is refused up front",
+          "[core]") {
+  // Neither can be renamed over, so a run would lose its file at the end, after the work.
+  const fs::path dir = fresh_directory("append_only");
+  const fs::path file = dir / "p.txt";
+  std::ofstream(file) << "keep\n";
+  struct Attribute {  // chattr +a on `path` while in scope
+    fs::path path;
+    bool set = std::system(("chattr +a '" + path.string() + "' 2>/dev/null").c_str()) == 0;
+    ~Attribute() {
+      if (set) (void)std::system(("chattr -a '" + path.string() + "'").c_str());
+    }
+  };
+  {
+    const Attribute append_only{file};
+    if (!append_only.set) {
+      WARN("chattr +a failed (not root, or the file system has no such attribute): skipped");
+      return;
+    }
+    CHECK_THROWS_WITH(check_output_path(file.string(), "--save-params"),
+                      Catch::Contains("--save-params '" + file.string() + "'") &&
+                          Catch::Contains("the file is append-only (chattr +a)"));
+    CHECK_THROWS_AS(write_file_atomically(file.string(), "new\n"), IoError);
+  }
+  CHECK(file_text(file) == "keep\n");
+  CHECK_NOTHROW(check_output_path(file.string(), "--save-params"));
+  const Attribute append_only{dir};
+  REQUIRE(append_only.set);
+  for (const fs::path& path : {file, dir / "new.txt"}) {
+    INFO(path);
+    CHECK_THROWS_WITH(check_output_path(path.string(), "--csv"),
+                      Catch::Contains("--csv '" + path.string() + "'") &&
+                          Catch::Contains("directory '" + dir.string() + "' is append-only"));
+    CHECK_THROWS_AS(write_file_atomically(path.string(), "new\n"), IoError);
+  }
 }
 
 TEST_CASE("atomic file: names too long with the temporary suffix are refused up front", "[core]") {

@@ -25,8 +25,12 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/file.h>
+#include <sys/ioctl.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#if __has_include(<linux/fs.h>)
+#include <linux/fs.h>
+#endif
 
 #include <algorithm>
 #include <atomic>
@@ -184,11 +188,31 @@ inline void remove_dead_writers_temporaries(const std::filesystem::path& target)
 
 }  // namespace detail
 
+namespace detail {
+
+/// Whether `path` carries the append-only attribute (chattr +a), which even root's rename
+/// cannot replace, nor, for a directory, rename any entry of. False where it cannot be read.
+[[nodiscard]] inline bool append_only(const std::filesystem::path& path) {
+#if defined(FS_IOC_GETFLAGS) && defined(FS_APPEND_FL)
+  const int fd = open_above_standard_streams(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC, 0);
+  if (fd < 0) return false;
+  int flags = 0;
+  const bool set = ::ioctl(fd, FS_IOC_GETFLAGS, &flags) == 0 && (flags & FS_APPEND_FL) != 0;
+  ::close(fd);
+  return set;
+#else
+  (void)path;
+  return false;
+#endif
+}
+
+}  // namespace detail
+
 /// Fails before any work, with `IoError` naming `what` (e.g. "--csv") and the reason, when a
 /// file could not later be written at `path` the way `write_file_atomically` writes it: empty
 /// path; a directory or special file there; a missing or unwritable directory; a
-/// write-protected existing file; or a name too long for the file system once the temporary
-/// suffix is added.
+/// write-protected existing file; an append-only file or directory; or a name too long for
+/// the file system once the temporary suffix is added.
 inline void check_output_path(const std::string& path, std::string_view what) {
   detail::require<IoError>(!path.empty(), what, ": the path is empty; expected a file path to "
                                                 "write (an unset shell variable?)");
@@ -210,6 +234,12 @@ inline void check_output_path(const std::string& path, std::string_view what) {
   detail::require<IoError>(!std::filesystem::exists(status) || ::access(target.c_str(), W_OK) == 0,
                            what, " '", path, "': the file exists and is write-protected; "
                            "expected a file this user may write (it is not replaced)");
+  detail::require<IoError>(!detail::append_only(directory), what, " '", path, "': directory '",
+                           directory.string(), "' is append-only (chattr +a), so no file in it "
+                           "can be renamed into place; expected a directory without it");
+  detail::require<IoError>(!std::filesystem::exists(status) || !detail::append_only(target),
+                           what, " '", path, "': the file is append-only (chattr +a), so it "
+                           "cannot be replaced; expected a file without it (chattr -a)");
   const long name_max = ::pathconf(directory.c_str(), _PC_NAME_MAX);
   const std::size_t limit = name_max > 0 ? static_cast<std::size_t>(name_max) : NAME_MAX;
   const std::size_t name = target.filename().string().size();

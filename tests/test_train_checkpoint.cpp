@@ -1,6 +1,6 @@
 // The checkpoint file on its own (train/checkpoint.hpp): what reads back, what is refused and
-// with which line, and the files of a run opened while stderr is closed. The runs that write
-// and resume checkpoints are in test_train_run.cpp.
+// with which line, one run per checkpoint at a time, and the files of a run opened while
+// stderr is closed. The runs that write and resume checkpoints are in test_train_run.cpp.
 #include <catch2/catch.hpp>
 
 #include <unistd.h>
@@ -14,8 +14,10 @@
 #include "sbptt/core/atomic_file.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/train/checkpoint.hpp"
+#include "sbptt/train/run.hpp"
 #include "sbptt/train/training_log.hpp"
 #include "support/files.hpp"
+#include "support/linear_trainer.hpp"
 
 using namespace sbptt;
 using sbptt::testing::file_text;
@@ -107,6 +109,47 @@ TEST_CASE("checkpoint: an error names the line that is wrong, whichever it is", 
   const std::string cut = text.substr(0, text.size() - 1);
   CHECK_THROWS_WITH(parse_checkpoint<double>(cut, "test.checkpoint"),
                     Catch::Contains("line " + std::to_string(lines.size()) + ": the line has no end"));
+}
+
+TEST_CASE("checkpoint: a second run of a checkpoint in use is refused before any work",
+          "[train]") {
+  // The same command started twice: both trained, their rows interleaved in the log, and no
+  // later run could resume from it. The second run here starts while the first is in its
+  // epoch 2 (flock locks of two opens conflict within one process as between two).
+  using sbptt::testing::LinearTrainer;
+  using sbptt::testing::spread;
+  LinearTrainer<double> first(Method::Combined), second(Method::Combined);
+  const Matrix<double> train = spread<double>(9, -1.0), test = spread<double>(4, 0.3);
+  RunSettings settings;
+  settings.epochs = 3;
+  settings.checkpoint = scratch("shared.checkpoint").string();
+  settings.log_csv = scratch("shared.csv").string();
+  fs::remove(settings.checkpoint);
+  bool refused = false;
+  RunCallbacks callbacks;
+  callbacks.on_epoch = [&](const EpochRecord& record) {
+    if (record.epoch != 1) return;
+    const std::string log_before = file_text(settings.log_csv);
+    RunCallbacks second_callbacks;
+    second_callbacks.on_start = [](long) { FAIL("the second run started"); };
+    try {
+      (void)run_training(second.trainer, train, test, settings, second_callbacks);
+    } catch (const IoError& e) {
+      refused = true;
+      CHECK_THAT(e.what(), Catch::Contains("checkpoint '" + settings.checkpoint + "' is in use") &&
+                               Catch::Contains(settings.checkpoint + ".lock") &&
+                               Catch::Contains("expected one run per checkpoint"));
+    }
+    CHECK(file_text(settings.log_csv) == log_before);
+    CHECK(second.trainer.epoch() == 0);
+  };
+  const auto result = run_training(first.trainer, train, test, settings, callbacks);
+  CHECK(refused);
+  CHECK(result.end == RunEnd::Finished);
+  // The lock ends with the run: the checkpoint resumes (its last epoch is the run's end).
+  const auto resumed = run_training(second.trainer, train, test, settings);
+  CHECK(resumed.end == RunEnd::Finished);
+  CHECK(second.trainer.epoch() == 3);
 }
 
 TEST_CASE("files opened while stderr is closed do not take its number", "[train]") {

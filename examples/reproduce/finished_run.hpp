@@ -140,7 +140,7 @@ inline FinishedRuns scan_finished(const fs::path& runs) {
 
 /// Removes the finished-run files of the run `name` so that a sweep that plans it redoes it.
 inline void forget_finished(const fs::path& runs, const std::string& name) {
-  for (const char* suffix : {".csv", ".log", ".run", ".checkpoint"})
+  for (const char* suffix : {".csv", ".log", ".run", ".checkpoint", ".checkpoint.lock"})
     fs::remove(runs / (name + suffix));
 }
 

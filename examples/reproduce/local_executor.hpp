@@ -21,6 +21,7 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -119,10 +120,12 @@ private:
     std::map<std::string, std::vector<fs::path>> by_run;
     for (const auto& entry : fs::directory_iterator(runs_)) {
       const std::string file = entry.path().filename().string();
-      // The checkpoint of a finished run: a kill between the run's last rename and the
-      // checkpoint's removal leaves it.
-      if (file.ends_with(".checkpoint") &&
-          fs::exists(runs_ / (file.substr(0, file.size() - 11) + ".csv"))) {
+      // The checkpoint of a finished run, or its lock file: a kill between the run's last
+      // rename and their removal leaves them.
+      std::string run_of;
+      for (const std::string_view suffix : {".checkpoint", ".checkpoint.lock"})
+        if (file.ends_with(suffix)) run_of = file.substr(0, file.size() - suffix.size());
+      if (!run_of.empty() && fs::exists(runs_ / (run_of + ".csv"))) {
         fs::remove(entry.path());
         continue;
       }
@@ -167,6 +170,13 @@ private:
 
   void write_summary() { finished_ = rebuild_summary(out_); }
 
+  /// Removes the run's checkpoint and the lock file its task program held on it (no program
+  /// runs the run: this executor holds the run's lock); whether there was a checkpoint.
+  bool remove_checkpoint(const Run& run) const {
+    fs::remove(run_file(runs_, run, ".checkpoint.lock"));
+    return fs::remove(run_file(runs_, run, ".checkpoint"));
+  }
+
   /// Starts the run unless another executor holds its lock or finished it meanwhile.
   bool start(const Run& run) {
     const std::string name = run.name();
@@ -179,8 +189,7 @@ private:
     // A checkpoint resumes only the run it was written for (--epochs aside, the programs
     // refuse others): one left by a run of other settings under this name goes. Without a
     // checkpoint the run starts over, and so does its training log.
-    if (read_text(run_file(runs_, run, ".run")) != run.description())
-      fs::remove(run_file(runs_, run, ".checkpoint"));
+    if (read_text(run_file(runs_, run, ".run")) != run.description()) remove_checkpoint(run);
     if (!fs::exists(run_file(runs_, run, ".checkpoint")))
       fs::remove(run_file(runs_, run, ".partial.csv"));
     sbptt::write_file_atomically(run_file(runs_, run, ".run").string(), run.description());
@@ -234,7 +243,7 @@ private:
           // finished exactly when its CSV has its name, on disk.
           rename_durably(partial_log, run_file(runs_, run, ".log"));
           rename_durably(partial, csv);
-          fs::remove(run_file(runs_, run, ".checkpoint"));  // served its purpose
+          remove_checkpoint(run);  // served its purpose
           ++done_;
           measured_seconds_ += wall;
           measured_estimate_ += finished_.expected_seconds(run);
@@ -257,7 +266,7 @@ private:
                               : concat("exit code ", code);
       // The program failed, perhaps on its checkpoint (refused, or its log cut): the next
       // attempt starts over.
-      if (fs::remove(run_file(runs_, run, ".checkpoint")))
+      if (remove_checkpoint(run))
         failure += "; its checkpoint was removed, the next sweep redoes it from epoch 1";
     }
     failures_.push_back(concat("  ", name, ": ", failure, "; log ", partial_log.string(),

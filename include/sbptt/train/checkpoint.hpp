@@ -35,6 +35,7 @@
 #include <vector>
 
 #include "sbptt/core/atomic_file.hpp"
+#include "sbptt/core/file_lock.hpp"
 #include "sbptt/core/number_text.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/core/types.hpp"
@@ -368,6 +369,20 @@ template <class Scalar>
   std::fclose(file);
   detail::require<IoError>(!failed, "reading checkpoint '", path, "' failed");
   return parse_checkpoint<Scalar>(text, path, check_settings);
+}
+
+/// The lock of a run on its checkpoint: `<checkpoint>.lock` beside the file the path names
+/// (links followed), held until the result is destroyed; none for an empty path. Two runs of
+/// one checkpoint would interleave their rows in the log and leave it resumable by neither.
+/// Throws `IoError` when another run holds it. A file system without locks runs unlocked.
+[[nodiscard]] inline detail::FileLock lock_checkpoint(const std::string& checkpoint) {
+  if (checkpoint.empty()) return {};
+  const std::string lock_file = detail::final_target(checkpoint).string() + ".lock";
+  detail::FileLock lock = detail::FileLock::take(lock_file, false);
+  detail::require<IoError>(!lock.busy(), "checkpoint '", checkpoint, "' is in use: another run "
+                           "holds '", lock_file, "' (the same command started twice?); "
+                           "expected one run per checkpoint at a time");
+  return lock;
 }
 
 }  // namespace sbptt

@@ -28,7 +28,8 @@
 /// `identity`); the log is cut back to its size at that checkpoint. The result is bitwise the
 /// one of an uninterrupted run (the seconds column aside, which is wall time). `epochs` is not
 /// part of the identity: a finished run can be continued with a larger `epochs`; a smaller
-/// one than the checkpoint's is refused.
+/// one than the checkpoint's is refused. A run holds its checkpoint's lock
+/// (`lock_checkpoint`) from before it reads the checkpoint to its end.
 #include <chrono>
 #include <concepts>
 #include <exception>
@@ -110,6 +111,7 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   require_distinct_files({{"training log", settings.log_csv, true},
                           {"checkpoint", settings.checkpoint, true},
                           {"parameters file", settings.save_params, true}});
+  const detail::FileLock checkpoint_lock = lock_checkpoint(settings.checkpoint);
 
   // Before the log or a checkpoint is touched: it refuses a controller whose copy would share
   // the parameters.

@@ -17,12 +17,12 @@ int run(const TaskOptions& o) {
   if (o.physical) options.model = CartPoleModel::Physical;
   const CartPole<Scalar, Poles> sim(options);
   Rng data_rng(o.seed);
-  auto data = examples::generated_sets<Scalar>(o, sim.state_dim(), [&](Index count) {
-    return cartpole_initial_states(sim, data_rng, count);
-  });
   auto network = Network<Scalar>::mlp(sim.state_dim(), {100, 100}, 1);
   Rng init_rng(o.seed + 1);
   glorot_uniform(network, init_rng, {.zero_last_kernel = true});
+  auto data = examples::generated_sets<Scalar>(o, sim.state_dim(), network, [&](Index count) {
+    return cartpole_initial_states(sim, data_rng, count);
+  });
   return examples::train(o, sim, network, cartpole_objective<Scalar, Poles>(), o.time.steps,
                          std::move(data));
 }
@@ -33,12 +33,12 @@ template <class Scalar, int Links>
 int run_chain(const TaskOptions& o) {
   const CartChain<Scalar, Links> sim(CartChainModel<Links>{}, static_cast<Scalar>(o.time.dt));
   Rng data_rng(o.seed);
-  auto data = examples::generated_sets<Scalar>(o, sim.state_dim(), [&](Index count) {
-    return cartpole_initial_states<Scalar>(Links, data_rng, count);
-  });
   auto network = Network<Scalar>::mlp(sim.state_dim(), {100, 100}, 1);
   Rng init_rng(o.seed + 1);
   glorot_uniform(network, init_rng, {.zero_last_kernel = true});
+  auto data = examples::generated_sets<Scalar>(o, sim.state_dim(), network, [&](Index count) {
+    return cartpole_initial_states<Scalar>(Links, data_rng, count);
+  });
   return examples::train(o, sim, network, cartpole_objective<Scalar, Links>(), o.time.steps,
                          std::move(data));
 }

@@ -17,12 +17,12 @@ int run(const TaskOptions& o) {
   if (o.physical) options.physical = {GuidanceCenter::Centroid, FlockingSign::AsIntended};
   const GuidanceByRepulsion<Scalar, Drivers, Evaders> sim(o.drivers, o.evaders, options);
   Rng data_rng(o.seed);
-  auto data = examples::generated_sets<Scalar>(o, sim.state_dim(), [&](Index count) {
-    return guidance_initial_states(sim, data_rng, count);
-  });
   auto network = Network<Scalar>::mlp(sim.state_dim(), {100, 100}, sim.control_dim());
   Rng init_rng(o.seed + 1);
   glorot_uniform(network, init_rng, {.zero_last_kernel = true});
+  auto data = examples::generated_sets<Scalar>(o, sim.state_dim(), network, [&](Index count) {
+    return guidance_initial_states(sim, data_rng, count);
+  });
   return examples::train(o, sim, network, guidance_objective(sim, o.rc), o.time.steps,
                          std::move(data));
 }

@@ -144,12 +144,12 @@ int run(TaskOptions o) {
   Rng data_rng(o.seed);
   if (o.check_derivatives) return check_derivatives(sim, o, data_rng);
   const Vector<double> target = target_positions(o.positions, *model, o.model);
-  auto data = examples::generated_sets<Scalar>(o, sim.state_dim(), [&](Index count) {
-    return initial_states(sim, o.spread, data_rng, count);
-  });
   auto network = Network<Scalar>::mlp(sim.state_dim(), {100, 100}, sim.control_dim());
   Rng init_rng(o.seed + 1);
   glorot_uniform(network, init_rng, {.zero_last_kernel = true});
+  auto data = examples::generated_sets<Scalar>(o, sim.state_dim(), network, [&](Index count) {
+    return initial_states(sim, o.spread, data_rng, count);
+  });
   Objective<TargetLoss<Scalar>> objective;
   objective.state_loss = {target.cast<Scalar>(), hinge_coordinates(*model)};
   objective.timing = LossTiming::Final;

@@ -16,8 +16,6 @@ int run(const TaskOptions& o) {
   options.steps = o.time.steps;
   const Schrodinger1D<Scalar, Nx> sim(o.nx, options);
   Rng data_rng(o.seed);
-  auto data = examples::generated_sets<Scalar>(
-      o, sim.state_dim(), [&](Index count) { return sim.initial_states(data_rng, count); });
   const Conv1d first{o.nx, 2, 60, 3, 2, Activation::Tanh};
   const Conv1d second{first.output_length(), 60, 60, 3, 2, Activation::Tanh};
   Network<Scalar> network({first, second, Dense{second.output_length() * 60, 1}});
@@ -25,6 +23,9 @@ int run(const TaskOptions& o) {
   // same function, but Glorot fans (6, 360) instead of our conv1d's (6, 180).
   Rng init_rng(o.seed + 1);
   glorot_uniform(network, init_rng, {.fan_overrides = {std::pair<Index, Index>{6, 360}}});
+  auto data = examples::generated_sets<Scalar>(o, sim.state_dim(), network, [&](Index count) {
+    return sim.initial_states(data_rng, count);
+  });
   return examples::train(o, sim, network, quantum_objective(sim, o.target + 1), o.time.steps,
                          std::move(data));
 }

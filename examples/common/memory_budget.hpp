@@ -5,9 +5,10 @@
 // pages are touched: no message, no exit code of the program's own. So the sizes are checked
 // against the least of the machine's memory, the process's cgroup limit (Slurm's, a
 // container's) and ulimit -v / -d before anything is generated. What is counted is a lower
-// bound (the generated set, its two halves and the trajectories' states), so no size that
-// fits is refused; a run that passes here and still runs out gets the out-of-memory message
-// of `task_main`.
+// bound (the generated set, its two halves and one batch's trajectory with the network's
+// record of each step; not the adjoints, gradients, threads' buffers or the program itself),
+// so no size that fits is refused; a run that passes here and still runs out gets the
+// out-of-memory message of `task_main`.
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -20,6 +21,7 @@
 
 #include <sbptt/core/error.hpp>
 #include <sbptt/core/types.hpp>
+#include <sbptt/nn/network.hpp>
 
 #include "task_options.hpp"
 
@@ -86,16 +88,22 @@ inline MemoryBound usable_memory() {
   return bound;
 }
 
-/// Throws `InvalidArgument` naming the size flags when the states of a run (the generated
-/// 2 × --samples, the train and test halves copied from them, and one batch's trajectory of
-/// states) cannot fit in `usable_memory()`.
+/// Throws `InvalidArgument` naming the size flags when what a run must hold at once cannot fit
+/// in `usable_memory()`: the generated 2 × --samples states and the train and test halves
+/// copied from them, and one batch's trajectory, whose every step holds its states and what
+/// `network` records of its forward pass (a workspace sized for one sample, times the batch).
 template <class Scalar>
-void require_memory_for_states(const TaskOptions& o, Index state_dim) {
-  const double numbers =
-      static_cast<double>(state_dim) *
-      (4.0 * static_cast<double>(o.samples) +
-       static_cast<double>(o.time.steps + 1) * static_cast<double>(o.batch));
-  const double bytes = numbers * static_cast<double>(sizeof(Scalar));
+void require_memory_for_run(const TaskOptions& o, Index state_dim,
+                            const Network<Scalar>& network) {
+  typename Network<Scalar>::Workspace one_sample;
+  network.size_forward(1, one_sample);
+  const auto scalar_bytes = static_cast<double>(sizeof(Scalar));
+  const double sets = 4.0 * static_cast<double>(o.samples) * static_cast<double>(state_dim);
+  const double per_step = static_cast<double>(state_dim) +
+                          static_cast<double>(one_sample.bytes()) / scalar_bytes;
+  const double trajectory = static_cast<double>(o.time.steps + 1) *
+                            static_cast<double>(o.batch) * per_step;
+  const double bytes = (sets + trajectory) * scalar_bytes;
   const MemoryBound usable = usable_memory();
   if (bytes <= usable.bytes) return;
   const auto gib = [](double b) {
@@ -106,9 +114,10 @@ void require_memory_for_states(const TaskOptions& o, Index state_dim) {
   const std::string nx = o.task == Task::Quantum ? detail::concat(" with --nx ", o.nx) : "";
   throw InvalidArgument(detail::concat(
       "--samples ", o.samples, " (and as many test samples)", nx, ", --batch ", o.batch,
-      " and --steps ", o.time.steps, " need at least ", gib(bytes), " for their states (",
-      sizeof(Scalar) == 4 ? "float" : "double", "), more than the ", gib(usable.bytes),
-      " this process may use (", usable.source, "); expected smaller sizes"));
+      " and --steps ", o.time.steps, " need at least ", gib(bytes), " (", sizeof(Scalar) == 4 ?
+      "float" : "double", ": ", gib(sets * scalar_bytes), " for the states, ",
+      gib(trajectory * scalar_bytes), " for a batch's trajectory), more than the ",
+      gib(usable.bytes), " this process may use (", usable.source, "); expected smaller sizes"));
 }
 
 }  // namespace sbptt::examples

@@ -60,11 +60,12 @@ struct DataSplit {
 };
 
 /// 2 × --samples states from `generate(count)`, the first half the train set and the second
-/// the test set, as the reference splits them; refused before anything is generated when the
-/// states cannot fit in memory (memory_budget.hpp).
+/// the test set, as the reference splits them; refused before anything is generated when a
+/// run of `network` on them cannot fit in memory (memory_budget.hpp).
 template <class Scalar, class Generate>
-DataSplit<Scalar> generated_sets(const TaskOptions& o, Index state_dim, Generate&& generate) {
-  require_memory_for_states<Scalar>(o, state_dim);
+DataSplit<Scalar> generated_sets(const TaskOptions& o, Index state_dim,
+                                 const Network<Scalar>& network, Generate&& generate) {
+  require_memory_for_run<Scalar>(o, state_dim, network);
   const Matrix<Scalar> states = generate(Index{2} * o.samples);
   const Index n = states.cols() / 2;
   return {states.leftCols(n), states.rightCols(n)};

@@ -306,34 +306,39 @@ TEST_CASE("a parameters or states file without newlines is refused at once", "[p
 TEST_CASE("running out of memory names the sizes asked for", "[programs]") {
   // Under ASan the programs cannot even start in 2 GB of address space (its shadow memory).
   if (sbptt::testing::address_sanitizer) return;
-  // The states fit in 2 GB of address space; a batch of 256 trajectories of 128 steps does
-  // not: the convolutions' activations, 46,000 numbers a sample-step at --nx 1024, about 12 GB.
-  const Result r = run("quantum", "--samples 256 --batch 256 --nx 1024 --epochs 1",
-                       "ulimit -v 2000000; ");
+  // The budget's lower bound, a trajectory of 129 × 8 samples × 99,048 doubles (817.7 MB,
+  // memory_budget.hpp), passes under 824 MB of address space; the program beside it does not.
+  const Result r = run("quantum", "--samples 8 --batch 8 --nx 1024 --epochs 1",
+                       "ulimit -v 805000; ");
   INFO(r.output);
   CHECK(r.status == 1);
-  CHECK(r.output.find("out of memory for --samples 256") != std::string::npos);
+  CHECK(r.output.find("out of memory for --samples 8") != std::string::npos);
   CHECK(r.output.find("--nx 1024") != std::string::npos);
 }
 
-TEST_CASE("sizes whose states cannot fit in memory are refused before any work",
-          "[programs]") {
+TEST_CASE("sizes that cannot fit in memory are refused before any work", "[programs]") {
   if (sbptt::testing::address_sanitizer) return;
   const fs::path log = scratch("too_big.csv");
   fs::remove(log);
-  // Under a 2 GB address-space limit: 2 × 1e6 samples of 2 × 1024 doubles are 32 GB.
+  // Under a 2 GB address-space limit. States: 4 × 1e6 samples (generated, then split) × 2048
+  // × 8 bytes = 61.0 GiB; a trajectory: 129 × 8 × (2048 + 97,000 of the network's record at
+  // --nx 1024) × 8 bytes = 0.8 GiB.
   Result r = run("quantum", "--samples 1000000 --nx 1024 --epochs 1 --csv " + log.string(),
                  "ulimit -v 2000000; ");
   INFO(r.output);
   CHECK(r.status == 2);
-  CHECK(r.output.find("--samples 1000000 (and as many test samples) with --nx 1024") !=
-        std::string::npos);
-  // 2048 × 8 bytes × (4 × 1e6 samples + 129 states × batch 8) = 61.05 GiB
-  CHECK(r.output.find("need at least 61.1 GiB") != std::string::npos);
+  CHECK(r.output.find("--samples 1000000 (and as many test samples) with --nx 1024, --batch 8 "
+                      "and --steps 128 need at least 61.8 GiB (double: 61.0 GiB for the "
+                      "states, 0.8 GiB for a batch's trajectory)") != std::string::npos);
   CHECK(r.output.find("more than the 1.9 GiB this process may use (ulimit -v)") !=
         std::string::npos);
   CHECK_FALSE(fs::exists(log));
-  // With no limit set: states beyond the machine's memory are refused too, not left to the
+  // The trajectory alone: 256 samples a batch need 24.4 GiB.
+  r = run("quantum", "--samples 256 --batch 256 --nx 1024 --epochs 1", "ulimit -v 2000000; ");
+  INFO(r.output);
+  CHECK(r.status == 2);
+  CHECK(r.output.find("24.4 GiB for a batch's trajectory") != std::string::npos);
+  // With no limit set: sizes beyond the machine's memory are refused too, not left to the
   // kernel's out-of-memory killer. The largest sizes the flags allow generate 131 GB at once;
   // on a machine with less than that (so that the old code failed at once too).
   const double memory = static_cast<double>(sysconf(_SC_PHYS_PAGES)) *

@@ -200,6 +200,9 @@ TEST_CASE("a parameters file whose last number has no newline after it is refuse
   REQUIRE_THROWS_WITH(sbptt::load_parameters<double>(file, 3),
                       Contains("cut.txt', line 3") && Contains("'0.1234'") &&
                           Contains("no newline") && Contains("cut short"));
+  // A last line that is wrong anyway is named for what is wrong with it.
+  write_text(file, "1.5\n-2\nabc");
+  REQUIRE_THROWS_WITH(sbptt::load_parameters<double>(file, 3), Contains("'abc' is not a number"));
   // Blanks after the last newline lose nothing: accepted, as trailing blank lines are.
   write_text(file, "1.5\n-2\n0.1234\n  ");
   CHECK(sbptt::load_parameters<double>(file, 3)(2) == 0.1234);

@@ -306,10 +306,11 @@ TEST_CASE("a parameters or states file without newlines is refused at once", "[p
 TEST_CASE("running out of memory names the sizes asked for", "[programs]") {
   // Under ASan the programs cannot even start in 2 GB of address space (its shadow memory).
   if (sbptt::testing::address_sanitizer) return;
-  // The budget's lower bound, a trajectory of 129 × 8 samples × 99,048 doubles (817.7 MB,
-  // memory_budget.hpp), passes under 824 MB of address space; the program beside it does not.
+  // The budget's lower bound (memory_budget.hpp), 824.3 MB at --nx 1024 (a trajectory of 129
+  // × 8 samples × 99,023 doubles and the sets' 16 × 98,999), passes under 829.4 MB of address
+  // space; the program beside it does not (it runs under 839.7 MB).
   const Result r = run("quantum", "--samples 8 --batch 8 --nx 1024 --epochs 1",
-                       "ulimit -v 805000; ");
+                       "ulimit -v 810000; ");
   INFO(r.output);
   CHECK(r.status == 1);
   CHECK(r.output.find("out of memory for --samples 8") != std::string::npos);
@@ -320,16 +321,17 @@ TEST_CASE("sizes that cannot fit in memory are refused before any work", "[progr
   if (sbptt::testing::address_sanitizer) return;
   const fs::path log = scratch("too_big.csv");
   fs::remove(log);
-  // Under a 2 GB address-space limit. States: 4 × 1e6 samples (generated, then split) × 2048
-  // × 8 bytes = 61.0 GiB; a trajectory: 129 × 8 × (2048 + 97,000 of the network's record at
-  // --nx 1024) × 8 bytes = 0.8 GiB.
+  // Under a 2 GB address-space limit. The sets: 1e6 samples × (4 × 2048 states, generated and
+  // split, + 96,975 of the network's record at --nx 1024 for their evaluation) × 8 bytes; a
+  // trajectory: 129 × 8 × (2048 + 96,975) × 8 bytes = 0.8 GiB.
   Result r = run("quantum", "--samples 1000000 --nx 1024 --epochs 1 --csv " + log.string(),
                  "ulimit -v 2000000; ");
   INFO(r.output);
   CHECK(r.status == 2);
   CHECK(r.output.find("--samples 1000000 (and as many test samples) with --nx 1024, --batch 8 "
-                      "and --steps 128 need at least 61.8 GiB (double: 61.0 GiB for the "
-                      "states, 0.8 GiB for a batch's trajectory)") != std::string::npos);
+                      "and --steps 128 need at least") != std::string::npos);
+  CHECK(r.output.find("GiB for the sets and their evaluation, 0.8 GiB for a batch's "
+                      "trajectory)") != std::string::npos);
   CHECK(r.output.find("more than the 1.9 GiB this process may use (ulimit -v)") !=
         std::string::npos);
   CHECK_FALSE(fs::exists(log));
@@ -348,6 +350,44 @@ TEST_CASE("sizes that cannot fit in memory are refused before any work", "[progr
   INFO(r.output);
   CHECK(r.status == 2);
   CHECK(r.output.find("this process may use (physical memory)") != std::string::npos);
+}
+
+TEST_CASE("a cgroup's memory limit above the program's own cgroup is honoured", "[programs]") {
+  // Slurm limits a job's cgroup and runs its task in a cgroup below it, whose own limit is
+  // "max". The kernel killed such a run (SIGKILL, no message) once its pages outgrew the job's
+  // limit. Here: 1e9 bytes on a parent cgroup, the program in a child; its 1.5 GiB trajectory
+  // (quantum --nx 1024, batch 16) cannot fit. Needs root and a writable memory cgroup (v1 or v2).
+  if (sbptt::testing::address_sanitizer) return;
+  // Below this process's own cgroup, so that the program stays within its container's or job's.
+  const bool v1 = fs::exists("/sys/fs/cgroup/memory/cgroup.procs");
+  std::string own;
+  std::ifstream cgroups("/proc/self/cgroup");
+  for (std::string line; std::getline(cgroups, line);) {
+    const auto memory = line.find(":memory:");
+    if (v1 && memory != std::string::npos) own = line.substr(memory + 8);
+    if (!v1 && line.rfind("0::", 0) == 0) own = line.substr(3);
+  }
+  const fs::path parent = fs::path(v1 ? "/sys/fs/cgroup/memory" : "/sys/fs/cgroup") /
+                          fs::path(own).relative_path() /
+                          ("sbptt_test_" + std::to_string(getpid()));
+  const std::string limit_file = v1 ? "memory.limit_in_bytes" : "memory.max";
+  std::error_code error;
+  fs::create_directories(parent / "inner", error);
+  if (error || !fs::exists(parent / limit_file) ||
+      !(std::ofstream(parent / limit_file) << "1000000000\n")) {
+    fs::remove(parent / "inner", error);
+    fs::remove(parent, error);
+    WARN("no writable memory cgroup (not root, or no memory controller): skipped");
+    return;
+  }
+  const Result r = run("quantum", "--samples 16 --batch 16 --nx 1024 --epochs 1",
+                       "echo $$ > " + (parent / "inner" / "cgroup.procs").string() + " && ");
+  fs::remove(parent / "inner", error);
+  fs::remove(parent, error);
+  INFO(r.output);
+  CHECK(r.status == 2);
+  CHECK(r.output.find("1.5 GiB for a batch's trajectory), more than the 0.9 GiB this process "
+                      "may use (the memory limit of its cgroup)") != std::string::npos);
 }
 
 TEST_CASE("skip-batch reports each skipped batch and never ends silently on NaN",

@@ -25,12 +25,8 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/file.h>
-#include <sys/ioctl.h>
 #include <sys/stat.h>
 #include <unistd.h>
-#if __has_include(<linux/fs.h>)
-#include <linux/fs.h>
-#endif
 
 #include <algorithm>
 #include <atomic>
@@ -186,20 +182,15 @@ inline void remove_dead_writers_temporaries(const std::filesystem::path& target)
   }
 }
 
-}  // namespace detail
-
-namespace detail {
-
 /// Whether `path` carries the append-only attribute (chattr +a), which even root's rename
-/// cannot replace, nor, for a directory, rename any entry of. False where it cannot be read.
+/// cannot replace, nor, for a directory, rename any entry of. `statx` reads it without read
+/// permission on the file; false where the system cannot tell.
 [[nodiscard]] inline bool append_only(const std::filesystem::path& path) {
-#if defined(FS_IOC_GETFLAGS) && defined(FS_APPEND_FL)
-  const int fd = open_above_standard_streams(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC, 0);
-  if (fd < 0) return false;
-  int flags = 0;
-  const bool set = ::ioctl(fd, FS_IOC_GETFLAGS, &flags) == 0 && (flags & FS_APPEND_FL) != 0;
-  ::close(fd);
-  return set;
+#if defined(STATX_ATTR_APPEND)
+  struct statx attributes{};
+  return ::statx(AT_FDCWD, path.c_str(), 0, STATX_BASIC_STATS, &attributes) == 0 &&
+         (attributes.stx_attributes_mask & STATX_ATTR_APPEND) != 0 &&
+         (attributes.stx_attributes & STATX_ATTR_APPEND) != 0;
 #else
   (void)path;
   return false;

@@ -83,13 +83,12 @@ enum class LineRead { Line, Unended, End, TooLong };
 }
 
 /// Refuses a non-blank last line that `read_bounded_line` found `Unended`; `where` names the
-/// file and line, `writer` the function whose files end every line.
-inline void require_line_ended(LineRead read, std::string_view line, const std::string& where,
-                               std::string_view writer) {
+/// file and line.
+inline void require_line_ended(LineRead read, std::string_view line, const std::string& where) {
   require<ParseError>(read != LineRead::Unended || trim_blanks(line).empty(), where, ": '",
                       printable(line), "' has no newline at its end, so the file may have been",
-                      " cut short; expected every line to end with one, as ", writer,
-                      " writes them (add one if you wrote the file by hand)");
+                      " cut short; expected every line to end with one, as sbptt writes them",
+                      " (add one if you wrote the file by hand)");
 }
 
 /// Parses one finite number; `where` prefixes every error ("file 'p', line 3").

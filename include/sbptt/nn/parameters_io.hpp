@@ -7,8 +7,9 @@
 /// Loading is strict, because a silently misread controller is worse than a refused one:
 /// each line is one finite number with optional surrounding blanks (spaces, tabs, a CR from a
 /// Windows editor), ended by a newline (without one, the last number may be a cut copy's);
-/// anything else is a `ParseError` naming the file, the 1-based line and the text. Writing goes to a temporary file beside the target, renamed over it at the end, so a
-/// crash never leaves a half-written parameters file.
+/// anything else is a `ParseError` naming the file, the 1-based line and the text. Writing
+/// goes to a temporary file beside the target, renamed over it at the end, so a crash never
+/// leaves a half-written parameters file.
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -66,7 +67,6 @@ template <class Scalar>
     detail::require<ParseError>(read != detail::LineRead::TooLong, where(), ": longer than ",
                                 detail::max_number_chars, " characters (it starts '",
                                 detail::printable(line), "'); expected one number per line");
-    detail::require_line_ended(read, line, where(), "save_parameters");
     if (detail::trim_blanks(line).empty()) {  // allowed only at the end of the file
       if (blank_run_start == 0) blank_run_start = line_number;
       continue;
@@ -77,6 +77,7 @@ template <class Scalar>
     detail::require<ParseError>(static_cast<Index>(values.size()) < expected, where(),
                                 ": more than the ", expected, " numbers expected");
     values.push_back(detail::parse_finite<Scalar>(line, where()));
+    detail::require_line_ended(read, line, where());  // after the line's own errors
   }
   detail::require<IoError>(!in.bad(), "load_parameters: reading '", path.string(),
                            "' failed after line ", line_number);

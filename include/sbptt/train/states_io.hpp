@@ -95,8 +95,8 @@ template <class Scalar>
     detail::require<ParseError>(read != detail::LineRead::TooLong, where, ": longer than ",
                                 longest, " characters (it starts '", detail::printable(line),
                                 "'); expected a row of ", state_dim, " numbers");
-    detail::require_line_ended(read, line, where, "save_states");
     if (detail::parse_state_row(line, state_dim, where, values)) ++rows;
+    detail::require_line_ended(read, line, where);  // after the row's own errors
   }
   detail::require<IoError>(!in.bad(), "reading states file '", path.string(),
                            "' failed after line ", line_number);

@@ -110,6 +110,56 @@ file(READ "${out}/summary.csv" merged)
 check("--merge over a NaN test loss: no summary row for the run"
       NOT merged MATCHES "cartpole_p4_C_norm_s42")
 
+# Every field of a row, not only the losses: a NaN batch loss or update norm, a cosine or an
+# agreement outside its range, one where the method computes none, a negative time. The runner
+# merged each of these as an "ok" run. Field K (1-based) of run's last row becomes `value`; the
+# file is restored after the check.
+function(check_last_row_refused run k value expected)
+  set(file "${runs}/${run}.csv")
+  file(READ "${file}" kept)
+  file(STRINGS "${file}" rows)
+  list(POP_BACK rows last)
+  set(prefix "")
+  foreach(i RANGE 2 ${k})
+    string(APPEND prefix "[^,]*,")
+  endforeach()
+  string(REGEX REPLACE "^(${prefix})[^,]*" "\\1${value}" last "${last}")
+  list(APPEND rows "${last}")
+  list(JOIN rows "\n" text)
+  file(WRITE "${file}" "${text}\n")
+  execute_process(COMMAND "${REPRODUCE}" ${grid} --merge --out "${out}" RESULT_VARIABLE rc
+                  OUTPUT_VARIABLE merge_out ERROR_VARIABLE merge_err)
+  file(WRITE "${file}" "${kept}")
+  check("--merge over field ${k} = '${value}' of ${run}: exit 1, damaged, ${expected}\n${merge_out}${merge_err}"
+        rc EQUAL 1 AND "${merge_out}${merge_err}" MATCHES "${run}[^\n]*${expected}[^\n]*damaged")
+endfunction()
+check_last_row_refused(cartpole_p4_C_norm_s43 2 nan "batch_loss.: 'nan' is not finite")
+check_last_row_refused(cartpole_p4_C_norm_s43 5 nan "update_norm2.: 'nan' is not a number >= 0 or 'inf'")
+check_last_row_refused(cartpole_p4_C_norm_s43 5 -1 "update_norm2.: '-1' is not a number >= 0 or 'inf'")
+check_last_row_refused(cartpole_p4_C_norm_s43 6 nan "cos_m_r.: 'nan' is not finite")
+check_last_row_refused(cartpole_p4_C_norm_s43 6 1.5 "cos_m_r.: '1.5' is outside .-1, 1.")
+check_last_row_refused(cartpole_p4_C_norm_s43 6 "" "cos_m_r.: empty")
+check_last_row_refused(cartpole_p4_C_norm_s43 7 -0.25 "agree_fraction.: '-0.25' is outside .0, 1.")
+check_last_row_refused(cartpole_p4_R_norm_s44 7 0.75 "agree_fraction.: '0.75' where method R logs nothing")
+check_last_row_refused(cartpole_p4_C_norm_s43 8 -0.5 "seconds.: '-0.5' is negative")
+# A norm that overflowed double's square is what the programs write (docs/formats.md).
+file(READ "${runs}/cartpole_p4_C_norm_s43.csv" kept)
+string(REGEX REPLACE "\n([0-9]+,[^,]*,[^,]*,[^,]*,)[^,]*(,[^\n]*\n)$" "\n\\1inf\\2" text "${kept}")
+check("the last row's update_norm2 is 'inf'" NOT text STREQUAL kept)
+file(WRITE "${runs}/cartpole_p4_C_norm_s43.csv" "${text}")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --merge --out "${out}" RESULT_VARIABLE rc
+                OUTPUT_VARIABLE merge_out ERROR_VARIABLE merge_err)
+file(WRITE "${runs}/cartpole_p4_C_norm_s43.csv" "${kept}")
+check("--merge over an update_norm2 of 'inf': the run is merged\n${merge_out}${merge_err}"
+      NOT "${merge_out}${merge_err}" MATCHES "cartpole_p4_C_norm_s43[^\n]*damaged")
+# --dry-run judged a run finished when its .csv existed: the NaN run above was "(finished)",
+# left out of the estimate, and a sweep then redid it.
+execute_process(COMMAND "${REPRODUCE}" ${grid} --dry-run --out "${out}" RESULT_VARIABLE rc
+                OUTPUT_VARIABLE dry_out ERROR_VARIABLE dry_err)
+check("--dry-run over a damaged run: it is to be redone, and says why\n${dry_out}${dry_err}"
+      rc EQUAL 0 AND dry_out MATCHES "cartpole_p4_C_norm_s42 [^\n]*damaged[^\n]*'nan' is not finite"
+      AND dry_out MATCHES "5 finished, 1 to do")
+
 # --- 2. limits shared with the task programs; a missing python ------------------------------
 foreach(flag epochs samples)
   execute_process(COMMAND "${REPRODUCE}" ${grid} --${flag} 2000000 --out "${WORK_DIR}/limits"

@@ -15,6 +15,7 @@
 #include <sbptt/core/instruction_set.hpp>
 
 #include "calibration.hpp"
+#include "finished_run.hpp"
 #include "options.hpp"
 #include "processes.hpp"
 #include "run_files.hpp"
@@ -79,18 +80,25 @@ inline void print_plan(const Options& o, const std::vector<Run>& plan, const fs:
   double estimate = 0;
   std::size_t todo = 0;
   const fs::path runs = fs::path(o.out) / "runs";
+  // The sweep's own judgement of the files (finished_run.hpp), not their presence: a damaged
+  // run is redone, so it counts as work to do.
+  const FinishedRuns finished = scan_finished(runs);
   std::vector<Run> unfinished;
   for (const auto& run : plan)
-    if (!fs::exists(run_file(runs, run, ".csv"))) unfinished.push_back(run);
+    if (!is_finished(finished, run)) unfinished.push_back(run);
   const MeasuredCosts costs = measure_costs(unfinished, bin_dir, o.threads);
   for (const auto& run : plan) {
     std::string command;
     for (const auto& a : command_line(run, bin_dir, runs, o.threads))
       command += (command.empty() ? "" : " ") + a;
-    const bool finished = fs::exists(run_file(runs, run, ".csv"));
-    std::printf("%-34s %s%s\n", run.name().c_str(), command.c_str(),
-                finished ? "  (finished)" : "");
-    if (!finished) estimate += costs.seconds(run).value_or(run.estimated_seconds()), ++todo;
+    const bool done = is_finished(finished, run);
+    const auto damage = finished.damaged.find(run.name());
+    const std::string state = done ? "  (finished)"
+                              : damage != finished.damaged.end()
+                                  ? concat("  (damaged, to be redone: ", damage->second, ")")
+                                  : std::string();
+    std::printf("%-34s %s%s\n", run.name().c_str(), command.c_str(), state.c_str());
+    if (!done) estimate += costs.seconds(run).value_or(run.estimated_seconds()), ++todo;
   }
   std::printf("reproduce: %s build; runs/<name>.log names each run's\n", sbptt::instruction_set());
   std::printf("%zu runs planned (profile %s, %zu finished, %zu to do), measured estimate %s of "

@@ -32,6 +32,56 @@ inline constexpr const char* summary_header =
     "task,complexity,method,clip,seed,epochs,final_test_loss,min_test_loss,final_train_loss,"
     "mean_seconds_per_epoch,total_seconds,status,run";
 
+/// The fields of one row of a training log, checked against what the programs write
+/// (docs/formats.md). The programs never log a NaN (a non-finite epoch has no row), so one
+/// here, or a value no run can produce, is damage, not a result.
+struct RowFields {
+  const std::vector<std::string>& fields;
+  const std::string& where;
+  sbptt::Method method;  ///< only the combined one logs cos_m_r and agree_fraction
+
+  [[nodiscard]] std::string field(std::size_t k) const {
+    return concat(where, ", field ", k + 1, " (", name(k), ")");
+  }
+  [[nodiscard]] static const std::string& name(std::size_t k) {
+    static const std::vector<std::string> names = split(sbptt::TrainingLog::header, ',');
+    return names[k];
+  }
+  double number(std::size_t k) const {
+    return sbptt::detail::parse_finite<double>(fields[k], field(k));
+  }
+  double non_negative(std::size_t k) const {
+    const double value = number(k);
+    if (value < 0) throw sbptt::ParseError(concat(field(k), ": '", fields[k], "' is negative"));
+    return value;
+  }
+  /// ‖v‖², which is `inf` where a finite norm squares past double's range.
+  void norm2(std::size_t k) const {
+    const std::string_view text = sbptt::detail::trim_blanks(fields[k]);
+    if (text == "inf") return;
+    try {
+      non_negative(k);
+    } catch (const sbptt::ParseError&) {
+      throw sbptt::ParseError(concat(field(k), ": '", sbptt::detail::printable(text),
+                                     "' is not a number >= 0 or 'inf'"));
+    }
+  }
+  /// A mean of cosines or fractions: in [low, high] up to its 9 printed digits, and empty for
+  /// every method but the combined one.
+  void bounded(std::size_t k, double low, double high) const {
+    if (method != sbptt::Method::Combined) {
+      if (!fields[k].empty())
+        throw sbptt::ParseError(concat(field(k), ": '", sbptt::detail::printable(fields[k]),
+                                       "' where method ", sbptt::label(method), " logs nothing"));
+      return;
+    }
+    const double value = number(k), slack = 1e-8;
+    if (value < low - slack || value > high + slack)
+      throw sbptt::ParseError(concat(field(k), ": '", fields[k], "' is outside [",
+                                     format_number(low), ", ", format_number(high), "]"));
+  }
+};
+
 /// Reads a finished training log (docs/programs.md): the header, then one row per epoch
 /// numbered 1, 2, ..., every line ended by a newline. Throws ParseError naming the file, the
 /// line and what is wrong (empty, cut off, a row that is not one).
@@ -51,14 +101,15 @@ inline Summary summarize(const Run& run, const fs::path& csv) {
     const std::string where = concat("'", csv.string(), "', line ", i + 1);
     if (fields.size() != 8)
       throw sbptt::ParseError(concat(where, ": ", fields.size(), " fields, expected 8"));
-    // Finite decimal numbers only: the programs never log a NaN (a non-finite epoch has no
-    // row), so one here is damage, not a result.
-    auto number = [&](std::size_t k) {
-      return sbptt::detail::parse_finite<double>(fields[k], concat(where, ", field ", k + 1));
-    };
-    if (number(0) != static_cast<double>(i))
+    const RowFields row{fields, where, run.method};
+    if (row.number(0) != static_cast<double>(i))
       throw sbptt::ParseError(concat(where, ": epoch ", fields[0], ", expected ", i));
-    const double train = number(2), test = number(3), seconds = number(7);
+    row.number(1);
+    const double train = row.number(2), test = row.number(3);
+    row.norm2(4);
+    row.bounded(5, -1, 1);
+    row.bounded(6, 0, 1);
+    const double seconds = row.non_negative(7);
     s.final_train = train;
     s.final_test = test;
     s.min_test = s.epochs_done == 0 ? test : std::min(s.min_test, test);

@@ -119,6 +119,33 @@ TEMPLATE_TEST_CASE("compare() sums in one pass what loops in double sum", "[core
   }
 }
 
+TEMPLATE_TEST_CASE("compare() is exact for finite gradients whose squares leave the scalar's range",
+                   "[core]", float, double) {
+  // Exploding gradients are what the combined update is for: components near the largest
+  // finite value made the sums of squares Inf and the cosine NaN (logged as "nan"); tiny ones
+  // made them zero and the cosine 0 for equal vectors. The closed form: g_R = 2·g_M gives 1,
+  // g_R = -g_M gives -1, orthogonal halves give 0.
+  using Scalar = TestType;
+  using Limits = std::numeric_limits<Scalar>;
+  for (const Scalar scale : {Limits::max() / Scalar(4), Scalar(1e-3) * Limits::min(),
+                             Limits::denorm_min() * Scalar(64)}) {
+    for (const sbptt::Index n : {3, 16, 13004}) {
+      INFO("scale = " << scale << ", n = " << n);
+      Vector<Scalar> g_m(n), g_r(n), across(n);
+      for (sbptt::Index i = 0; i < n; ++i) {
+        g_m(i) = scale * (i % 3 == 0 ? Scalar(-0.5) : Scalar(0.25));
+        across(i) = i < n / 2 ? g_m(i) : Scalar(0);
+      }
+      Vector<Scalar> rest = g_m - across;
+      g_r = g_m;
+      CHECK(sbptt::compare(g_m, g_r).cos_modified_regular == Approx(1.0).margin(1e-6));
+      g_r = -g_m;
+      CHECK(sbptt::compare(g_m, g_r).cos_modified_regular == Approx(-1.0).margin(1e-6));
+      CHECK(sbptt::compare(across, rest).cos_modified_regular == Approx(0.0).margin(1e-6));
+    }
+  }
+}
+
 TEMPLATE_TEST_CASE("compare_and_combine gives compare's report and combine's vector in one pass",
                    "[core]", float, double) {
   // Whole registers, tails and vectors shorter than a register, with zeros of both signs and

@@ -66,16 +66,16 @@ struct RowFields {
                                      "' is not a number >= 0 or 'inf'"));
     }
   }
-  /// A mean of cosines or fractions: in [low, high] up to its 9 printed digits, and empty for
-  /// every method but the combined one.
-  void bounded(std::size_t k, double low, double high) const {
+  /// A mean of cosines or fractions: in [low, high] up to `slack`, and empty for every method
+  /// but the combined one.
+  void bounded(std::size_t k, double low, double high, double slack) const {
     if (method != sbptt::Method::Combined) {
       if (!fields[k].empty())
         throw sbptt::ParseError(concat(field(k), ": '", sbptt::detail::printable(fields[k]),
                                        "' where method ", sbptt::label(method), " logs nothing"));
       return;
     }
-    const double value = number(k), slack = 1e-8;
+    const double value = number(k);
     if (value < low - slack || value > high + slack)
       throw sbptt::ParseError(concat(field(k), ": '", fields[k], "' is outside [",
                                      format_number(low), ", ", format_number(high), "]"));
@@ -107,8 +107,10 @@ inline Summary summarize(const Run& run, const fs::path& csv) {
     row.number(1);
     const double train = row.number(2), test = row.number(3);
     row.norm2(4);
-    row.bounded(5, -1, 1);
-    row.bounded(6, 0, 1);
+    // A cosine from float sums over up to 10^4 products can pass 1 by their rounding, where
+    // g_M and g_R nearly agree; a fraction of counts only by the mean's last digit.
+    row.bounded(5, -1, 1, 1e-3);
+    row.bounded(6, 0, 1, 1e-8);
     const double seconds = row.non_negative(7);
     s.final_train = train;
     s.final_test = test;

@@ -1,7 +1,9 @@
 #pragma once
 /// \file What a forward pass and a reverse sweep report besides the loss and the gradient, and
 /// the pair of sweeps that the combined update needs (`GradientPair`).
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <string_view>
 #include <vector>
@@ -48,12 +50,34 @@ struct SweepDiagnostics {
 
 /// Diagnostics comparing the modified vector g_M with the regular gradient g_R.
 struct ComparisonDiagnostics {
-  double cos_modified_regular = 0;  ///< cos(g_M, g_R); 0 when either is zero
+  double cos_modified_regular = 0;  ///< cos(g_M, g_R); 0 when either is zero or not finite
   double agree_fraction = 0;        ///< `sign_agreement(g_M, g_R)` (core/sign.hpp)
 };
 
 
 namespace detail {
+
+/// cos(a, b) of vectors of n entries, summed in double over a / max|a| and b / max|b|, so that
+/// no finite input overflows or underflows; 0 when either is zero or not finite (a sweep
+/// reports that as its first non-finite value).
+template <class Scalar>
+[[nodiscard]] double scaled_cosine(const Scalar* a, const Scalar* b, Index n) {
+  double a_max = 0, b_max = 0;
+  for (Index i = 0; i < n; ++i) {
+    a_max = std::max(a_max, std::abs(static_cast<double>(a[i])));
+    b_max = std::max(b_max, std::abs(static_cast<double>(b[i])));
+    if (!finite_by_bits(a[i]) || !finite_by_bits(b[i])) return 0.0;
+  }
+  if (a_max == 0 || b_max == 0) return 0.0;
+  double dot = 0, aa = 0, bb = 0;
+  for (Index i = 0; i < n; ++i) {
+    const double x = static_cast<double>(a[i]) / a_max, y = static_cast<double>(b[i]) / b_max;
+    dot += x * y;
+    aa += x * x;
+    bb += y * y;
+  }
+  return dot / (std::sqrt(aa) * std::sqrt(bb));
+}
 
 /// `compare`, writing the combined vector to `combined` (n entries) in the same pass unless it
 /// is null.
@@ -73,7 +97,15 @@ template <class Scalar>
   ComparisonDiagnostics result;
   const double norms = static_cast<double>(std::sqrt(sums.modified_norm2) *
                                            std::sqrt(sums.regular_norm2));
-  result.cos_modified_regular = norms > 0 ? static_cast<double>(sums.dot) / norms : 0.0;
+  // Squares of exploding (or vanishing) gradients leave the scalar's range: Inf made the
+  // cosine NaN, zero made it 0 for equal vectors. Such sums are redone with scaled vectors.
+  const auto in_range = [](Scalar norm2) {
+    return finite_by_bits(norm2) && norm2 >= std::numeric_limits<Scalar>::min();
+  };
+  if (in_range(sums.modified_norm2) && in_range(sums.regular_norm2) && finite_by_bits(sums.dot))
+    result.cos_modified_regular = static_cast<double>(sums.dot) / norms;
+  else
+    result.cos_modified_regular = scaled_cosine(modified.data(), regular.data(), modified.size());
   result.agree_fraction =
       static_cast<double>(agreement_fraction<Scalar>(agreeing, modified.size()));
   return result;

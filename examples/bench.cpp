@@ -81,6 +81,7 @@
 #include "bench/rows.hpp"
 #include "bench/targets.hpp"
 #include "command_line.hpp"
+#include "standard_streams.hpp"
 
 using namespace bench;  // NOLINT(google-build-using-namespace): the program's own namespace
 
@@ -196,6 +197,9 @@ int main(int argc, char** argv) {
       return r;
     }).rss_kib;
     std::printf("RSS of an idle child %.1f MiB\n\n", empty_rss / 1024);
+    // Its figures are its result: a stdout that fails (a full disk) stops it before minutes of
+    // measuring.
+    if (!sbptt::examples::streams_written("bench")) return 1;
 
     struct Job {
       std::string task, scalar;
@@ -266,12 +270,12 @@ int main(int argc, char** argv) {
                   100 * r.fraction_of_peak(), r.ms_threads,
                   r.ms_epoch / r.ms_threads, round_trip.c_str(), r.sim_ns,
                   r.trajectory_bytes / 1024, r.rss_kib / 1024);
-      std::fflush(stdout);
+      if (!sbptt::examples::streams_written("bench")) return 1;
       rows.push_back(row);
     }
     summarize(rows, settings.threads);
     if (!settings.csv.empty()) write_csv(settings, rows);
-    return 0;
+    return sbptt::examples::with_streams_checked("bench", 0);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench: %s\n", e.what());
     return 1;

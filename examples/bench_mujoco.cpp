@@ -25,6 +25,7 @@
 #include <sbptt/sim/mujoco.hpp>
 
 #include "command_line.hpp"
+#include "standard_streams.hpp"
 #include "mujoco_cartpole_layout.hpp"
 
 using namespace sbptt;
@@ -148,6 +149,7 @@ int main(int argc, char** argv) {
                 instruction_set());
     std::printf("%-38s %10s %12s %10s   ratios to the analytic row\n", "simulator (double)",
                 "step ns", "jacobians ns", "vjp ns");
+    if (!examples::streams_written("bench_mujoco")) return 1;
     for (const Index poles : {1, 2}) cartpole_rows(poles, source, static_cast<int>(repeats));
     const MujocoModelPtr pendulum =
         load_mujoco_model(source + "/examples/models/double_pendulum.xml");
@@ -164,5 +166,5 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "bench_mujoco: %s\n", e.what());
     return 2;
   }
-  return 0;
+  return examples::with_streams_checked("bench_mujoco", 0);
 }

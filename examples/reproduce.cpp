@@ -34,6 +34,7 @@
 #include <iostream>
 
 #include "reproduce/emit.hpp"
+#include "standard_streams.hpp"
 #include "reproduce/local_executor.hpp"
 #include "reproduce/merge.hpp"
 #include "reproduce/options.hpp"
@@ -42,7 +43,9 @@
 using namespace reproduce;  // NOLINT(google-build-using-namespace): the program's own namespace
 namespace fs = std::filesystem;
 
-int main(int argc, char** argv) {
+namespace {
+
+int run_reproduce(int argc, char** argv) {
   Options options;
   std::vector<Run> plan;
   try {
@@ -101,4 +104,12 @@ int main(int argc, char** argv) {
     std::cerr << "reproduce: " << e.what() << "\n";
     return 1;
   }
+}
+
+}  // namespace
+
+// What reproduce prints is part of its work (the commands of --emit parallel, the plan, the
+// table): a write that failed turns exit 0 into 1.
+int main(int argc, char** argv) {
+  return sbptt::examples::with_streams_checked("reproduce", run_reproduce(argc, argv));
 }

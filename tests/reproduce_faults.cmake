@@ -160,6 +160,15 @@ check("--dry-run over a damaged run: it is to be redone, and says why\n${dry_out
       rc EQUAL 0 AND dry_out MATCHES "cartpole_p4_C_norm_s42 [^\n]*damaged[^\n]*'nan' is not finite"
       AND dry_out MATCHES "5 finished, 1 to do")
 
+# Standard output that cannot be written (a full disk): the commands of --emit parallel and
+# the plan of --dry-run were lost with exit 0.
+foreach(mode "--emit;parallel" --dry-run)
+  execute_process(COMMAND "${REPRODUCE}" ${grid} ${mode} --out "${out}" RESULT_VARIABLE rc
+                  OUTPUT_FILE /dev/full ERROR_VARIABLE err)
+  check("${mode} into a full stdout: exit 1, saying so (${err})" rc EQUAL 1 AND err MATCHES
+        "reproduce: standard output or standard error was not written in full: No space left")
+endforeach()
+
 # --- 2. limits shared with the task programs; a missing python ------------------------------
 foreach(flag epochs samples)
   execute_process(COMMAND "${REPRODUCE}" ${grid} --${flag} 2000000 --out "${WORK_DIR}/limits"

@@ -177,7 +177,7 @@ TEST_CASE("output cut short by a file-size limit ends with exit 1, not 0", "[pro
 
 TEST_CASE("stdout that cannot be written: exit 1, and stderr gives the reason", "[programs]") {
   // stderr into the pipe, stdout into /dev/full (every write fails with ENOSPC).
-  // lqr_convergence, whose study takes a minute, stops after its first line.
+  // lqr_convergence, whose study takes a minute, and bench stop after their first line.
   const std::string csv = scratch("full_stdout.csv").string();
   const fs::path own_scene = fresh_directory("full_stdout_own_scene");
   for (const auto& [program, arguments] : std::vector<std::pair<std::string, std::string>>{
@@ -186,7 +186,9 @@ TEST_CASE("stdout that cannot be written: exit 1, and stderr gives the reason", 
            {"train_own_scene", own_scene.string()},
            {"rotation", "--iterations 5 --csv " + csv},
            {"accuracy", "--integrators-only --csv " + csv},
-           {"lqr_convergence", ""}}) {
+           {"lqr_convergence", ""},
+           {"bench", "--tasks cartpole1 --scalars float --methods R --repeats 1"},
+           {"bench_mujoco", "--repeats 1"}}) {
     const auto r = sbptt::testing::run(program, arguments, "", "2>&1 >/dev/full");
     INFO(program << "\n" << r.output);
     CHECK(r.status == 1);

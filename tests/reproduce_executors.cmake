@@ -11,6 +11,7 @@
 #   4. two full executors at once in one folder: every run started exactly once (the per-run
 #      lock), the same summary;
 #   5. --merge counts done, running (a lock held by another process) and missing runs;
+#      a sweep waits for a run that another process holds, then runs it;
 #   6. --emit slurm writes a job array of the unfinished runs (--array=0-(n-1)%K, the CPUs,
 #      a time limit, a log per task) and a merge job, and prints the sbatch commands;
 #   7. --run, --shard, --emit refuse bad values and each other with exit 2.
@@ -152,6 +153,16 @@ execute_process(COMMAND env SLURM_ARRAY_TASK_ID=1 bash "${P}/slurm/array.sh"
                 RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
 check("array task 1 runs guidance_rc0.001_C_norm_s43"
       rc EQUAL 0 AND EXISTS "${P}/runs/guidance_rc0.001_C_norm_s43.csv")
+
+# A sweep whose run another process holds (as another executor would): the sweep waited for
+# nothing and exited 0 with the run unfinished, against "0: every planned run is finished".
+# It now waits, and runs it when the holder lets go of it unfinished.
+execute_process(COMMAND sh "${WORK_DIR}/hold.sh" "${P}/runs/cartpole_p4_C_norm_s42.lock"
+                "${REPRODUCE}" ${grid} --out "${P}" RESULT_VARIABLE rc OUTPUT_VARIABLE swept
+                ERROR_VARIABLE swept_err)
+check("a sweep over a run held elsewhere: exit 0 once it is finished\n${swept}${swept_err}"
+      rc EQUAL 0 AND EXISTS "${P}/runs/cartpole_p4_C_norm_s42.csv"
+      AND swept_err MATCHES "1 held by another executor \\(e.g. cartpole_p4_C_norm_s42\\)")
 
 # --- 7. bad values ---------------------------------------------------------------------------------
 foreach(bad "--shard;0/3" "--shard;4/3" "--shard;2" "--emit;pbs" "--run;nosuchrun"

@@ -23,10 +23,10 @@
 #include <string>
 #include <string_view>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include <sbptt/core/atomic_file.hpp>
-#include <sbptt/core/instruction_set.hpp>
 #include <sbptt/train/training_log.hpp>
 
 #include "durable_files.hpp"
@@ -65,8 +65,7 @@ public:
                                                std::max<std::size_t>(todo.size(), 1))))
                     .c_str());
     std::printf("reproduce: output in %s (runs/, summary.csv, plots/)\n", out_.c_str());
-    std::printf("reproduce: %s build; runs/<name>.log names each run's\n",
-                sbptt::instruction_set());
+    print_instruction_sets();
     std::fflush(stdout);
     // More threads than cores make the runs wait for each other; the spin-then-sleep pool
     // copes, but the seconds columns then measure contention, not the method.
@@ -94,8 +93,8 @@ public:
     print_table(rows);
     std::printf("\nsummary: %s\n", (out_ / "summary.csv").c_str());
     if (!elsewhere_.empty())
-      std::printf("reproduce: %zu run(s) were left to the executor that holds their lock (e.g. "
-                  "%s); run reproduce with --merge once they have finished\n",
+      std::printf("reproduce: %zu run(s) were finished by another executor in the same folder "
+                  "(e.g. %s)\n",
                   elsewhere_.size(), elsewhere_.front().c_str());
     if (!failures_.empty()) {
       std::cerr << "reproduce: " << failures_.size() << " run(s) failed and will be redone by the "
@@ -177,13 +176,18 @@ private:
     return fs::remove(run_file(runs_, run, ".checkpoint"));
   }
 
-  /// Starts the run unless another executor holds its lock or finished it meanwhile.
+  /// Starts the run unless another executor holds its lock (the run waits in `waiting_` until
+  /// it lets go) or finished it meanwhile.
   bool start(const Run& run) {
     const std::string name = run.name();
     FileLock lock = try_lock_run(runs_, name);
-    if (!lock.held() || fs::exists(run_file(runs_, run, ".csv"))) {
+    if (!lock.held()) {
+      waiting_.push_back(&run);
+      return false;
+    }
+    if (fs::exists(run_file(runs_, run, ".csv"))) {
       elsewhere_.push_back(name);
-      --total_;
+      ++done_;
       return false;
     }
     // A checkpoint resumes only the run it was written for (--epochs aside, the programs
@@ -282,6 +286,7 @@ private:
     queued_ = &todo;
     std::size_t& next = next_;
     auto last_progress = std::chrono::steady_clock::time_point{};
+    auto last_retry = std::chrono::steady_clock::now();
     while (true) {
       if (interrupted) {
         for (const auto& c : running_) ::kill(c.pid, SIGTERM);
@@ -295,13 +300,28 @@ private:
         return 130;
       }
       bool changed = false;
-      while (running_.size() < static_cast<std::size_t>(options_.jobs) && next < todo.size()) {
+      const auto free_slot = [&] {
+        return running_.size() < static_cast<std::size_t>(options_.jobs);
+      };
+      while (free_slot() && next < todo.size()) {
         start(*todo[next++]);
         changed = true;
       }
-      if (running_.empty()) break;
+      // Exit 0 says every planned run is finished: a run that another executor holds is
+      // waited for, and run here if that executor lets go of it unfinished (killed, failed).
+      auto now = std::chrono::steady_clock::now();
+      if (next == todo.size() && free_slot() && !waiting_.empty() &&
+          now - last_retry > std::chrono::seconds(1)) {
+        const std::vector<const Run*> waited = std::exchange(waiting_, {});
+        for (const Run* run : waited)
+          if (free_slot()) start(*run);
+          else waiting_.push_back(run);
+        changed = changed || waiting_.size() != waited.size();
+        last_retry = now;
+      }
+      if (running_.empty() && waiting_.empty()) break;
       changed = reap() || changed;
-      const auto now = std::chrono::steady_clock::now();
+      now = std::chrono::steady_clock::now();
       if ((tty_ && now - last_progress > std::chrono::milliseconds(500)) || (!tty_ && changed)) {
         progress();
         last_progress = now;
@@ -355,6 +375,9 @@ private:
                               " elapsed, about ", format_duration(seconds_left()), " left");
     if (!failures_.empty()) line += concat(", ", failures_.size(), " failed");
     if (!names.empty()) line += "; running: " + names;
+    if (!waiting_.empty())
+      line += concat("; ", waiting_.size(), " held by another executor (e.g. ",
+                     waiting_.front()->name(), ")");
     if (tty_) {
       winsize size{};
       std::size_t width = 100;
@@ -381,7 +404,8 @@ private:
   fs::path bin_dir_, out_, runs_;
   FinishedRuns finished_;              ///< on disk, as of the last summary.csv
   std::vector<std::string> failures_;
-  std::vector<std::string> elsewhere_;  ///< planned runs another executor had locked
+  std::vector<std::string> elsewhere_;     ///< planned runs another executor finished
+  std::vector<const Run*> waiting_;        ///< planned runs another executor holds now
   double measured_seconds_ = 0, measured_estimate_ = 0;  ///< of the runs finished here
   std::vector<Child> running_;
   std::size_t done_ = 0, total_ = 0;

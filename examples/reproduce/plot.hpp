@@ -12,7 +12,6 @@
 #include <string>
 #include <vector>
 
-#include <sbptt/core/instruction_set.hpp>
 
 #include "calibration.hpp"
 #include "finished_run.hpp"
@@ -100,7 +99,7 @@ inline void print_plan(const Options& o, const std::vector<Run>& plan, const fs:
     std::printf("%-34s %s%s\n", run.name().c_str(), command.c_str(), state.c_str());
     if (!done) estimate += costs.seconds(run).value_or(run.estimated_seconds()), ++todo;
   }
-  std::printf("reproduce: %s build; runs/<name>.log names each run's\n", sbptt::instruction_set());
+  print_instruction_sets();
   std::printf("%zu runs planned (profile %s, %zu finished, %zu to do), measured estimate %s of "
               "compute, about %s wall time with --jobs %ld\n",
               plan.size(), o.profile.c_str(), plan.size() - todo, todo,

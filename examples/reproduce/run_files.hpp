@@ -12,11 +12,20 @@
 #include <vector>
 
 #include <sbptt/core/error.hpp>
+#include <sbptt/core/instruction_set.hpp>
 
 #include "grid.hpp"
 #include "processes.hpp"
 
 namespace reproduce {
+
+/// The line that goes with every estimate and timing the runner prints: the task programs of
+/// --bin-dir may be another build than the runner, so each run's log names its own.
+inline void print_instruction_sets() {
+  std::printf("reproduce: built for %s; each run's log, runs/<name>.log, names the instruction "
+              "set of its task program\n",
+              sbptt::instruction_set());
+}
 
 /// runs/<name><suffix>: the files of one run.
 inline fs::path run_file(const fs::path& runs, const Run& run, const char* suffix) {

@@ -27,8 +27,8 @@
 //                         plot.hpp (figures, --dry-run plan)
 //
 // Exit codes: 0 every planned run finished, 1 a run failed or an error (--merge: runs missing),
-// 2 bad flags, 130 interrupted (SIGINT/SIGTERM/SIGHUP, also while plotting; the finished runs
-// are kept).
+// 2 bad flags, 130 interrupted (SIGINT/SIGTERM/SIGHUP, also while plotting or while --dry-run
+// measures; the finished runs are kept).
 
 #include <exception>
 #include <iostream>
@@ -82,8 +82,8 @@ int run_reproduce(int argc, char** argv) {
       return 1;
     }
     if (options.dry_run) {
-      print_plan(options, plan, bin_dir);
-      return 0;
+      install_signal_handlers();
+      return print_plan(options, plan, bin_dir);
     }
     if (options.emit == "parallel") return emit_parallel(options, plan, self, bin_dir);
     if (options.emit == "slurm") return emit_slurm(options, plan, self, bin_dir);

@@ -19,7 +19,8 @@
 #   3. interrupts the runner while it plots (a fake python and plot script that leave a
 #      temporary PNG behind): exit 130 on SIGTERM and on SIGINT, no "no plots" message, no
 #      plots/.tmp.* left; started with SIGHUP and SIGINT ignored (nohup, a script's background
-#      job), it neither catches them nor stops on them;
+#      job), it neither catches them nor stops on them; interrupted while --dry-run measures,
+#      it says so, exits 130 and leaves no scratch folder;
 #   4. (when strace is installed) traces a sweep: every file the runner renames into place was
 #      fsync'ed just before, and its folder just after (a file written unnamed, O_TMPFILE, is
 #      fsync'ed through its descriptor and then linked to the name that is renamed).
@@ -356,6 +357,30 @@ check("interrupted while plotting (SIGINT): exit code 130"
 check("interrupted while plotting: no false 'no plots'" NOT interrupted MATCHES "no plots")
 check("interrupted while plotting: the figure is kept" interrupted MATCHES "\na.png")
 check("interrupted while plotting: no temporary figure is left" NOT interrupted MATCHES "\\.tmp\\.")
+
+# An interrupt while --dry-run measures the task programs: the runner died of the signal and
+# left its scratch folder (TMPDIR/sbptt-reproduce-probe-<pid>) behind, saying nothing.
+file(WRITE "${WORK_DIR}/interrupt_dry_run.sh" [=[
+runner=$1; tmp=$2; shift 2
+mkdir -p "$tmp"
+TMPDIR="$tmp" "$runner" "$@" --dry-run > "$tmp.log" 2>&1 &
+pid=$!
+i=0
+until ls "$tmp"/sbptt-reproduce-probe-*/runs/* > /dev/null 2>&1; do
+  i=$((i + 1)); [ $i -gt 1000 ] && { echo "never measured"; break; }
+  sleep 0.01
+done
+kill -TERM $pid
+wait $pid
+echo "dry run: exit code $?"
+cat "$tmp.log"
+echo "left in TMPDIR: [$(ls -A "$tmp")]"
+]=])
+execute_process(COMMAND sh "${WORK_DIR}/interrupt_dry_run.sh" "${REPRODUCE}" "${WORK_DIR}/tmp"
+                ${grid} --out "${WORK_DIR}/dry" OUTPUT_VARIABLE dry ERROR_VARIABLE dry_err)
+check("interrupted while --dry-run measures: exit 130, saying so, no scratch folder left\n${dry}${dry_err}"
+      dry MATCHES "dry run: exit code 130\n" AND dry MATCHES "interrupted while measuring"
+      AND dry MATCHES "left in TMPDIR: \\[\\]")
 
 # --- 4. fsync before a file counts ---------------------------------------------------------------
 # The runner is the first process in the trace; the fake programs' own renames are theirs.

@@ -50,15 +50,16 @@ struct MeasuredCosts {
 };
 
 /// Wall seconds of `probe` run for `epochs` epochs (stdout and stderr discarded; its training
-/// log goes to `scratch`/runs/).
-inline double time_probe(Run probe, long epochs, const fs::path& bin_dir, long threads,
-                         const fs::path& scratch) {
+/// log goes to `scratch`/runs/), or nothing when a signal interrupted it.
+inline std::optional<double> time_probe(Run probe, long epochs, const fs::path& bin_dir,
+                                        long threads, const fs::path& scratch) {
   probe.epochs = epochs;
   const std::vector<std::string> argv = command_line(probe, bin_dir, scratch / "runs", threads);
   const auto start = std::chrono::steady_clock::now();
   const int code = run_command(argv, true);
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (interrupted) return std::nullopt;
   if (code != 0)
     throw sbptt::IoError(concat("measuring ", probe.name(), ": ", argv.front(),
                                 " exited with ", code, "; expected a working task program"));
@@ -66,8 +67,10 @@ inline double time_probe(Run probe, long epochs, const fs::path& bin_dir, long t
 }
 
 /// Measures every task of `plan` (see the file comment); prints one line per measurement.
-inline MeasuredCosts measure_costs(const std::vector<Run>& plan, const fs::path& bin_dir,
-                                   long threads) {
+/// Nothing when a signal (install_signal_handlers) interrupted it; its scratch folder is gone
+/// either way.
+inline std::optional<MeasuredCosts> measure_costs(const std::vector<Run>& plan,
+                                                  const fs::path& bin_dir, long threads) {
   MeasuredCosts costs;
   const fs::path scratch =
       fs::temp_directory_path() / concat("sbptt-reproduce-probe-", ::getpid());
@@ -91,12 +94,13 @@ inline MeasuredCosts measure_costs(const std::vector<Run>& plan, const fs::path&
       Run probe = *hardest;
       probe.method = method;
       probe.samples = std::clamp(probe.samples, 8L, 256L);
-      const double one = time_probe(probe, 1, bin_dir, threads, scratch);
-      const double three = time_probe(probe, 3, bin_dir, threads, scratch);
-      const double epoch = std::max(three - one, 1e-6) / 2;
+      const auto one = time_probe(probe, 1, bin_dir, threads, scratch);
+      const auto three = one ? time_probe(probe, 3, bin_dir, threads, scratch) : std::nullopt;
+      if (!three) return std::nullopt;
+      const double epoch = std::max(*three - *one, 1e-6) / 2;
       (method == Method::Regular ? cost.regular : cost.combined) =
           epoch / static_cast<double>(probe.samples);
-      if (method == Method::Regular) cost.start_up = std::max(one - epoch, 0.0);
+      if (method == Method::Regular) cost.start_up = std::max(*one - epoch, 0.0);
       std::printf("reproduce: measured %s %s at %ld samples: %.3f s per epoch\n",
                   probe.info().name, std::string(sbptt::label(method)).c_str(), probe.samples,
                   epoch);

@@ -74,8 +74,9 @@ inline int plot(const Options& o, const fs::path& own_dir) {
 }
 
 /// --dry-run: every planned command, then the estimate from costs measured on this machine
-/// with the task programs of `bin_dir` (calibration.hpp).
-inline void print_plan(const Options& o, const std::vector<Run>& plan, const fs::path& bin_dir) {
+/// with the task programs of `bin_dir` (calibration.hpp). Returns 130 when a signal
+/// interrupted the measuring, else 0.
+inline int print_plan(const Options& o, const std::vector<Run>& plan, const fs::path& bin_dir) {
   double estimate = 0;
   std::size_t todo = 0;
   const fs::path runs = fs::path(o.out) / "runs";
@@ -85,7 +86,12 @@ inline void print_plan(const Options& o, const std::vector<Run>& plan, const fs:
   std::vector<Run> unfinished;
   for (const auto& run : plan)
     if (!is_finished(finished, run)) unfinished.push_back(run);
-  const MeasuredCosts costs = measure_costs(unfinished, bin_dir, o.threads);
+  const std::optional<MeasuredCosts> costs = measure_costs(unfinished, bin_dir, o.threads);
+  if (!costs) {
+    std::cerr << "reproduce: interrupted while measuring the task programs; no plan printed, "
+                 "nothing written\n";
+    return 130;
+  }
   for (const auto& run : plan) {
     std::string command;
     for (const auto& a : command_line(run, bin_dir, runs, o.threads))
@@ -97,7 +103,7 @@ inline void print_plan(const Options& o, const std::vector<Run>& plan, const fs:
                                   ? concat("  (damaged, to be redone: ", damage->second, ")")
                                   : std::string();
     std::printf("%-34s %s%s\n", run.name().c_str(), command.c_str(), state.c_str());
-    if (!done) estimate += costs.seconds(run).value_or(run.estimated_seconds()), ++todo;
+    if (!done) estimate += costs->seconds(run).value_or(run.estimated_seconds()), ++todo;
   }
   print_instruction_sets();
   std::printf("%zu runs planned (profile %s, %zu finished, %zu to do), measured estimate %s of "
@@ -109,6 +115,7 @@ inline void print_plan(const Options& o, const std::vector<Run>& plan, const fs:
                                              std::max<std::size_t>(todo, 1))))
                   .c_str(),
               o.jobs);
+  return 0;
 }
 
 }  // namespace reproduce

@@ -170,6 +170,25 @@ foreach(mode "--emit;parallel" --dry-run)
         "reproduce: standard output or standard error was not written in full: No space left")
 endforeach()
 
+# A named pipe where a finished run's files are (a user's mkfifo, a tool's leftover): --merge
+# and a sweep opened it to read and hung there for ever.
+foreach(suffix .csv .log .run)
+  file(REMOVE "${runs}/cartpole_p4_R_norm_s44${suffix}")
+  execute_process(COMMAND mkfifo "${runs}/cartpole_p4_R_norm_s44${suffix}")
+  execute_process(COMMAND "${REPRODUCE}" ${grid} --merge --out "${out}" TIMEOUT 20
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE merge_out ERROR_VARIABLE merge_err)
+  set(said "${merge_out}${merge_err}")
+  check("--merge over a FIFO as the run's ${suffix}: exit 1 in time, damaged (${rc})\n${said}"
+        rc EQUAL 1 AND said MATCHES "damaged: cartpole_p4_R_norm_s44: [^\n]*(FIFO|cut|damaged)")
+  execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${out}" TIMEOUT 20
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE swept ERROR_VARIABLE swept_err)
+  check("a sweep over a FIFO as the run's ${suffix}: exit 0 in time, the run redone (${rc})"
+        rc EQUAL 0 AND NOT IS_DIRECTORY "${runs}/cartpole_p4_R_norm_s44${suffix}"
+        AND swept MATCHES "cartpole_p4_R_norm_s44: [^\n]*the run is redone")
+  execute_process(COMMAND test -f "${runs}/cartpole_p4_R_norm_s44${suffix}" RESULT_VARIABLE rc)
+  check("the redone run's ${suffix} is a regular file" rc EQUAL 0)
+endforeach()
+
 # --- 2. limits shared with the task programs; a missing python ------------------------------
 foreach(flag epochs samples)
   execute_process(COMMAND "${REPRODUCE}" ${grid} --${flag} 2000000 --out "${WORK_DIR}/limits"

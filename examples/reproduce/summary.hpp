@@ -86,6 +86,10 @@ struct RowFields {
 /// numbered 1, 2, ..., every line ended by a newline. Throws ParseError naming the file, the
 /// line and what is wrong (empty, cut off, a row that is not one).
 inline Summary summarize(const Run& run, const fs::path& csv) {
+  std::error_code error;
+  if (fs::exists(csv, error) && !fs::is_regular_file(csv, error))
+    throw sbptt::ParseError(concat("'", csv.string(), "' is not a regular file (a FIFO, a device "
+                                   "or a folder)"));
   const std::string text = read_text(csv);
   if (text.empty()) throw sbptt::ParseError(concat("'", csv.string(), "' is empty"));
   if (text.back() != '\n')

@@ -1,7 +1,12 @@
 // reproduce: small text helpers (number formats, lists, whole-file reads).
 #pragma once
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -12,8 +17,6 @@
 #include <vector>
 
 #include <sbptt/core/error.hpp>
-
-#include "flag_values.hpp"
 
 #include "flag_values.hpp"
 
@@ -71,12 +74,23 @@ inline bool same_number(double a, double b) {
   return std::abs(a - b) <= 1e-9 * std::max(std::abs(a), std::abs(b));
 }
 
+/// The whole of the regular file `path`, or "" when there is none. Anything else under the
+/// name (a named pipe, a device, a folder) reads as "" too: opening a pipe to read waits for a
+/// writer for ever, and the runner's own files are never one.
 inline std::string read_text(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return {};
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) return {};
+  std::string text;
+  struct stat info {};
+  if (::fstat(fd, &info) == 0 && S_ISREG(info.st_mode)) {
+    char buffer[65536];
+    ssize_t got = 0;
+    while ((got = ::read(fd, buffer, sizeof buffer)) > 0 ||
+           (got < 0 && errno == EINTR))
+      if (got > 0) text.append(buffer, static_cast<std::size_t>(got));
+  }
+  ::close(fd);
+  return text;
 }
 
 }  // namespace reproduce

@@ -1,6 +1,8 @@
 // The mujoco program as a user runs it, on any MJCF scene (examples/models/, tests/models/):
 // --dump-gradients against finite differences, training, --check-derivatives, and the models,
 // targets, flags and checkpoints it refuses.
+#include <sys/stat.h>
+
 #include <catch2/catch.hpp>
 
 #include <cmath>
@@ -180,6 +182,25 @@ TEST_CASE("mujoco says why it cannot read --model, and never writes over it",
                         "' are the same file") != std::string::npos);
     CHECK(file_text(copy) == original);
   }
+}
+
+TEST_CASE("mujoco refuses a --model that is a pipe, before waiting on it", "[programs][mujoco]") {
+  // MuJoCo opens the model by its name and reads it as a file: a pipe's model was an "XML
+  // read error", exit 2, and a named pipe without a writer hung the program for ever.
+  const fs::path fifo = scratch("model_pipe.xml");
+  fs::remove(fifo);
+  REQUIRE(::mkfifo(fifo.c_str(), 0666) == 0);
+  const std::string model = model_file("examples/models/double_pendulum.xml");
+  for (const auto& [prefix, path] :
+       {std::pair{std::string("cat " + model + " | "), std::string("/dev/stdin")},
+        std::pair{std::string("timeout 20 "), fifo.string()}}) {
+    const Result r = run("mujoco", "--model " + path + " --target 0", prefix);
+    INFO(prefix << path << "\n" << r.output);
+    CHECK(r.status == 1);
+    CHECK(r.output.find("--model: load_mujoco_model: '" + path + "' is not a regular file (a " +
+                        "pipe or a device); expected an MJCF or URDF file") != std::string::npos);
+  }
+  CHECK(fs::is_fifo(fifo));
 }
 
 TEST_CASE("mujoco holds the model's own time step to --dt's range", "[programs][mujoco]") {

@@ -11,6 +11,9 @@
 // SIGINT or SIGTERM stopped training after the epoch it came in (its log row, checkpoint and
 // parameters written; a second one ends the program at once; one the program was started
 // ignoring stays ignored: stop_signals.hpp).
+#include <unistd.h>
+
+#include <algorithm>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -38,11 +41,30 @@ namespace detail_task {
 /// The signal (SIGINT, SIGTERM) that asked training to stop after its current epoch, or 0.
 inline volatile std::sig_atomic_t stop_signal = 0;
 
-/// Notes the signal and gives it back its default action, so that a second one ends the
-/// program at once.
+/// What the program says the moment SIGINT (0) or SIGTERM (1) comes: an epoch of a large
+/// scene may take minutes, and silence would read as a signal lost. Written before the
+/// handler is installed, since the handler may only write(2) it.
+inline char stop_notice[2][256];
+inline std::size_t stop_notice_size[2];
+
+inline void prepare_stop_notices(const char* name) {
+  for (const int k : {0, 1}) {
+    const char* signal = k == 0 ? "SIGINT" : "SIGTERM";
+    const int size = std::snprintf(stop_notice[k], sizeof stop_notice[k],
+                                   "%s: %s: stopping after the current epoch, which keeps its "
+                                   "work; a second %s stops at once\n",
+                                   name, signal, signal);
+    stop_notice_size[k] = size < 0 ? 0 : std::min<std::size_t>(size, sizeof stop_notice[k] - 1);
+  }
+}
+
+/// Notes the signal, says so, and gives it back its default action, so that a second one ends
+/// the program at once.
 extern "C" inline void request_stop(int signal) {
   stop_signal = signal;
   std::signal(signal, SIG_DFL);
+  const int k = signal == SIGINT ? 0 : 1;
+  [[maybe_unused]] const auto written = ::write(2, stop_notice[k], stop_notice_size[k]);
 }
 
 }  // namespace detail_task
@@ -267,6 +289,7 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                    name, epoch == 0 ? "initial" : "resumed",
                    std::string(to_string(where->quantity)).c_str(),
                    detail::concat(where->value).c_str(), describe_where(*where).c_str());
+    detail_task::prepare_stop_notices(name);
     for (const int signal : stop_signals) std::signal(signal, detail_task::request_stop);
   };
   callbacks.on_non_finite = [&](const NonFiniteEvent& event, bool skipped) {

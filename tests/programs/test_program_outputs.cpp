@@ -373,6 +373,10 @@ TEST_CASE("SIGINT or SIGTERM stops after the current epoch, keeps its work and s
     CHECK(contains(stopped.output, "stopped by " + std::string(signal == SIGINT ? "SIGINT" : "SIGTERM") +
                                        " after epoch " + std::to_string(done)));
     CHECK(contains(stopped.output, "run the same command again to resume"));
+    // Said when the signal comes, not only after the epoch (which may take minutes).
+    const std::string name = signal == SIGINT ? "SIGINT" : "SIGTERM";
+    CHECK(contains(stopped.output, "cartpole: " + name + ": stopping after the current epoch, "
+                                   "which keeps its work; a second " + name + " stops at once"));
     CHECK(fs::exists(dir / "p.txt"));
     const Outcome rerun = launch("cartpole", resumable);
     REQUIRE(rerun.status == 0);

@@ -65,6 +65,9 @@ int run_reproduce(int argc, char** argv) {
       throw InvalidArgument(concat("the selection leaves no run of profile ", options.profile));
     // --merge accounts for the whole plan; everything else works on this process's share.
     if (!options.merge) plan = select_share(options, plan);
+    // Every mode but --merge runs the task programs or hands out their commands.
+    if (!options.bin_dir.empty() && !options.merge)
+      for (const auto& run : plan) require_task_program(run, options.bin_dir, true);
   } catch (const InvalidArgument& e) {
     std::cerr << "reproduce: " << e.what() << "\n";
     return 2;

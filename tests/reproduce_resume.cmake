@@ -50,13 +50,17 @@ execute_process(COMMAND "${REPRODUCE}" --tasks cartpole --complexities 4 --metho
                 OUTPUT_VARIABLE out ERROR_QUIET)
 check("--dry-run shows --threads 4 on the command line" rc EQUAL 0 AND out MATCHES
       "cartpole --poles 4 [^\n]* --threads 4 --csv ")
-# A dry run measures with the task programs, so a --bin-dir without them is an error before the
-# measurement, in words (it was an uncaught exception, exit 134).
-execute_process(COMMAND "${REPRODUCE}" --tasks cartpole --complexities 4 --methods C --seeds 1
-                --bin-dir "${WORK_DIR}/no_such_dir" --dry-run --out "${WORK_DIR}/dry"
-                RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-check("--dry-run with a --bin-dir without programs: exit 1 naming the program\n${out}${err}"
-      rc EQUAL 1 AND err MATCHES "no executable task program '[^']*no_such_dir/cartpole'")
+# A --bin-dir without the task programs is a bad flag (exit 2), named before any work, in
+# every mode that runs or hands out their commands (a dry run was an uncaught exception, exit
+# 134, then exit 1); --merge runs none.
+foreach(mode --dry-run "--emit;parallel" "--emit;slurm" "--run;cartpole_p4_C_norm_s42" "")
+  execute_process(COMMAND "${REPRODUCE}" --tasks cartpole --complexities 4 --methods C --seeds 1
+                  --bin-dir "${WORK_DIR}/no_such_dir" ${mode} --out "${WORK_DIR}/no_programs"
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  check("'${mode}' with a --bin-dir without programs: exit 2 naming the flag\n${out}${err}"
+        rc EQUAL 2 AND err MATCHES "--bin-dir '[^']*no_such_dir' holds no executable task program 'cartpole'")
+  check("'${mode}' with a --bin-dir without programs: nothing made" NOT EXISTS "${WORK_DIR}/no_programs")
+endforeach()
 # The reviewers profile: the cart chain, 1-3 links x R, M, C, S x 3 seeds, through cartpole.
 execute_process(COMMAND "${REPRODUCE}" --profile reviewers --epochs 2 --samples 8
                 --bin-dir "${WORK_DIR}/fake" --dry-run --out "${WORK_DIR}/dry"

@@ -32,12 +32,18 @@ inline fs::path run_file(const fs::path& runs, const Run& run, const char* suffi
   return runs / (run.name() + suffix);
 }
 
-/// Throws unless the task program of `run` in `bin_dir` can be executed.
-inline void require_task_program(const Run& run, const fs::path& bin_dir) {
+/// Throws unless the task program of `run` in `bin_dir` can be executed: an IoError when
+/// `bin_dir` is the default (the examples are not built), a bad --bin-dir when it is the
+/// user's (`from_flag`).
+inline void require_task_program(const Run& run, const fs::path& bin_dir, bool from_flag = false) {
   const fs::path program = bin_dir / run.info().program;
-  if (!is_executable(program))
-    throw sbptt::IoError(concat("no executable task program '", program.string(),
-                                "'; build the examples or pass --bin-dir DIR"));
+  if (is_executable(program)) return;
+  if (from_flag)
+    throw InvalidArgument(concat("--bin-dir '", bin_dir.string(), "' holds no executable task ",
+                                 "program '", run.info().program, "'; expected the folder of ",
+                                 "the built examples (build/examples)"));
+  throw sbptt::IoError(concat("no executable task program '", program.string(),
+                              "'; build the examples or pass --bin-dir DIR"));
 }
 
 /// The task program's command line. --threads is passed here and kept out of Run::flags(),

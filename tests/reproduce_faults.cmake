@@ -111,6 +111,15 @@ file(READ "${out}/summary.csv" merged)
 check("--merge over a NaN test loss: no summary row for the run"
       NOT merged MATCHES "cartpole_p4_C_norm_s42")
 
+# A damaged run that the merge does not plan (of another selection in the same folder) was left
+# out of summary.csv without a word.
+file(WRITE "${runs}/guidance_rc0.001_C_norm_s42.csv" "")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --merge --out "${out}" RESULT_VARIABLE rc
+                OUTPUT_VARIABLE merge_out ERROR_VARIABLE merge_err)
+file(REMOVE "${runs}/guidance_rc0.001_C_norm_s42.csv")
+check("--merge names a damaged run it does not plan, left out of summary.csv\n${merge_err}"
+      merge_err MATCHES "warning: guidance_rc0.001_C_norm_s42 [^\n]*not planned[^\n]*: its .run file is missing[^\n]*left out of summary.csv")
+
 # Every field of a row, not only the losses: a NaN batch loss or update norm, a cosine or an
 # agreement outside its range, one where the method computes none, a negative time. The runner
 # merged each of these as an "ok" run. Field K (1-based) of run's last row becomes `value`; the

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <iostream>
 #include <map>
 #include <optional>
 #include <string>
@@ -136,6 +137,14 @@ inline FinishedRuns scan_finished(const fs::path& runs) {
     found.summaries[run->order_key()] = std::move(*finished.summary);
   }
   return found;
+}
+
+/// Says on stderr that the run `name`, which the current plan does not hold, is damaged and
+/// in no summary; `then` is what becomes of its files.
+inline void warn_unplanned_damage(const std::string& name, const std::string& why,
+                                  const char* then) {
+  std::cerr << "reproduce: warning: " << name << " (not planned now): " << why
+            << "; left out of summary.csv" << then << "\n";
 }
 
 /// Removes the finished-run files of the run `name` so that a sweep that plans it redoes it.

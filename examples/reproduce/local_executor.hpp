@@ -160,9 +160,7 @@ private:
       if (planned.contains(name))
         std::printf("reproduce: %s: %s; the run is redone\n", name.c_str(), why.c_str());
       else
-        std::cerr << "reproduce: warning: " << name << " (of an earlier sweep, not planned now): "
-                  << why << "; left out of summary.csv and removed, so that a sweep that plans "
-                  << "it redoes it\n";
+        warn_unplanned_damage(name, why, " and removed, so that a sweep that plans it redoes it");
       forget_finished(runs_, name);
     }
   }

@@ -5,6 +5,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -43,6 +44,11 @@ inline int merge(const Options& o, const std::vector<Run>& plan) {
       std::printf("  damaged: %s: %s\n", name.c_str(), damaged->second.c_str());
     }
   }
+  std::set<std::string> planned;
+  for (const Run& run : plan) planned.insert(run.name());
+  for (const auto& [name, why] : finished.damaged)
+    if (!planned.contains(name))
+      warn_unplanned_damage(name, why, "; a sweep that plans it redoes it");
   return running.empty() && missing.empty() ? 0 : 1;
 }
 

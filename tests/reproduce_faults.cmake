@@ -227,6 +227,17 @@ execute_process(COMMAND "${REPRODUCE}" ${plotting_grid} --plot-script "${WORK_DI
 check("--plot-script <missing>: exit 2 naming the flag and the file (${err})"
       rc EQUAL 2 AND err MATCHES "--plot-script '[^']*nonexistent.py'")
 check("--plot-script <missing>: nothing was started" NOT EXISTS "${WORK_DIR}/plot_script")
+# A python (or script) that exits 0 and draws nothing: the runner printed "plots: <out>/plots"
+# for a folder that was never made.
+file(WRITE "${WORK_DIR}/draws_nothing.py" "")
+file(WRITE "${out}/plots/old.png" "a figure of an earlier plot")
+execute_process(COMMAND touch -d "2 minutes ago" "${out}/plots/old.png")
+execute_process(COMMAND "${REPRODUCE}" ${plotting_grid} --python /bin/true --plot-script
+                "${WORK_DIR}/draws_nothing.py" --merge --out "${out}" TIMEOUT 20
+                OUTPUT_VARIABLE plotted ERROR_VARIABLE plotted_err)
+check("a plot script that draws nothing: a warning, no 'plots:' line\n${plotted}${plotted_err}"
+      NOT plotted MATCHES "\nplots: " AND plotted_err MATCHES
+      "warning: [^\n]*draws_nothing.py exited 0 but drew no figure in [^\n]*plots")
 # --out naming a file, or a path under one: refused up front, naming the flag and the file, in
 # every mode (a sweep stopped at its first write with "filesystem error: cannot create
 # directories", exit 1, and --dry-run planned into it).

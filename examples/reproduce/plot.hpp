@@ -2,6 +2,7 @@
 #pragma once
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -55,6 +56,8 @@ inline int plot(const Options& o, const fs::path& own_dir) {
   }
   std::fflush(stdout);
   const fs::path plots = fs::path(o.out) / "plots";
+  // The kernel stamps files with a coarse clock, which may lag this one by a tick.
+  const auto started = fs::file_time_type::clock::now() - std::chrono::seconds(1);
   const int code = run_command({python, script->string(), o.out}, false);
   // A script stopped by a signal cannot clean up after itself: its temporary figures go here.
   std::error_code error;
@@ -65,11 +68,21 @@ inline int plot(const Options& o, const fs::path& own_dir) {
               << plots.string() << "\n";
     return 130;
   }
-  if (code != 0)
+  if (code != 0) {
     std::cerr << "reproduce: warning: " << script->string() << " failed (exit code " << code
               << "); no plots\n";
+    return 0;
+  }
+  // Exit 0 is not yet a figure: a python that is not one (--python /bin/true) exits 0 too,
+  // and the figures of an earlier plot may still be there.
+  std::size_t figures = 0;
+  for (const auto& entry : fs::directory_iterator(plots, error))
+    if (entry.is_regular_file(error) && entry.last_write_time(error) >= started) ++figures;
+  if (figures == 0)
+    std::cerr << "reproduce: warning: " << script->string() << " exited 0 but drew no figure in "
+              << plots.string() << "\n";
   else
-    std::printf("plots: %s\n", plots.c_str());
+    std::printf("plots: %s (%zu files drawn)\n", plots.c_str(), figures);
   return 0;
 }
 

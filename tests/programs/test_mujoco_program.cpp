@@ -203,6 +203,25 @@ TEST_CASE("mujoco refuses a --model that is a pipe, before waiting on it", "[pro
   CHECK(fs::is_fifo(fifo));
 }
 
+TEST_CASE("mujoco: a model too large for memory is an error (exit 1), not a bad flag",
+          "[programs][mujoco]") {
+  // A stack of 10^9 numbers (8 GB) under a 2 GB address-space limit: MuJoCo "Could not
+  // allocate memory" was reported as a model that does not load, exit 2 (a bad flag). Under
+  // ASan the program cannot start in 2 GB of address space (its shadow memory).
+  if (sbptt::testing::address_sanitizer) return;
+  const fs::path model = edited_model("examples/models/double_pendulum.xml",
+                                      "<mujoco model=\"double_pendulum\">",
+                                      "<mujoco model=\"double_pendulum\"><size nstack=\"1000000000\"/>",
+                                      "huge_stack.xml");
+  const Result r = run("mujoco", "--model " + model.string() + " --target 0,0 --epochs 1",
+                       "ulimit -v 2000000; ");
+  INFO(r.output);
+  CHECK(r.status == 1);
+  CHECK(r.output.find("--model: load_mujoco_model: '" + model.string() + "' needs more memory "
+                      "than this process may use (MuJoCo: Could not allocate memory)") !=
+        std::string::npos);
+}
+
 TEST_CASE("mujoco holds the model's own time step to --dt's range", "[programs][mujoco]") {
   const fs::path tiny = edited_model("examples/models/acrobot.xml", "timestep=\"0.01\"",
                                      "timestep=\"1e-300\"", "acrobot_tiny_step.xml");

@@ -91,7 +91,8 @@ private:
 
 /// Parses and compiles the MJCF (or URDF) file `path`. Throws IoError with the system's reason
 /// when the file cannot be read (MuJoCo would call any such file "not found") or is a pipe or a
-/// device (refused before opening it, which would wait for a writer), InvalidArgument
+/// device (refused before opening it, which would wait for a writer) or needs more memory than
+/// the process may use (MuJoCo's "Could not allocate memory"), InvalidArgument
 /// naming the file and quoting MuJoCo's own message when it does not load. With `warnings`, the
 /// warnings MuJoCo raises while loading (e.g. "XML contains a 'NaN'") are collected there
 /// instead of printed on stdout and appended to MUJOCO_LOG.TXT (`MujocoWarningCapture`);
@@ -122,6 +123,10 @@ private:
     std::string reason(message.data());
     while (!reason.empty() && std::isspace(static_cast<unsigned char>(reason.back())) != 0)
       reason.pop_back();
+    // Memory is the machine's limit, not a fault of the model: not an InvalidArgument.
+    detail::require<IoError>(reason.find("Could not allocate memory") == std::string::npos,
+                             "load_mujoco_model: '", path, "' needs more memory than this ",
+                             "process may use (MuJoCo: Could not allocate memory)");
     throw InvalidArgument(
         detail::concat("load_mujoco_model: cannot load the model file '", path, "': ", reason));
   }

@@ -197,6 +197,18 @@ inline void remove_dead_writers_temporaries(const std::filesystem::path& target)
 #endif
 }
 
+/// Why no file can be renamed to `target` in `directory` (chattr +a on either), or "".
+[[nodiscard]] inline std::string append_only_reason(const std::filesystem::path& directory,
+                                                    const std::filesystem::path& target) {
+  if (append_only(directory))
+    return concat("directory '", directory.string(), "' is append-only (chattr +a), so no file ",
+                  "in it can be renamed into place; expected a directory without it");
+  if (append_only(target))
+    return "the file is append-only (chattr +a), so it cannot be replaced; expected a file "
+           "without it (chattr -a)";
+  return {};
+}
+
 }  // namespace detail
 
 /// Fails before any work, with `IoError` naming `what` (e.g. "--csv") and the reason, when a
@@ -225,12 +237,8 @@ inline void check_output_path(const std::string& path, std::string_view what) {
   detail::require<IoError>(!std::filesystem::exists(status) || ::access(target.c_str(), W_OK) == 0,
                            what, " '", path, "': the file exists and is write-protected; "
                            "expected a file this user may write (it is not replaced)");
-  detail::require<IoError>(!detail::append_only(directory), what, " '", path, "': directory '",
-                           directory.string(), "' is append-only (chattr +a), so no file in it "
-                           "can be renamed into place; expected a directory without it");
-  detail::require<IoError>(!std::filesystem::exists(status) || !detail::append_only(target),
-                           what, " '", path, "': the file is append-only (chattr +a), so it "
-                           "cannot be replaced; expected a file without it (chattr -a)");
+  const std::string append_only = detail::append_only_reason(directory, target);
+  detail::require<IoError>(append_only.empty(), what, " '", path, "': ", append_only);
   const long name_max = ::pathconf(directory.c_str(), _PC_NAME_MAX);
   const std::size_t limit = name_max > 0 ? static_cast<std::size_t>(name_max) : NAME_MAX;
   const std::size_t name = target.filename().string().size();
@@ -255,6 +263,9 @@ public:
       : path_(path), target_(detail::final_target(path)),
         directory_(detail::directory_of(target_)) {
     detail::require<IoError>(!path.empty(), "cannot write a file at an empty path");
+    // Before the temporary exists: in an append-only directory it could not be removed again.
+    const std::string append_only = detail::append_only_reason(directory_, target_);
+    detail::require<IoError>(append_only.empty(), "cannot write '", path_, "': ", append_only);
 #ifdef O_TMPFILE
     fd_ = detail::open_above_standard_streams(directory_.c_str(), O_TMPFILE | O_WRONLY | O_CLOEXEC,
                                               0666);

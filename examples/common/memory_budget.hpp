@@ -125,10 +125,10 @@ void require_memory_for_run(const TaskOptions& o, Index state_dim,
     std::snprintf(text, sizeof text, "%.1f GiB", b / (1024.0 * 1024.0 * 1024.0));
     return std::string(text);
   };
-  const std::string nx = o.task == Task::Quantum ? detail::concat(" with --nx ", o.nx) : "";
   const std::string batch_flag = dump ? "" : detail::concat(", --batch ", o.batch);
   throw InvalidArgument(detail::concat(
-      "--samples ", o.samples, " (and as many test samples)", nx, batch_flag, " and --steps ",
+      "--samples ", o.samples, " (and as many test samples)", state_size_flags(o), batch_flag,
+      " and --steps ",
       o.time.steps, " need at least ", gib(bytes), " (", sizeof(Scalar) == 4 ? "float" : "double",
       ", ", state_dim, " numbers a state: ", gib(sets * scalar_bytes),
       " for the sets and their evaluation, ", gib(trajectory * scalar_bytes),

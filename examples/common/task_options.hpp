@@ -102,6 +102,20 @@ inline const char* cart_pole_model(const TaskOptions& o) {
   return o.chain ? "chain" : o.physical ? "physical" : "reference";
 }
 
+/// " with --poles 4" and the like: the flags that set the size of the task's state, for the
+/// messages about memory.
+[[nodiscard]] inline std::string state_size_flags(const TaskOptions& o) {
+  switch (o.task) {
+    case Task::CartPole: return detail::concat(" with --poles ", o.poles);
+    case Task::Guidance:
+      return detail::concat(" with --drivers ", o.drivers, " and --evaders ", o.evaders);
+    case Task::Quantum: return detail::concat(" with --nx ", o.nx);
+    case Task::Mujoco: return detail::concat(" with --model '", o.model, "'");
+    case Task::Toy: break;
+  }
+  return {};
+}
+
 namespace detail_task {
 
 /// Steps of dt that make up T exactly; throws naming `flags` when T is not a whole number of

@@ -386,10 +386,10 @@ int task_main(Task task, int argc, char** argv, Body&& body) {
       std::cerr << name << ": " << e.what() << "\n";
       return 2;
     } catch (const std::bad_alloc&) {
-      const std::string nx = task == Task::Quantum ? ", --nx " + std::to_string(options.nx) : "";
       std::cerr << name << ": out of memory for --samples " << options.samples
-                << " (and as many test samples), --batch " << options.batch << ", --steps "
-                << options.time.steps << nx << ", --threads " << options.threads
+                << " (and as many test samples)" << state_size_flags(options) << ", --batch "
+                << options.batch << ", --steps " << options.time.steps << ", --threads "
+                << options.threads
                 << "; expected sizes whose data and trajectories fit in memory\n";
       return 1;
     } catch (const std::exception& e) {

@@ -340,6 +340,18 @@ TEST_CASE("sizes that cannot fit in memory are refused before any work", "[progr
   INFO(r.output);
   CHECK(r.status == 2);
   CHECK(r.output.find("24.4 GiB for a batch's trajectory") != std::string::npos);
+  // The flags that set a state's size are named as --nx is: they were left out.
+  for (const auto& [program, flags] :
+       {std::pair<std::string, std::string>{"guidance", "--drivers 16 --evaders 64"},
+        {"cartpole", "--poles 4 --batch 1000000"}}) {
+    r = run(program, "--samples 1000000 --epochs 1 " + flags, "ulimit -v 2000000; ");
+    INFO(r.output);
+    CHECK(r.status == 2);
+    const std::string named = program == "guidance" ? "with --drivers 16 and --evaders 64, "
+                                                    : "with --poles 4, ";
+    CHECK(r.output.find("--samples 1000000 (and as many test samples) " + named) !=
+          std::string::npos);
+  }
   // With no limit set: sizes beyond the machine's memory are refused too, not left to the
   // kernel's out-of-memory killer. The largest sizes the flags allow generate 131 GB at once;
   // on a machine with less than that (so that the old code failed at once too).

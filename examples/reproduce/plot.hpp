@@ -13,7 +13,6 @@
 #include <string>
 #include <vector>
 
-
 #include "calibration.hpp"
 #include "finished_run.hpp"
 #include "options.hpp"

@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -64,7 +65,9 @@ extern "C" inline void request_stop(int signal) {
   stop_signal = signal;
   std::signal(signal, SIG_DFL);
   const int k = signal == SIGINT ? 0 : 1;
+  const int saved_errno = errno;  // of the code the signal interrupted
   [[maybe_unused]] const auto written = ::write(2, stop_notice[k], stop_notice_size[k]);
+  errno = saved_errno;
 }
 
 }  // namespace detail_task

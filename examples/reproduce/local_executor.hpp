@@ -12,6 +12,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -180,6 +181,12 @@ private:
     const std::string name = run.name();
     FileLock lock = try_lock_run(runs_, name);
     if (!lock.held()) {
+      // Only a lock another process holds is waited for: on a file system without locks
+      // (Lustre mounted without flock) every run would wait for ever.
+      if (!lock.busy() && lock.error() != EINTR)
+        throw sbptt::IoError(concat("cannot lock '", (runs_ / (name + ".lock")).string(), "': ",
+                                    std::strerror(lock.error()), "; the runner needs a file "
+                                    "system with file locks (flock) to share a folder safely"));
       waiting_.push_back(&run);
       return false;
     }

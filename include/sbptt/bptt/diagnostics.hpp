@@ -102,7 +102,8 @@ template <class Scalar>
   const auto in_range = [](Scalar norm2) {
     return finite_by_bits(norm2) && norm2 >= std::numeric_limits<Scalar>::min();
   };
-  if (in_range(sums.modified_norm2) && in_range(sums.regular_norm2) && finite_by_bits(sums.dot))
+  if (in_range(sums.modified_norm2) && in_range(sums.regular_norm2) && finite_by_bits(sums.dot) &&
+      finite_by_bits(norms))
     result.cos_modified_regular = static_cast<double>(sums.dot) / norms;
   else
     result.cos_modified_regular = scaled_cosine(modified.data(), regular.data(), modified.size());

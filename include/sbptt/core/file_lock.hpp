@@ -57,6 +57,9 @@ public:
   /// Whether another open of the file holds the lock (as opposed to a file system without
   /// locks, or no attempt).
   [[nodiscard]] bool busy() const { return error_ == EWOULDBLOCK; }
+  /// errno of the failed flock (0 when held or not tried): ENOLCK, EOPNOTSUPP and the like
+  /// say that the file system takes no locks.
+  [[nodiscard]] int error() const { return error_; }
 
 private:
   int fd_ = -1;

@@ -47,8 +47,13 @@ struct RowFields {
     static const std::vector<std::string> names = split(sbptt::TrainingLog::header, ',');
     return names[k];
   }
+  // The location is built only for a message: scan_finished reads every row of every run.
   double number(std::size_t k) const {
-    return sbptt::detail::parse_finite<double>(fields[k], field(k));
+    try {
+      return sbptt::detail::parse_finite<double>(fields[k], std::string());
+    } catch (const sbptt::ParseError& e) {
+      throw sbptt::ParseError(field(k) + e.what());
+    }
   }
   double non_negative(std::size_t k) const {
     const double value = number(k);

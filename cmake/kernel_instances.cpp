@@ -5,8 +5,10 @@
 #include "sbptt/nn/packed_product.hpp"
 
 namespace sbptt {
-template void PackedMatrix<float>::multiply(const float*, Index, Index, float*, Index) const;
-template void PackedMatrix<double>::multiply(const double*, Index, Index, double*, Index) const;
+template void PackedMatrix<float>::multiply(const float*, Index, Index, float*, Index,
+                                            const float*) const;
+template void PackedMatrix<double>::multiply(const double*, Index, Index, double*, Index,
+                                             const double*) const;
 template void add_outer_products(float*, Index, Index, const float*, const float*, Index,
                                  const float*);
 template void add_outer_products(double*, Index, Index, const double*, const double*, Index,

@@ -194,6 +194,50 @@ TEMPLATE_TEST_CASE("a short matrix's entries are the file comment's dot products
   }
 }
 
+TEMPLATE_TEST_CASE("with tanh outputs T, each entry is the product's times 1 − T²",
+                   "[nn][packed]", float, double) {
+  // The backward pass's Wᵀ Δ ⊙ (1 − T²) in one call: against the plain product times 1 − t²
+  // in long double, whose rounding (t², 1 − t², the product: three) is bounded by
+  // 3 eps |y| (1 + t²); for panels and short matrices, every block width of 1 to 13 columns,
+  // a column independent of its batch, and at leading dimensions past the rows, whose entries
+  // of T (NaN) are not read and of Y not written.
+  using S = TestType;
+  const S eps = std::numeric_limits<S>::epsilon();
+  std::vector<Index> row_counts = panel_row_counts<S>();
+  row_counts.push_back(std::max<Index>(1, PackedMatrix<S>::kLanes / 4));
+  row_counts.push_back(1);
+  const S nan = std::numeric_limits<S>::quiet_NaN();
+  for (const Index rows : row_counts) {
+    const Index cols = 23, ld = rows + 3;
+    const Matrix<S> w = random_matrix<S>(rows * cols, 1, 31, 1.0);
+    PackedMatrix<S> a;
+    a.pack(w.data(), cols, rows, true);  // a Wᵀ, as the backward pass packs it
+    const Matrix<S> x = random_matrix<S>(cols, 13, 32, 1.0);
+    Matrix<S> t = Matrix<S>::Constant(ld, 13, nan);
+    t.topRows(rows) = random_matrix<S>(rows, 13, 33, 1.0).array().tanh().matrix();
+    Matrix<S> plain(rows, 13), single = Matrix<S>::Constant(ld, 1, S(7.25));
+    a.multiply(x.data(), cols, 13, plain.data(), rows);
+    for (Index n = 1; n <= 13; ++n) {
+      Matrix<S> y = Matrix<S>::Constant(ld, n, S(7.25));
+      a.multiply(x.data(), cols, n, y.data(), ld, t.data());
+      REQUIRE((y.bottomRows(3).array() == S(7.25)).all());
+      for (Index j = 0; j < n; ++j) {
+        a.multiply(x.col(j).data(), cols, 1, single.data(), ld, t.col(j).data());
+        INFO("rows " << rows << ", column " << j << " of " << n);
+        REQUIRE((single.col(0).array() == y.col(j).array()).all());
+        for (Index i = 0; i < rows; ++i) {
+          const long double tt = static_cast<long double>(t(i, j)) * t(i, j);
+          const long double exact = static_cast<long double>(plain(i, j)) * (1.0L - tt);
+          const long double bound =
+              3.03L * static_cast<long double>(eps) * std::abs(plain(i, j)) * (1.0L + tt);
+          INFO("entry " << i);
+          REQUIRE(std::abs(static_cast<long double>(y(i, j)) - exact) <= bound);
+        }
+      }
+    }
+  }
+}
+
 TEMPLATE_TEST_CASE("the product writes the real rows only, at the given leading dimensions",
                    "[nn][packed]", float, double) {
   // 19 rows: the last panel is padded (a masked store with AVX-512, a buffer elsewhere); ldy =

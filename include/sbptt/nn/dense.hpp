@@ -67,12 +67,13 @@ struct Dense {
     add_weight_and_bias_products(grad, outputs, inputs, delta, x.data(), x.cols(), scale);
   }
 
-  /// Writes the input VJP ∂L/∂x = Wᵀ Δ, n_in × B (column-major), into `dx`.
+  /// Writes the input VJP ∂L/∂x = Wᵀ Δ, n_in × B (column-major), into `dx`; or, given the
+  /// outputs T of a tanh layer below (n_in × B), that layer's Δ = (Wᵀ Δ) ⊙ (1 − T²).
   /// \param wt  Wᵀ, packed (`Network::pack` makes it)
   template <class Scalar>
-  void input_vjp(const PackedMatrix<Scalar>& wt, const Scalar* delta, Index batch,
-                 Scalar* dx) const {
-    wt.multiply(delta, outputs, batch, dx, inputs);
+  void input_vjp(const PackedMatrix<Scalar>& wt, const Scalar* delta, Index batch, Scalar* dx,
+                 const Scalar* below_tanh_outputs = nullptr) const {
+    wt.multiply(delta, outputs, batch, dx, inputs, below_tanh_outputs);
   }
 };
 

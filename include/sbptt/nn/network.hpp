@@ -298,12 +298,15 @@ private:
     if (deltas.size() < layers_.size()) deltas.resize(layers_.size());
     const Index batch = ws.batch_;
     const Scalar* upstream = dy.data();  // ∂L/∂(output of layer l)
+    bool upstream_is_delta = false;      // the product above applied layer l's derivative
     for (Index l = num_layers() - 1; l >= 0; --l) {
       const auto ul = static_cast<std::size_t>(l);
       const Layer& layer = layers_[ul];
       const Matrix<Scalar>& out = ws.outputs_[ul];
       auto delta = detail::grow_map(deltas[ul], out.rows(), batch);
-      if (layer_activation(layer) != Activation::Identity) {
+      if (upstream_is_delta) {
+        // Written into `delta` by the product above.
+      } else if (layer_activation(layer) != Activation::Identity) {
         activation_backward(layer_activation(layer), out,
                             detail::ConstMatrixMap<Scalar>(upstream, out.rows(), batch), delta);
       } else if (upstream != delta.data()) {
@@ -311,12 +314,18 @@ private:
       }
 
       // The input adjoint of layer 0 is dX; skipping it is what stops the gradient. Below
-      // layer 0 it is the next layer's Δ itself when that layer is linear (no copy).
+      // layer 0 it is the next layer's Δ itself when that layer is linear (no copy), or when
+      // this layer is dense over a tanh layer: its product then applies the tanh's derivative
+      // in registers (packed_product.hpp), saving a pass over the adjoint in memory.
       Scalar* d_in = nullptr;
+      const Scalar* below_tanh_outputs = nullptr;
       if (l > 0) {
         const Layer& below = layers_[ul - 1];
         const Index rows = layer_output_dim(below);
-        d_in = layer_activation(below) == Activation::Identity
+        if (std::holds_alternative<Dense>(layer) &&
+            layer_activation(below) == Activation::Tanh)
+          below_tanh_outputs = ws.outputs_[ul - 1].data();
+        d_in = layer_activation(below) == Activation::Identity || below_tanh_outputs != nullptr
                    ? detail::grow_map(deltas[ul - 1], rows, batch).data()
                    : detail::grow_map(scratch.adjoint, rows, batch).data();
       } else if (dx != nullptr) {
@@ -331,11 +340,12 @@ private:
             if constexpr (std::is_same_v<std::decay_t<decltype(spec)>, Conv1d>) {
               spec.input_vjp(wt, delta.data(), batch, d_in, scratch.columns);
             } else {
-              spec.input_vjp(wt, delta.data(), batch, d_in);
+              spec.input_vjp(wt, delta.data(), batch, d_in, below_tanh_outputs);
             }
           },
           layer);
       upstream = d_in;
+      upstream_is_delta = below_tanh_outputs != nullptr;
     }
   }
 

@@ -97,39 +97,78 @@ public:
 
   /// Y = A X + b: `x` is cols() × n column-major with leading dimension `ldx`, `y` rows() × n
   /// column-major with leading dimension `ldy` (overwritten; it must not overlap `x`).
-  void multiply(const Scalar* x, Index ldx, Index n, Scalar* y, Index ldy) const;
+  /// With `tanh_outputs` = T (rows() × n, leading dimension `ldy`), Y = (A X + b) ⊙ (1 − T²)
+  /// instead: a backward pass's Wᵀ Δ times the derivative of the tanh layer below, applied to
+  /// each register before it is stored, so that the product's result never makes a round trip
+  /// through memory.
+  void multiply(const Scalar* x, Index ldx, Index n, Scalar* y, Index ldy,
+                const Scalar* tanh_outputs = nullptr) const;
 
 private:
   // Accumulators of a 2-panel block, plus the two weight registers and a broadcast, must fit
   // in the register file (32 registers with AVX-512, 16 with SSE/AVX on x86-64).
   static constexpr int kColumnBlock = EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS >= 32 ? 8 : 4;
 
+  /// Where the results go: Y (leading dimension `ld`), each multiplied by 1 − t² of the entry
+  /// at the same place in `tanh_outputs` when that is set.
+  struct Destination {
+    Scalar* y;
+    Index ld;
+    const Scalar* tanh_outputs;
+
+    /// The same from column j on.
+    [[nodiscard]] Destination from_column(Index j) const {
+      return {y + j * ld, ld, tanh_outputs == nullptr ? nullptr : tanh_outputs + j * ld};
+    }
+    /// Rows first … first + count − 1 of column c (count ≤ kLanes) from `value`'s lanes.
+    SBPTT_ALWAYS_INLINE void store(Index first, Index c, Index count, Packet value) const {
+      const Index at = c * ld + first;
+      if (tanh_outputs != nullptr) {
+        using namespace Eigen::internal;
+        const Packet t = load_rows(tanh_outputs + at, count);
+        value = pmul(value, psub(pset1<Packet>(Scalar(1)), pmul(t, t)));
+      }
+      store_rows(y + at, count, value);
+    }
+    /// The same for one entry (the short matrices' dot products). 1 − t² by
+    /// `fused_multiply_add`, as `row_dots` adds its last terms: a plain expression could be
+    /// contracted in one inlined copy and not in another.
+    void store(Index row, Index c, Scalar value) const {
+      const Index at = c * ld + row;
+      if (tanh_outputs != nullptr) {
+        const Scalar t = tanh_outputs[at];
+        value *= detail::fused_multiply_add(-t, t, Scalar(1));
+      }
+      y[at] = value;
+    }
+  };
+
   /// Columns 0 … Columns − 1 (1 or 2) of every row, in blocks of enough panels for about 8
   /// independent chains of multiply-adds, which hide their latency at two a cycle, where the
   /// accumulators, the panels' weights and a broadcast fit in the registers (with 16: 7 panels
   /// of one column, 4 of two); the last block smaller.
   template <int Columns>
-  void narrow_columns(Index panels, const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
+  void narrow_columns(Index panels, const Scalar* x, Index ldx, const Destination& out) const {
     constexpr int block_panels =
         EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS >= 32 ? 8 : (Columns == 1 ? 7 : 4);
     Index p = 0;
     for (; p + block_panels <= panels; p += block_panels)
-      block_at<block_panels, Columns>(p, x, ldx, y, ldy);
+      block_at<block_panels, Columns>(p, x, ldx, out);
     detail::with_count<block_panels - 1>(panels - p, [&](auto count) {
-      block_at<decltype(count)::value, Columns>(p, x, ldx, y, ldy);
+      block_at<decltype(count)::value, Columns>(p, x, ldx, out);
     });
   }
 
   /// `block` for the Panels panels from p, the last panel of A at the narrowest width that
   /// holds its rows where that is cheaper (`kNarrowLastPanel`).
   template <int Panels, int Columns>
-  void block_at(Index p, const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
+  void block_at(Index p, const Scalar* x, Index ldx, const Destination& out) const {
     if constexpr (kNarrowLastPanel) {
       const Index last_rows = rows_ - (p + Panels - 1) * kLanes;  // in the block's last panel
-      if (4 * last_rows <= kLanes) return block<Panels, Columns, 4>(p, x, ldx, y, ldy);
-      if (2 * last_rows <= kLanes) return block<Panels, Columns, 2>(p, x, ldx, y, ldy);
+      if (4 * last_rows <= kLanes) return block<Panels, Columns, 4>(p, x, ldx, out);
+      if (2 * last_rows <= kLanes) return block<Panels, Columns, 2>(p, x, ldx, out);
     }
-    block<Panels, Columns, 1>(p, x, ldx, y, ldy);
+    block<Panels, Columns, 1>(p, x, ldx, out);
   }
 
   /// Rows p·kLanes … (p + Panels)·kLanes − 1 of Y, columns 0 … Columns − 1, the last panel in
@@ -138,7 +177,8 @@ private:
   /// block made guidance's R epoch 2% slower at -O3 than the plain loops; kept apart, 7–8%
   /// faster (13.59–13.78 against 14.79–15.02 ms; docs/benchmark-runs.md, seventeenth run).
   template <int Panels, int Columns, int LastFraction>
-  [[gnu::noinline]] void block(Index p, const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
+  [[gnu::noinline]] void block(Index p, const Scalar* x, Index ldx,
+                               const Destination& out) const {
     using Eigen::internal::pset1;
     Packet acc[Panels][Columns];
     const Scalar* a[Panels];
@@ -163,7 +203,7 @@ private:
       const Index first = (p + q) * kLanes;
       const Index count = std::min(kLanes, rows_ - first);
       detail::static_for<Columns>([&](auto c) SBPTT_ALWAYS_INLINE {
-        store_rows(y + c * ldy + first, count, acc[q][c]);
+        out.store(first, c, count, acc[q][c]);
       });
     });
   }
@@ -219,7 +259,7 @@ private:
   /// 1 × 100 × 8, the cart pole's: 32–38 against 25–26; docs/benchmark-runs.md, seventeenth
   /// run).
   template <int Rows, int Columns>
-  void row_dots(const Scalar* x, Index ldx, Scalar* y, Index ldy) const {
+  void row_dots(const Scalar* x, Index ldx, const Destination& out) const {
     using Eigen::internal::pmadd;
     using Eigen::internal::ploadu;
     const Index whole = cols_ / kLanes * kLanes;
@@ -251,7 +291,7 @@ private:
         // of this loop and not in another, and a column would depend on its batch.
         for (Index k = whole; k < cols_; ++k)
           sum = detail::fused_multiply_add(a[k], x[c * ldx + k], sum);
-        y[r + c * ldy] = sum;
+        out.store(r, c, sum);
       }
     }
   }
@@ -309,6 +349,17 @@ private:
     std::copy(lanes, lanes + count, to);
   }
 
+  /// The `count` entries at `from` in the first lanes (the others 0), reading no further.
+  SBPTT_ALWAYS_INLINE static Packet load_rows(const Scalar* from, Index count) {
+    if (count == kLanes) return Eigen::internal::ploadu<Packet>(from);
+#if defined(EIGEN_VECTORIZE_AVX512)
+    if constexpr (FloatOrDouble<Scalar>) return detail::load_first_lanes(from, count);
+#endif
+    alignas(64) Scalar lanes[kLanes] = {};
+    std::copy(from, from + count, lanes);
+    return Eigen::internal::pload<Packet>(lanes);
+  }
+
   Index rows_ = 0;
   Index cols_ = 0;
   Vector<Scalar> data_;
@@ -320,16 +371,17 @@ private:
 // one from instantiating it and the kernels it calls.
 template <class Scalar>
 void PackedMatrix<Scalar>::multiply(const Scalar* x, Index ldx, Index n, Scalar* y,
-                                    Index ldy) const {
+                                    Index ldy, const Scalar* tanh_outputs) const {
+  const Destination out{y, ldy, tanh_outputs};
   if (by_rows()) {
     detail::with_count<kMaxShortRows>(rows_, [&](auto rows) {
       constexpr int r = decltype(rows)::value;
       constexpr int columns = kDotsInFlight / r;
       Index j = 0;
       for (; j + columns <= n; j += columns)
-        row_dots<r, columns>(x + j * ldx, ldx, y + j * ldy, ldy);
+        row_dots<r, columns>(x + j * ldx, ldx, out.from_column(j));
       detail::with_count<columns - 1>(n - j, [&](auto left) {
-        row_dots<r, decltype(left)::value>(x + j * ldx, ldx, y + j * ldy, ldy);
+        row_dots<r, decltype(left)::value>(x + j * ldx, ldx, out.from_column(j));
       });
     });
     return;
@@ -344,7 +396,7 @@ void PackedMatrix<Scalar>::multiply(const Scalar* x, Index ldx, Index n, Scalar*
     const Index unpaired_from = full_panels - full_panels % 2;  // where the pairs stop
     for (; unpaired_done + 8 <= n; unpaired_done += 8)
       for (Index p = unpaired_from; p < panels; ++p)
-        block_at<1, 8>(p, x + unpaired_done * ldx, ldx, y + unpaired_done * ldy, ldy);
+        block_at<1, 8>(p, x + unpaired_done * ldx, ldx, out.from_column(unpaired_done));
   }
   Index j = 0;
   auto blocks_of = [&](auto columns) {
@@ -370,16 +422,16 @@ void PackedMatrix<Scalar>::multiply(const Scalar* x, Index ldx, Index n, Scalar*
       // docs/benchmark-runs.md, twenty-second run).
       if constexpr (4 * width + 4 + 1 <= EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS) {
         for (; p + 4 <= full_panels && p + 4 <= paired; p += 4)
-          block_at<4, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+          block_at<4, width>(p, x + j * ldx, ldx, out.from_column(j));
       }
       for (; p + 2 <= paired; p += 2)
-        block_at<2, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+        block_at<2, width>(p, x + j * ldx, ldx, out.from_column(j));
       if (last_three && p + 3 == panels) {
-        block_at<3, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+        block_at<3, width>(p, x + j * ldx, ldx, out.from_column(j));
         p += 3;
       }
       if (j + width <= unpaired_done) continue;
-      for (; p < panels; ++p) block_at<1, width>(p, x + j * ldx, ldx, y + j * ldy, ldy);
+      for (; p < panels; ++p) block_at<1, width>(p, x + j * ldx, ldx, out.from_column(j));
     }
   };
   blocks_of(std::integral_constant<int, kColumnBlock>{});
@@ -389,18 +441,18 @@ void PackedMatrix<Scalar>::multiply(const Scalar* x, Index ldx, Index n, Scalar*
   // The last 1 to 3 columns (a batch cut over 3 or more threads has such parts) in blocks of
   // more panels, for the same reason: one panel a block would leave one chain per column.
   if (j + 2 <= n) {
-    narrow_columns<2>(panels, x + j * ldx, ldx, y + j * ldy, ldy);
+    narrow_columns<2>(panels, x + j * ldx, ldx, out.from_column(j));
     j += 2;
   }
-  if (j < n) narrow_columns<1>(panels, x + j * ldx, ldx, y + j * ldy, ldy);
+  if (j < n) narrow_columns<1>(panels, x + j * ldx, ldx, out.from_column(j));
 }
 
 #if defined(SBPTT_SEPARATE_KERNELS)
 // Instantiated once, in cmake/kernel_instances.cpp (docs/testing.md).
-extern template void PackedMatrix<float>::multiply(const float*, Index, Index, float*,
-                                                   Index) const;
-extern template void PackedMatrix<double>::multiply(const double*, Index, Index, double*,
-                                                    Index) const;
+extern template void PackedMatrix<float>::multiply(const float*, Index, Index, float*, Index,
+                                                   const float*) const;
+extern template void PackedMatrix<double>::multiply(const double*, Index, Index, double*, Index,
+                                                    const double*) const;
 #endif
 
 }  // namespace sbptt

@@ -84,6 +84,12 @@ int run_reproduce(int argc, char** argv) {
                    "or remove runs/<name>.* to redo them\n";
       return 1;
     }
+    if (const auto folder = folder_among_run_files(runs)) {
+      std::cerr << "reproduce: '" << folder->string()
+                << "' is a folder where the runner keeps a run's file; it removes files only: "
+                   "move the folder away, then run again\n";
+      return 1;
+    }
     if (options.dry_run) {
       install_signal_handlers();
       return print_plan(options, plan, bin_dir);

@@ -9,6 +9,7 @@
 #      exit code in the log), also a run of an earlier sweep that the next one does not plan,
 #      and checks that the next sweep exits 0, names each damaged run, redoes exactly the
 #      planned ones, and that its summary.csv equals the undamaged sweep's (timing aside);
+#      a folder in place of a run's file is refused in every mode and kept;
 #   2. checks that --epochs and --samples above the task programs' limit, a --python that
 #      does not exist and an --out that is a file or lies under one are refused with exit 2
 #      before any work, and so are a missing --plot-script, an empty --run, an --out name
@@ -201,6 +202,27 @@ foreach(suffix .csv .log .run)
   execute_process(COMMAND test -f "${runs}/cartpole_p4_R_norm_s44${suffix}" RESULT_VARIABLE rc)
   check("the redone run's ${suffix} is a regular file" rc EQUAL 0)
 endforeach()
+
+# A folder where a run's file belongs (a user's mkdir, an unpacked archive): the sweep said
+# "the run is redone", then failed to remove the folder and exited 1 with a bare "filesystem
+# error". Every mode now refuses it before any work, names it, and leaves it and its contents.
+file(REMOVE "${runs}/cartpole_p4_R_norm_s44.csv")
+file(WRITE "${runs}/cartpole_p4_R_norm_s44.csv/notes.txt" "a user's file\n")
+foreach(mode "" --merge --dry-run "--emit;parallel")
+  execute_process(COMMAND "${REPRODUCE}" ${grid} ${mode} --out "${out}" TIMEOUT 20
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE said ERROR_VARIABLE err)
+  string(APPEND said "${err}")
+  check("a folder as a run's .csv, mode '${mode}': exit 1 naming it, before any work (${rc})\n${said}"
+        rc EQUAL 1 AND said MATCHES "cartpole_p4_R_norm_s44.csv' is a folder" AND
+        NOT said MATCHES "redone|filesystem error|measured")
+  check("a folder as a run's .csv, mode '${mode}': the folder and its file kept"
+        EXISTS "${runs}/cartpole_p4_R_norm_s44.csv/notes.txt")
+endforeach()
+file(REMOVE_RECURSE "${runs}/cartpole_p4_R_norm_s44.csv")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${out}" TIMEOUT 20 RESULT_VARIABLE rc
+                OUTPUT_QUIET ERROR_QUIET)
+check("the folder moved away: the sweep redoes the run (${rc})"
+      rc EQUAL 0 AND EXISTS "${runs}/cartpole_p4_R_norm_s44.csv")
 
 # --- 2. limits shared with the task programs; a missing python ------------------------------
 foreach(flag epochs samples)

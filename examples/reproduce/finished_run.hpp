@@ -147,6 +147,22 @@ inline void warn_unplanned_damage(const std::string& name, const std::string& wh
             << "; left out of summary.csv" << then << "\n";
 }
 
+/// A folder in `runs` under a name the runner keeps a run's file by (runs/<name>.csv, a
+/// temporary), or nothing. The runner removes and replaces such files; it removes no folder,
+/// since one holds what a user put there, so every mode refuses one before any work.
+inline std::optional<fs::path> folder_among_run_files(const fs::path& runs) {
+  if (!fs::is_directory(runs)) return std::nullopt;
+  for (const auto& entry : fs::directory_iterator(runs)) {
+    if (!entry.is_directory()) continue;
+    const std::string file = entry.path().filename().string();
+    for (const std::string_view suffix : {".csv", ".log", ".run", ".lock", ".checkpoint"})
+      if (file.ends_with(suffix)) return entry.path();
+    for (const std::string_view infix : {".partial.", ".tmp."})
+      if (file.find(infix) != std::string::npos) return entry.path();
+  }
+  return std::nullopt;
+}
+
 /// Removes the finished-run files of the run `name` so that a sweep that plans it redoes it.
 inline void forget_finished(const fs::path& runs, const std::string& name) {
   for (const char* suffix : {".csv", ".log", ".run", ".checkpoint", ".checkpoint.lock"})

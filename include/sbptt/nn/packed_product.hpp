@@ -34,6 +34,7 @@
 #include "sbptt/core/first_lanes.hpp"
 #include "sbptt/core/fused_multiply_add.hpp"
 #include "sbptt/core/transpose_tile.hpp"
+#include "sbptt/nn/product_destination.hpp"
 
 namespace sbptt {
 
@@ -98,9 +99,7 @@ public:
   /// Y = A X + b: `x` is cols() × n column-major with leading dimension `ldx`, `y` rows() × n
   /// column-major with leading dimension `ldy` (overwritten; it must not overlap `x`).
   /// With `tanh_outputs` = T (rows() × n, leading dimension `ldy`), Y = (A X + b) ⊙ (1 − T²)
-  /// instead: a backward pass's Wᵀ Δ times the derivative of the tanh layer below, applied to
-  /// each register before it is stored, so that the product's result never makes a round trip
-  /// through memory.
+  /// instead, applied to each register as it is stored (product_destination.hpp).
   void multiply(const Scalar* x, Index ldx, Index n, Scalar* y, Index ldy,
                 const Scalar* tanh_outputs = nullptr) const;
 
@@ -109,39 +108,7 @@ private:
   // in the register file (32 registers with AVX-512, 16 with SSE/AVX on x86-64).
   static constexpr int kColumnBlock = EIGEN_ARCH_DEFAULT_NUMBER_OF_REGISTERS >= 32 ? 8 : 4;
 
-  /// Where the results go: Y (leading dimension `ld`), each multiplied by 1 − t² of the entry
-  /// at the same place in `tanh_outputs` when that is set.
-  struct Destination {
-    Scalar* y;
-    Index ld;
-    const Scalar* tanh_outputs;
-
-    /// The same from column j on.
-    [[nodiscard]] Destination from_column(Index j) const {
-      return {y + j * ld, ld, tanh_outputs == nullptr ? nullptr : tanh_outputs + j * ld};
-    }
-    /// Rows first … first + count − 1 of column c (count ≤ kLanes) from `value`'s lanes.
-    SBPTT_ALWAYS_INLINE void store(Index first, Index c, Index count, Packet value) const {
-      const Index at = c * ld + first;
-      if (tanh_outputs != nullptr) {
-        using namespace Eigen::internal;
-        const Packet t = load_rows(tanh_outputs + at, count);
-        value = pmul(value, psub(pset1<Packet>(Scalar(1)), pmul(t, t)));
-      }
-      store_rows(y + at, count, value);
-    }
-    /// The same for one entry (the short matrices' dot products). 1 − t² by
-    /// `fused_multiply_add`, as `row_dots` adds its last terms: a plain expression could be
-    /// contracted in one inlined copy and not in another.
-    void store(Index row, Index c, Scalar value) const {
-      const Index at = c * ld + row;
-      if (tanh_outputs != nullptr) {
-        const Scalar t = tanh_outputs[at];
-        value *= detail::fused_multiply_add(-t, t, Scalar(1));
-      }
-      y[at] = value;
-    }
-  };
+  using Destination = detail::ProductDestination<Scalar>;
 
   /// Columns 0 … Columns − 1 (1 or 2) of every row, in blocks of enough panels for about 8
   /// independent chains of multiply-adds, which hide their latency at two a cycle, where the
@@ -324,40 +291,6 @@ private:
   static void grow_and_zero(Vector<Scalar>& storage, Index size) {
     if (storage.size() < size) storage.resize(size);
     storage.head(size).setZero();
-  }
-
-  /// The first `count` lanes of `value` to `to`: only a panel's real rows go out. With
-  /// AVX-512 by a masked store: through a buffer and a copy, the 12 rows of the last panel
-  /// made the quantum CNN's first product (60 × 6 × 128, float) take 1187–1306 ns against
-  /// 694–702 (docs/benchmark-runs.md, seventeenth run). Always inlined: GCC 12 called it from
-  /// the blocks of 3 panels, the accumulator going through memory at each of the 24 calls
-  /// (cart pole 4's R epoch, best of 40, 34.5–36.3 ms against 31.8–33.0 inlined, alternating
-  /// runs outside the machine's dips; docs/benchmark-runs.md, twenty-third run).
-  SBPTT_ALWAYS_INLINE static void store_rows(Scalar* to, Index count, const Packet& value) {
-    if (count == kLanes) {
-      Eigen::internal::pstoreu(to, value);
-      return;
-    }
-#if defined(EIGEN_VECTORIZE_AVX512)
-    if constexpr (FloatOrDouble<Scalar>) {
-      detail::store_first_lanes(to, value, count);
-      return;
-    }
-#endif
-    alignas(64) Scalar lanes[kLanes];
-    Eigen::internal::pstoreu(lanes, value);
-    std::copy(lanes, lanes + count, to);
-  }
-
-  /// The `count` entries at `from` in the first lanes (the others 0), reading no further.
-  SBPTT_ALWAYS_INLINE static Packet load_rows(const Scalar* from, Index count) {
-    if (count == kLanes) return Eigen::internal::ploadu<Packet>(from);
-#if defined(EIGEN_VECTORIZE_AVX512)
-    if constexpr (FloatOrDouble<Scalar>) return detail::load_first_lanes(from, count);
-#endif
-    alignas(64) Scalar lanes[kLanes] = {};
-    std::copy(from, from + count, lanes);
-    return Eigen::internal::pload<Packet>(lanes);
   }
 
   Index rows_ = 0;

@@ -115,8 +115,9 @@ inline Summary summarize(const Run& run, const fs::path& csv) {
     row.number(1);
     const double train = row.number(2), test = row.number(3);
     row.norm2(4);
-    // A cosine from float sums over 13,004 products can pass 1 by their rounding, where
-    // g_M and g_R nearly agree; a fraction of counts only by the mean's last digit.
+    // Builds before the cosine was clamped (test_core_sign.cpp) logged cosines past 1 by
+    // the rounding of float sums, where g_M and g_R nearly agree; a fraction of counts passes
+    // its bounds only by the mean's last digit.
     // Builds before 96694fb logged cos_m_r as nan where float sums of squares overflowed: a
     // diagnostic of a finished run whose losses stand, so such runs are kept.
     if (run.method != sbptt::Method::Combined || fields[5] != "nan")

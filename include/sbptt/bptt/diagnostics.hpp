@@ -50,8 +50,9 @@ struct SweepDiagnostics {
 
 /// Diagnostics comparing the modified vector g_M with the regular gradient g_R.
 struct ComparisonDiagnostics {
-  double cos_modified_regular = 0;  ///< cos(g_M, g_R); 0 when either is zero or not finite
-  double agree_fraction = 0;        ///< `sign_agreement(g_M, g_R)` (core/sign.hpp)
+  /// cos(g_M, g_R) in [-1, 1]; 0 when either is zero or not finite
+  double cos_modified_regular = 0;
+  double agree_fraction = 0;  ///< `sign_agreement(g_M, g_R)` (core/sign.hpp)
 };
 
 
@@ -107,6 +108,8 @@ template <class Scalar>
     result.cos_modified_regular = static_cast<double>(sums.dot) / norms;
   else
     result.cos_modified_regular = scaled_cosine(modified.data(), regular.data(), modified.size());
+  // The quotient of parallel vectors rounds past ±1 (by up to 1.2e-7 in float).
+  result.cos_modified_regular = std::clamp(result.cos_modified_regular, -1.0, 1.0);
   result.agree_fraction =
       static_cast<double>(agreement_fraction<Scalar>(agreeing, modified.size()));
   return result;

@@ -338,13 +338,15 @@ std::vector<double> norms_after_epochs(const Case& c) {
 
 /// Just above |θ| after `epoch`: a training trap at it springs in the next epoch's training.
 double just_after_epoch(const std::vector<double>& norms, int epoch) {
-  return norms[epoch - 1] + 1e-9 * (norms[epoch] - norms[epoch - 1]);
+  const auto e = static_cast<std::size_t>(epoch);
+  return norms[e - 1] + 1e-9 * (norms[e] - norms[e - 1]);
 }
 
 /// Between |θ| after `epoch` - 1 and after `epoch`: an evaluation trap at it springs in the
 /// evaluation of `epoch`.
 double within_epoch(const std::vector<double>& norms, int epoch) {
-  return (norms[epoch - 2] + norms[epoch - 1]) / 2;
+  const auto e = static_cast<std::size_t>(epoch);
+  return (norms[e - 2] + norms[e - 1]) / 2;
 }
 
 }  // namespace

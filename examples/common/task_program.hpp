@@ -55,7 +55,8 @@ inline void prepare_stop_notices(const char* name) {
                                    "%s: %s: stopping after the current epoch, which keeps its "
                                    "work; a second %s stops at once\n",
                                    name, signal, signal);
-    stop_notice_size[k] = size < 0 ? 0 : std::min<std::size_t>(size, sizeof stop_notice[k] - 1);
+    stop_notice_size[k] =
+        size < 0 ? 0 : std::min(static_cast<std::size_t>(size), sizeof stop_notice[k] - 1);
   }
 }
 

@@ -212,7 +212,7 @@ foreach(mode "" --merge --dry-run "--emit;parallel")
   execute_process(COMMAND "${REPRODUCE}" ${grid} ${mode} --out "${out}" TIMEOUT 20
                   RESULT_VARIABLE rc OUTPUT_VARIABLE said ERROR_VARIABLE err)
   string(APPEND said "${err}")
-  check("a folder as a run's .csv, mode '${mode}': exit 1 naming it, before any work (${rc})\n${said}"
+  check("a folder as a run's .csv, mode '${mode}': exit 1 naming it, no work (${rc})\n${said}"
         rc EQUAL 1 AND said MATCHES "cartpole_p4_R_norm_s44.csv' is a folder" AND
         NOT said MATCHES "redone|filesystem error|measured")
   check("a folder as a run's .csv, mode '${mode}': the folder and its file kept"

@@ -394,6 +394,11 @@ RowResult measure(const Settings& settings, const Sim& sim,
     keep_fastest(best, [&] { epoch(row_trainer); });
   };
   long long untimed_macs = 0;  // not the timed epochs' work: kept out of the GFLOP count
+  const auto uncounted = [&](auto&& work) {
+    const long long before = alone.counted.macs();
+    work();
+    untimed_macs += alone.counted.macs() - before;
+  };
   const sbptt::SweepTally tally_before =
       threaded ? threaded->trainer.engine().sweep_tally() : sbptt::SweepTally{};
   for (int repeat = 0; repeat < settings.repeats; ++repeat) {
@@ -401,9 +406,7 @@ RowResult measure(const Settings& settings, const Sim& sim,
     if (regular) keep_best(r.ms_regular, *regular);  // right after the C epoch it is set against
     if (threaded) {
       keep_best(r.ms_threads, *threaded);
-      const long long before = alone.counted.macs();
-      keep_fastest(r.ms_evaluation, [&] { evaluation(alone); });
-      untimed_macs += alone.counted.macs() - before;
+      uncounted([&] { keep_fastest(r.ms_evaluation, [&] { evaluation(alone); }); });
       keep_fastest(r.ms_evaluation_threads, [&] { evaluation(*threaded); });
       keep_fastest(r.ms_beside, [&] { beside->epoch(train, test); });
       keep_fastest(r.ms_beside_alone, [&] { beside->epoch_alone(train, test); });
@@ -413,11 +416,7 @@ RowResult measure(const Settings& settings, const Sim& sim,
     // which is how epochs follow each other in training: timed first in each repeat, a C
     // epoch made guidance's C/R 1.293–1.308, timed after the R epoch 1.275–1.290; with this
     // untimed epoch between, 1.283–1.292 (docs/benchmark-runs.md, sixtieth run).
-    if (repeat + 1 < settings.repeats) {
-      const long long before = alone.counted.macs();
-      epoch(alone);
-      untimed_macs += alone.counted.macs() - before;
-    }
+    if (repeat + 1 < settings.repeats) uncounted([&] { epoch(alone); });
   }
   if (!threaded) {
     r.ms_threads = r.ms_epoch;

@@ -37,17 +37,19 @@ inline constexpr const char* summary_header =
 /// here, or a value no run can produce, is damage, not a result.
 struct RowFields {
   const std::vector<std::string>& fields;
-  const std::string& where;
+  const fs::path& csv;
+  std::size_t line;      ///< 1 for the header
   sbptt::Method method;  ///< only the combined one logs cos_m_r and agree_fraction
 
+  // The location is built only for a message: scan_finished reads every row of every run.
+  [[nodiscard]] std::string where() const { return concat("'", csv.string(), "', line ", line); }
   [[nodiscard]] std::string field(std::size_t k) const {
-    return concat(where, ", field ", k + 1, " (", name(k), ")");
+    return concat(where(), ", field ", k + 1, " (", name(k), ")");
   }
   [[nodiscard]] static const std::string& name(std::size_t k) {
     static const std::vector<std::string> names = split(sbptt::TrainingLog::header, ',');
     return names[k];
   }
-  // The location is built only for a message: scan_finished reads every row of every run.
   double number(std::size_t k) const {
     try {
       return sbptt::detail::parse_finite<double>(fields[k], std::string());
@@ -85,6 +87,14 @@ struct RowFields {
       throw sbptt::ParseError(concat(field(k), ": '", fields[k], "' is outside [",
                                      format_number(low), ", ", format_number(high), "]"));
   }
+  /// The mean of the batches' cosines, `bounded` with a slack: builds before the cosine was
+  /// clamped (test_core_sign.cpp) logged cosines past 1 by the rounding of float sums, where
+  /// g_M and g_R nearly agree. Builds before 96694fb logged `nan` where float sums of squares
+  /// overflowed: a diagnostic of a finished run whose losses stand, so such runs are kept.
+  void cosine_mean(std::size_t k) const {
+    if (method == sbptt::Method::Combined && fields[k] == "nan") return;
+    bounded(k, -1, 1, 1e-3);
+  }
 };
 
 /// Reads a finished training log (docs/programs.md): the header, then one row per epoch
@@ -106,23 +116,16 @@ inline Summary summarize(const Run& run, const fs::path& csv) {
   Summary s{run};
   for (std::size_t i = 1; i < lines.size(); ++i) {
     const auto fields = split(lines[i], ',');
-    const std::string where = concat("'", csv.string(), "', line ", i + 1);
+    const RowFields row{fields, csv, i + 1, run.method};
     if (fields.size() != 8)
-      throw sbptt::ParseError(concat(where, ": ", fields.size(), " fields, expected 8"));
-    const RowFields row{fields, where, run.method};
+      throw sbptt::ParseError(concat(row.where(), ": ", fields.size(), " fields, expected 8"));
     if (row.number(0) != static_cast<double>(i))
-      throw sbptt::ParseError(concat(where, ": epoch ", fields[0], ", expected ", i));
+      throw sbptt::ParseError(concat(row.where(), ": epoch ", fields[0], ", expected ", i));
     row.number(1);
     const double train = row.number(2), test = row.number(3);
     row.norm2(4);
-    // Builds before the cosine was clamped (test_core_sign.cpp) logged cosines past 1 by
-    // the rounding of float sums, where g_M and g_R nearly agree; a fraction of counts passes
-    // its bounds only by the mean's last digit.
-    // Builds before 96694fb logged cos_m_r as nan where float sums of squares overflowed: a
-    // diagnostic of a finished run whose losses stand, so such runs are kept.
-    if (run.method != sbptt::Method::Combined || fields[5] != "nan")
-      row.bounded(5, -1, 1, 1e-3);
-    row.bounded(6, 0, 1, 1e-8);
+    row.cosine_mean(5);
+    row.bounded(6, 0, 1, 1e-8);  // a mean of fractions: off only by its last digit
     const double seconds = row.non_negative(7);
     s.final_train = train;
     s.final_test = test;

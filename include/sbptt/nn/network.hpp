@@ -304,13 +304,13 @@ private:
       const Layer& layer = layers_[ul];
       const Matrix<Scalar>& out = ws.outputs_[ul];
       auto delta = detail::grow_map(deltas[ul], out.rows(), batch);
-      if (upstream_is_delta) {
-        // Written into `delta` by the product above.
-      } else if (layer_activation(layer) != Activation::Identity) {
-        activation_backward(layer_activation(layer), out,
-                            detail::ConstMatrixMap<Scalar>(upstream, out.rows(), batch), delta);
-      } else if (upstream != delta.data()) {
-        delta = detail::ConstMatrixMap<Scalar>(upstream, out.rows(), batch);
+      if (!upstream_is_delta) {
+        if (layer_activation(layer) != Activation::Identity) {
+          activation_backward(layer_activation(layer), out,
+                              detail::ConstMatrixMap<Scalar>(upstream, out.rows(), batch), delta);
+        } else if (upstream != delta.data()) {
+          delta = detail::ConstMatrixMap<Scalar>(upstream, out.rows(), batch);
+        }
       }
 
       // The input adjoint of layer 0 is dX; skipping it is what stops the gradient. Below

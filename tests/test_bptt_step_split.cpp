@@ -2,12 +2,15 @@
 // the sweeping thread and a second one: the pattern of the tasks (StepShare) by enumeration;
 // every task's backward pass runs exactly once and before its products, the products are added
 // exactly once and in task order, only after the sweep has recorded the task's μ, whichever
-// thread does the work; the sweep finishes alone when the second thread never starts, stops
+// thread does the work; the sweep runs a backward pass it waits for that the second thread has
+// not begun; the sweep finishes alone when the second thread never starts, stops
 // waiting when the second thread fails, and a sweep that gives up stops the second thread.
 #include <catch2/catch.hpp>
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
+#include <future>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -116,6 +119,27 @@ TEST_CASE("step split: a task counts as prepared after its slot has passed to a 
   CHECK(split.is_prepared(0));
   CHECK(split.is_prepared(Split::ring_size));
   CHECK_FALSE(split.is_prepared(Split::ring_size + 1));
+}
+
+TEST_CASE("step split: the sweep runs the backward pass it waits for when the second thread, "
+          "though started, has not begun it", "[bptt][threads]") {
+  // The second thread may be busy adding earlier tasks' products; the sweep would idle.
+  Split split;
+  split.reset(20);
+  split.started.store(true);
+  std::atomic<int> prepared{0};
+  auto prepare = [&](Index, Split::Slot&) { prepared.fetch_add(1); };
+  auto nothing = [](Index, Split::Slot&) {};
+  auto waiting = std::async(std::launch::async,
+                            [&] { return split.wait_prepared(0, prepare, nothing); });
+  const bool returned =
+      waiting.wait_for(std::chrono::seconds(10)) == std::future_status::ready;
+  if (!returned) split.failed.store(true);  // ends a wait that no one would serve
+  CHECK(returned);
+  CHECK(waiting.get() == returned);
+  CHECK(prepared.load() == 1);
+  CHECK(split.is_prepared(0));
+  CHECK(split.claimed.load() == 1);
 }
 
 TEST_CASE("step split: the sweep stops waiting when the second thread fails, and a sweep that "

@@ -12,14 +12,15 @@
 /// the same products.
 ///
 /// Threads: the steps are split between the two threads, each adding the products of the
-/// backward passes it ran, so that the layer adjoints stay on the core that wrote them
-/// (step_split.hpp). The products of the split's tasks (7 of every 13 recordings k = m − 1 − n,
-/// `StepShare`) are summed apart from those of the other recordings and added to them at the
-/// end, on one thread as on two, so the results are the same bits for every thread count. The
-/// per-sample loops are never split over the threads here, even where a lone sweep would split
-/// them: for quantum control (2 × 8 VJPs of about 0.76 µs per step) splitting them instead of
-/// handing the products to the second thread (the schedule before this one) made the
-/// two-thread C epoch 301.8 ms, against 248–263 ms (docs/benchmark-runs.md, fifth run).
+/// backward passes it mostly ran itself, so that the layer adjoints seldom leave the core
+/// that wrote them (step_split.hpp). The products of the split's tasks (7 of every 13
+/// recordings k = m − 1 − n, `StepShare`) are summed apart from those of the other recordings
+/// and added to them at the end, on one thread as on two, so the results are the same bits for
+/// every thread count. The per-sample loops are never split over the threads here, even where
+/// a lone sweep would split them: for quantum control (2 × 8 VJPs of about 0.76 µs per step)
+/// splitting them instead of handing the products to the second thread (the schedule before
+/// this one) made the two-thread C epoch 301.8 ms, against 248–263 ms (docs/benchmark-runs.md,
+/// fifth run).
 #include <array>
 #include <atomic>
 #include <cstddef>

@@ -17,10 +17,13 @@
 /// The sweep never waits for a thread that may not have started: until the second thread has
 /// started, the sweep runs the tasks it needs itself, and it adds products while it waits; so
 /// it finishes even if the second thread never starts. Once that thread runs, the sweep leaves
-/// it the tasks and waits, except at the end, where it helps add what is left: a task it ran
-/// would hand its Δ to the other core after all. If the second thread throws, it says so
-/// (`failed`), and the sweep stops waiting and returns, so that `ThreadPool::run_beside`
-/// rethrows that thread's exception.
+/// it the products, except at the end, where it helps add what is left. While it waits for a
+/// backward pass, it runs the next one that no thread has begun (the second thread may be
+/// busy adding products, as quantum control's often is): that task's Δ then crosses to the
+/// other core, but the sweep does not idle. The cart pole's second thread is ahead, and its
+/// batches took as long either way; quantum's took 0.4–2.9% less (docs/design.md, decision of
+/// 2026-12-05). If the second thread throws, it says so (`failed`), and the sweep stops
+/// waiting and returns, so that `ThreadPool::run_beside` rethrows that thread's exception.
 #include <array>
 #include <atomic>
 #include <cstddef>
@@ -132,15 +135,17 @@ struct StepSplit {
     return true;
   }
 
-  /// The sweep's wait for the backward pass of `task`, doing the work itself while the second
-  /// thread has not started; false if the second thread failed.
+  /// The sweep's wait for the backward pass of `task`: meanwhile it runs the next backward pass
+  /// that no thread has begun (this task's, or a later one's while the second thread runs this
+  /// one), and adds products too while the second thread has not started; false if the second
+  /// thread failed.
   template <class Prepare, class Add>
   bool wait_prepared(Index task, Prepare& prepare, Add& add) {
     int turns = 0;
     while (!is_prepared(task)) {
       if (failed.load(std::memory_order_acquire)) return false;
       const bool alone = !started.load(std::memory_order_acquire);
-      if (!(alone && (try_preparing(prepare) || try_adding(add)))) back_off(turns);
+      if (!(try_preparing(prepare) || (alone && try_adding(add)))) back_off(turns);
     }
     return true;
   }

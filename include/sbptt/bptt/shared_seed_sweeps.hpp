@@ -13,7 +13,7 @@
 ///
 /// Threads: the steps are split between the two threads, each adding the products of the
 /// backward passes it mostly ran itself, so that the layer adjoints seldom leave the core
-/// that wrote them (step_split.hpp). The products of the split's tasks (7 of every 13
+/// that wrote them (step_split.hpp). The products of the split's tasks (4 of every 7
 /// recordings k = m − 1 − n, `StepShare`) are summed apart from those of the other recordings
 /// and added to them at the end, on one thread as on two, so the results are the same bits for
 /// every thread count. The per-sample loops are never split over the threads here, even where

@@ -1,12 +1,12 @@
 #pragma once
 /// \file The steps of the combined update's shared-seed pair split between two threads, each
-/// thread adding the parameter products of the backward passes it ran itself. Implementation
-/// detail of `SharedSeedSweeps` (shared_seed_sweeps.hpp).
+/// thread adding the parameter products of the backward passes it mostly ran itself.
+/// Implementation detail of `SharedSeedSweeps` (shared_seed_sweeps.hpp).
 ///
 /// The pair records its steps from the last: recording k is step n = m − 1 − k. The sweeping
 /// thread runs the VJPs of every step; the network's work of each step (its backward pass and
-/// parameter products) goes to one thread or the other, by a fixed pattern (`StepShare`): 7 of
-/// every 13 recordings are the tasks of this split, the rest the sweep's own. A task's backward
+/// parameter products) goes to one thread or the other, by a fixed pattern (`StepShare`): 4 of
+/// every 7 recordings are the tasks of this split, the rest the sweep's own. A task's backward
 /// pass (the seed 1: Δ_l(1) and K_nᵀ1) reads only the forward pass, so the second thread runs
 /// it ahead of the sweep, into a ring slot; its products need both sweeps' μ_n, which the sweep
 /// records here when it reaches the step. So in the steady state Δ (6.4 KB a step for the cart
@@ -35,13 +35,15 @@
 
 namespace sbptt::detail {
 
-/// Which recordings are the split's tasks: 7 of every 13, spread evenly (1, 3, 5, 7, 9, 11,
-/// 12, 14, …). Fixed, not measured at run time, so that the sums are grouped alike for every
+/// Which recordings are the split's tasks: 4 of every 7, spread evenly (1, 3, 5, 6, 8, 10, 12,
+/// 13, …). Fixed, not measured at run time, so that the sums are grouped alike for every
 /// machine and thread count. More than half, because the sweeping thread also runs every
-/// step's VJPs: for the cart pole the threads are even when the second one takes about 0.54
-/// of the network's work (docs/design.md, decision of 2026-11-30).
+/// step's VJPs: the cart pole's second thread, at 7 of 13, still waited for the sweep; where
+/// the second thread is the busier one (quantum control), the sweep runs backward passes while
+/// it waits (`wait_prepared`), so the larger share does not make it idle (docs/design.md,
+/// decisions of 2026-11-30 and 2026-12-05).
 struct StepShare {
-  static constexpr Index tasks_per_period = 7, period = 13;
+  static constexpr Index tasks_per_period = 4, period = 7;
 
   [[nodiscard]] static constexpr bool is_task(Index recording) {
     return tasks_before(recording + 1) > tasks_before(recording);

@@ -28,7 +28,7 @@
 //
 // Exit codes: 0 every planned run finished, 1 a run failed or an error (--merge: runs missing),
 // 2 bad flags, 130 interrupted (SIGINT/SIGTERM/SIGHUP, also while plotting or while --dry-run
-// measures; the finished runs are kept).
+// measures or prints; the finished runs are kept).
 
 #include <exception>
 #include <iostream>

@@ -21,7 +21,8 @@
 #      temporary PNG behind): exit 130 on SIGTERM and on SIGINT, no "no plots" message, no
 #      plots/.tmp.* left; started with SIGHUP and SIGINT ignored (nohup, a script's background
 #      job), it neither catches them nor stops on them; interrupted while --dry-run measures,
-#      it says so, exits 130 and leaves no scratch folder;
+#      it says so, exits 130 and leaves no scratch folder; interrupted while it prints the
+#      plan, it stops, says so and exits 130;
 #   4. (when strace is installed) traces a sweep: every file the runner renames into place was
 #      fsync'ed just before, and its folder just after (a file written unnamed, O_TMPFILE, is
 #      fsync'ed through its descriptor and then linked to the name that is renamed).
@@ -399,7 +400,7 @@ ls -A "$out/plots"
 env --default-signal=INT "$runner" "$@" --out "$out" > "$out.log" 2>&1 &
 pid=$!
 wait_for_plot
-kill -INT $pid
+kill -TERM $pid
 wait $pid
 echo "SIGINT at its default: exit code $?"
 cat "$out.log"
@@ -446,6 +447,34 @@ execute_process(COMMAND sh "${WORK_DIR}/interrupt_dry_run.sh" "${REPRODUCE}" "${
 check("interrupted while --dry-run measures: exit 130, saying so, no scratch folder left\n${dry}${dry_err}"
       dry MATCHES "dry run: exit code 130\n" AND dry MATCHES "interrupted while measuring"
       AND dry MATCHES "left in TMPDIR: \\[\\]")
+
+# An interrupt after the last measurement, while the plan is printed: the runner printed the
+# whole plan and exited 0. Its stdout is a pipe that is not read until the signal has been
+# sent, and 2000 planned runs fill far more than a pipe holds, so the runner is still printing.
+# SIGTERM, because a background job of sh ignores SIGINT.
+file(WRITE "${WORK_DIR}/interrupt_plan.sh" [=[
+runner=$1; tmp=$2; shift 2
+rm -f "$tmp.fifo"; mkfifo "$tmp.fifo"
+"$runner" "$@" --dry-run > "$tmp.fifo" 2> "$tmp.err" &
+pid=$!
+exec 3< "$tmp.fifo"
+while IFS= read -r line <&3; do
+  case "$line" in cartpole_*) break ;; esac
+done
+kill -TERM $pid
+cat <&3 > "$tmp.out"
+wait $pid
+echo "plan: exit code $?"
+cat "$tmp.err"
+echo "estimate printed: $(grep -c 'measured estimate' "$tmp.out")"
+]=])
+execute_process(COMMAND sh "${WORK_DIR}/interrupt_plan.sh" "${REPRODUCE}" "${WORK_DIR}/plan"
+                --tasks cartpole --complexities 4 --methods R,C --clips norm --seeds 1000
+                --epochs 4 --no-plot --bin-dir "${WORK_DIR}/fake" --out "${WORK_DIR}/dry"
+                OUTPUT_VARIABLE plan ERROR_VARIABLE plan_err)
+check("interrupted after --dry-run measured, while it prints: exit 130, saying so, no estimate\n${plan}${plan_err}"
+      plan MATCHES "plan: exit code 130\n" AND plan MATCHES "interrupted while printing the plan"
+      AND plan MATCHES "estimate printed: 0")
 
 # --- 4. fsync before a file counts ---------------------------------------------------------------
 # The runner is the first process in the trace; the fake programs' own renames are theirs.

@@ -87,7 +87,7 @@ inline int plot(const Options& o, const fs::path& own_dir) {
 
 /// --dry-run: every planned command, then the estimate from costs measured on this machine
 /// with the task programs of `bin_dir` (calibration.hpp). Returns 130 when a signal
-/// interrupted the measuring, else 0.
+/// interrupted the measuring or the printing (which then stops short of the estimate), else 0.
 inline int print_plan(const Options& o, const std::vector<Run>& plan, const fs::path& bin_dir) {
   double estimate = 0;
   std::size_t todo = 0;
@@ -99,12 +99,21 @@ inline int print_plan(const Options& o, const std::vector<Run>& plan, const fs::
   for (const auto& run : plan)
     if (!is_finished(finished, run)) unfinished.push_back(run);
   const std::optional<MeasuredCosts> costs = measure_costs(unfinished, bin_dir, o.threads);
-  if (!costs) {
+  // A signal after the last measurement still counts: its check in time_probe came before.
+  if (!costs || interrupted) {
     std::cerr << "reproduce: interrupted while measuring the task programs; no plan printed, "
                  "nothing written\n";
     return 130;
   }
+  const auto stopped_printing = [] {
+    if (!interrupted) return false;
+    std::fflush(stdout);
+    std::cerr << "reproduce: interrupted while printing the plan; it is incomplete and no "
+                 "estimate was printed\n";
+    return true;
+  };
   for (const auto& run : plan) {
+    if (stopped_printing()) return 130;
     std::string command;
     for (const auto& a : command_line(run, bin_dir, runs, o.threads))
       command += (command.empty() ? "" : " ") + a;
@@ -117,6 +126,7 @@ inline int print_plan(const Options& o, const std::vector<Run>& plan, const fs::
     std::printf("%-34s %s%s\n", run.name().c_str(), command.c_str(), state.c_str());
     if (!done) estimate += costs->seconds(run).value_or(run.estimated_seconds()), ++todo;
   }
+  if (stopped_printing()) return 130;
   print_instruction_sets();
   std::printf("%zu runs planned (profile %s, %zu finished, %zu to do), measured estimate %s of "
               "compute, about %s wall time with --jobs %ld\n",

@@ -11,7 +11,8 @@
 #   4. two full executors at once in one folder: every run started exactly once (the per-run
 #      lock), the same summary;
 #   5. --merge counts done, running (a lock held by another process) and missing runs;
-#      a sweep waits for a run that another process holds, then runs it;
+#      a sweep waits for a run that another process holds, says so again while it waits, with
+#      the age of the run's log, then runs it;
 #   6. --emit slurm writes a job array of the unfinished runs (--array=0-(n-1)%K, the CPUs,
 #      a time limit, a log per task) and a merge job, and prints the sbatch commands;
 #   7. --run, --shard, --emit refuse bad values and each other with exit 2.
@@ -116,7 +117,7 @@ check("their summary is the local one" summary STREQUAL reference)
 file(REMOVE "${P}/runs/guidance_rc0.001_C_norm_s43.csv")
 # Another process holds a run's lock (as an executor running it would) while --merge looks.
 file(WRITE "${WORK_DIR}/hold.sh" [=[
-flock "$1" sleep 3 &
+flock "$1" sleep ${HOLD_SECONDS:-3} &
 sleep 0.5
 shift
 "$@"
@@ -156,13 +157,22 @@ check("array task 1 runs guidance_rc0.001_C_norm_s43"
 
 # A sweep whose run another process holds (as another executor would): the sweep waited for
 # nothing and exited 0 with the run unfinished, against "0: every planned run is finished".
-# It now waits, and runs it when the holder lets go of it unfinished.
-execute_process(COMMAND sh "${WORK_DIR}/hold.sh" "${P}/runs/cartpole_p4_C_norm_s42.lock"
+# It now waits, and runs it when the holder lets go of it unfinished. While it waits it says
+# so again from time to time, with how long ago the holder last wrote the run's log: a log
+# that does not grow is a stopped holder (a suspended job). It said so once, with no age.
+file(WRITE "${P}/runs/cartpole_p4_C_norm_s42.partial.log" "epoch 1\n")
+execute_process(COMMAND touch -d "2 hours ago" "${P}/runs/cartpole_p4_C_norm_s42.partial.log")
+execute_process(COMMAND env HOLD_SECONDS=13 sh "${WORK_DIR}/hold.sh"
+                "${P}/runs/cartpole_p4_C_norm_s42.lock"
                 "${REPRODUCE}" ${grid} --out "${P}" RESULT_VARIABLE rc OUTPUT_VARIABLE swept
                 ERROR_VARIABLE swept_err)
 check("a sweep over a run held elsewhere: exit 0 once it is finished\n${swept}${swept_err}"
       rc EQUAL 0 AND EXISTS "${P}/runs/cartpole_p4_C_norm_s42.csv"
-      AND swept_err MATCHES "1 held by another executor \\(e.g. cartpole_p4_C_norm_s42\\)")
+      AND swept_err MATCHES "1 held by another executor \\(e.g. cartpole_p4_C_norm_s42, its log last written 2h0[0-9]m ago\\)")
+string(REGEX MATCHALL "held by another executor" waiting_lines "${swept_err}")
+list(LENGTH waiting_lines waiting_count)
+check("a sweep that waits 12 s for a held run says so at least twice (${waiting_count})"
+      waiting_count GREATER_EQUAL 2)
 
 # --- 7. bad values ---------------------------------------------------------------------------------
 foreach(bad "--shard;0/3" "--shard;4/3" "--shard;2" "--emit;pbs" "--run;nosuchrun"

@@ -292,6 +292,7 @@ private:
     std::size_t& next = next_;
     auto last_progress = std::chrono::steady_clock::time_point{};
     auto last_retry = std::chrono::steady_clock::now();
+    std::chrono::steady_clock::duration quiet_interval = std::chrono::seconds(10);
     while (true) {
       if (interrupted) {
         for (const auto& c : running_) ::kill(c.pid, SIGTERM);
@@ -327,9 +328,16 @@ private:
       if (running_.empty() && waiting_.empty()) break;
       changed = reap() || changed;
       now = std::chrono::steady_clock::now();
-      if ((tty_ && now - last_progress > std::chrono::milliseconds(500)) || (!tty_ && changed)) {
+      // A log (not a terminal) gets a line when something changed, and, while the sweep waits
+      // for runs held elsewhere, again after 10 s, 20 s, ... up to every 10 minutes.
+      if (changed) quiet_interval = std::chrono::seconds(10);
+      const bool quiet_too_long = !waiting_.empty() && now - last_progress > quiet_interval;
+      if ((tty_ && now - last_progress > std::chrono::milliseconds(500)) ||
+          (!tty_ && (changed || quiet_too_long))) {
         progress();
         last_progress = now;
+        if (!changed) quiet_interval = std::min<std::chrono::steady_clock::duration>(
+            2 * quiet_interval, std::chrono::minutes(10));
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
@@ -382,7 +390,7 @@ private:
     if (!names.empty()) line += "; running: " + names;
     if (!waiting_.empty())
       line += concat("; ", waiting_.size(), " held by another executor (e.g. ",
-                     waiting_.front()->name(), ")");
+                     waiting_.front()->name(), log_age(*waiting_.front()), ")");
     if (tty_) {
       winsize size{};
       std::size_t width = 100;
@@ -394,6 +402,22 @@ private:
       std::fprintf(stderr, "%s\n", line.c_str());
     }
     std::fflush(stderr);
+  }
+
+  /// ", its log last written 2h05m ago" from the newer of the run's partial log and training
+  /// log, which the holder keeps writing while it runs: a stopped holder (a suspended job) is
+  /// one whose age only grows. Empty when neither is there.
+  [[nodiscard]] std::string log_age(const Run& run) const {
+    std::optional<fs::file_time_type> newest;
+    for (const char* suffix : {".partial.log", ".partial.csv"}) {
+      std::error_code error;
+      const auto written = fs::last_write_time(run_file(runs_, run, suffix), error);
+      if (!error && (!newest || written > *newest)) newest = written;
+    }
+    if (!newest) return {};
+    const double age =
+        std::chrono::duration<double>(fs::file_time_type::clock::now() - *newest).count();
+    return concat(", its log last written ", format_duration(age), " ago");
   }
 
   void finish_progress() {

@@ -168,7 +168,8 @@ execute_process(COMMAND env HOLD_SECONDS=13 sh "${WORK_DIR}/hold.sh"
                 ERROR_VARIABLE swept_err)
 check("a sweep over a run held elsewhere: exit 0 once it is finished\n${swept}${swept_err}"
       rc EQUAL 0 AND EXISTS "${P}/runs/cartpole_p4_C_norm_s42.csv"
-      AND swept_err MATCHES "1 held by another executor \\(e.g. cartpole_p4_C_norm_s42, its log last written 2h0[0-9]m ago\\)")
+      AND swept_err MATCHES "1 held by another executor \\(e.g. cartpole_p4_C_norm_s42, "
+      AND swept_err MATCHES "cartpole_p4_C_norm_s42, its log last written 2h0[0-9]m ago\\)")
 string(REGEX MATCHALL "held by another executor" waiting_lines "${swept_err}")
 list(LENGTH waiting_lines waiting_count)
 check("a sweep that waits 12 s for a held run says so at least twice (${waiting_count})"

@@ -23,7 +23,9 @@
 #      job), it neither catches them nor stops on them; interrupted while --dry-run measures,
 #      it says so, exits 130 and leaves no scratch folder; interrupted while it prints the
 #      plan, it stops, says so and exits 130;
-#   4. (when strace is installed) traces a sweep: every file the runner renames into place was
+#   4. plays a file system without locks (flock fails: a sweep stops before any run and says
+#      why, --merge counts no run as running);
+#   5. (when strace is installed) traces a sweep: every file the runner renames into place was
 #      fsync'ed just before, and its folder just after (a file written unnamed, O_TMPFILE, is
 #      fsync'ed through its descriptor and then linked to the name that is renamed).
 cmake_minimum_required(VERSION 3.20)
@@ -476,7 +478,29 @@ check("interrupted after --dry-run measured, while it prints: exit 130, saying s
       plan MATCHES "plan: exit code 130\n" AND plan MATCHES "interrupted while printing the plan"
       AND plan MATCHES "estimate printed: 0")
 
-# --- 4. fsync before a file counts ---------------------------------------------------------------
+# --- 4. a file system without locks -------------------------------------------------------------
+# flock fails with ENOLCK everywhere (tests/support/flock_fails.cpp, preloaded), as on a
+# Lustre or NFS mount without lock support. A sweep stops before it runs anything and names
+# what it needs; --merge counted every run with a lock file as running (lock held).
+if(DEFINED FLOCK_FAILS AND NOT SANITIZED)  # a sanitizer's runtime must be the first library
+  file(MAKE_DIRECTORY "${WORK_DIR}/lockless/runs")
+  execute_process(COMMAND env "LD_PRELOAD=${FLOCK_FAILS}" "${REPRODUCE}" ${grid}
+                  --out "${WORK_DIR}/lockless" RESULT_VARIABLE rc OUTPUT_VARIABLE out
+                  ERROR_VARIABLE err)
+  check("a sweep on a file system without locks: exit 1 before any run, saying why\n${out}${err}"
+        rc EQUAL 1 AND err MATCHES "cannot lock '[^']*\\.lock': No locks available"
+        AND err MATCHES "needs a file system with file locks"
+        AND NOT EXISTS "${WORK_DIR}/lockless/fake_invocations")
+  # A run killed mid-way leaves its lock file; no process holds it.
+  file(TOUCH "${WORK_DIR}/lockless/runs/cartpole_p4_R_norm_s42.lock")
+  execute_process(COMMAND env "LD_PRELOAD=${FLOCK_FAILS}" "${REPRODUCE}" ${grid} --merge
+                  --out "${WORK_DIR}/lockless" RESULT_VARIABLE rc OUTPUT_VARIABLE out
+                  ERROR_VARIABLE err)
+  check("--merge on a file system without locks: a run's lock file is no run under way\n${out}${err}"
+        rc EQUAL 1 AND out MATCHES "0 of 6 planned runs done, 0 running \\(lock held\\), 6 missing")
+endif()
+
+# --- 5. fsync before a file counts ---------------------------------------------------------------
 # The runner is the first process in the trace; the fake programs' own renames are theirs.
 file(WRITE "${WORK_DIR}/fsync_order.awk" [=[
 # Names are compared by their last component: strace -y shows resolved paths.

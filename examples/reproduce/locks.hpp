@@ -20,10 +20,11 @@ inline FileLock try_lock_run(const fs::path& runs, const std::string& name) {
   return FileLock::take(runs / (name + ".lock"), false);
 }
 
-/// Whether another process holds the run's lock now (it is running the run).
+/// Whether another process holds the run's lock now (it is running the run). On a file system
+/// without locks no lock is held, and a lock file only tells that a run once started.
 inline bool run_is_locked(const fs::path& runs, const std::string& name) {
   if (!fs::exists(runs / (name + ".lock"))) return false;
-  return !try_lock_run(runs, name).held();
+  return try_lock_run(runs, name).busy();
 }
 
 /// <out>/.lock: held while summary.csv is rebuilt, so that concurrent executors write it one

@@ -328,6 +328,19 @@ TEST_CASE("mujoco: a state MuJoCo would reset gives NaN, not a silently reset st
   CHECK(a.array().isNaN().all());
   mj.step(good, u, after);  // the pooled mjData carries nothing over
   CHECK(after == before);
+  // A step that MuJoCo takes but whose result it would refuse as the next step's state: the
+  // cart at 5e9 m/s for 10 s ends 5e10 m away. Found by a fault probe: as the last step of a
+  // rollout it was never refused, and `mujoco --dt 1e6 --steps 1` printed a loss of 5e20.
+  const auto coarse = mujoco_cartpole(1, 10.0);
+  Vector<double> fast = good;
+  fast(2) = 5e9;
+  Vector<double> accepted = fast;
+  accepted(2) = 1e8;  // ends 1e9 m away: within 1e10
+  coarse.step(accepted, u, next);
+  CHECK(next.allFinite());
+  CHECK(std::abs(next(0)) > 1e9);
+  coarse.step(fast, u, next);
+  CHECK(next.array().isNaN().all());
   CHECK(printed == 0);
   mju_user_warning = nullptr;
 }

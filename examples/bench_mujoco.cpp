@@ -2,7 +2,7 @@
 // finite-difference Jacobians are: the physical cart pole (1 and 2 poles) as CartPole
 // (analytic A, B and an O(P) VJP) and as MJCF through MujocoSimulator (mj_step,
 // mjd_transitionFD), plus the double pendulum of examples/models.
-//   bench_mujoco [--repeats N] [--source DIR]
+//   bench_mujoco [--repeats N] [--source DIR]      exit 0, 1 error, 2 bad flag
 //
 // Columns (one thread; the best of N timed repeats of a loop over 64 states, so another
 // process on the machine inflates them, never deflates):
@@ -90,13 +90,32 @@ void print_row(const char* name, const Costs& c, const Costs* reference) {
   std::printf("\n");
 }
 
-void cartpole_rows(Index poles, const std::string& source, int repeats) {
+/// The models of the rows, read from the source tree before any measurement.
+struct Models {
+  MujocoModelPtr cartpole[2];  ///< physical, 1 and 2 poles
+  MujocoModelPtr double_pendulum;
+};
+
+/// Throws `IoError` naming --source if a model cannot be read or compiled.
+Models read_models(const std::string& source) {
+  try {
+    Models models;
+    for (const int poles : {1, 2})
+      models.cartpole[poles - 1] = load_mujoco_model(
+          source + "/tests/models/cartpole_physical_" + std::to_string(poles) + ".xml");
+    models.double_pendulum = load_mujoco_model(source + "/examples/models/double_pendulum.xml");
+    return models;
+  } catch (const Error& e) {
+    throw IoError(detail::concat("--source '", source, "': ", e.what(), "; expected the sbptt "
+                                 "source tree, with tests/models and examples/models"));
+  }
+}
+
+void cartpole_rows(Index poles, const mjModel& model, int repeats) {
   CartPoleOptions options;
   options.model = CartPoleModel::Physical;
   const CartPole<double, Eigen::Dynamic> cart(poles, options);
-  const MujocoModelPtr model = load_mujoco_model(source + "/tests/models/cartpole_physical_" +
-                                                 std::to_string(poles) + ".xml");
-  const MujocoSimulator<double> mj(*model);
+  const MujocoSimulator<double> mj(model);
   Rng rng(1);
   const Matrix<double> starts = cartpole_initial_states(cart, rng, 64);
   std::vector<Vector<double>> cart_states, mj_states;
@@ -114,7 +133,7 @@ void cartpole_rows(Index poles, const std::string& source, int repeats) {
   std::printf("  max |A_FD - A| over 64 states, cart pole %s:", p.c_str());
   const Matrix<double> pi = examples::mujoco_layout_permutation(poles);
   for (const double eps : {1e-2, 1e-4, 1e-6, 1e-8, 1e-10}) {
-    const MujocoSimulator<double> probe(*model, MujocoOptions{eps});
+    const MujocoSimulator<double> probe(model, MujocoOptions{eps});
     double worst = 0;
     for (std::size_t s = 0; s < cart_states.size(); ++s) {
       Matrix<double> a, a_fd, b_fd;
@@ -138,22 +157,28 @@ int main(int argc, char** argv) {
   std::string source = SBPTT_SOURCE_DIR;
   examples::CommandLine cli("bench_mujoco",
                             "per-step cost of MuJoCo (mj_step, mjd_transitionFD) against the "
-                            "analytic cart pole, and the accuracy of its finite differences");
+                            "analytic cart pole, and the accuracy of its finite differences. Exit "
+                            "codes: 0 success, 1 error, 2 bad flag.");
   cli.integer("--repeats", repeats, 1, 1000, "timed repeats per figure (the best is kept)");
   cli.path("--source", source, "the sbptt source tree (for tests/models and examples/models)",
            SBPTT_SOURCE_DIR);
   try {
-    if (!cli.parse(argc, argv)) return 0;
+    if (!cli.parse(argc, argv)) return examples::with_streams_checked("bench_mujoco", 0);
+  } catch (const InvalidArgument& e) {
+    std::fprintf(stderr, "bench_mujoco: %s\n", e.what());
+    return 2;
+  }
+  try {
+    const Models models = read_models(source);
     // MuJoCo's own code is Debian's build, whatever this program was compiled for.
     std::printf("instruction set: %s (sbptt's analytic rows; libmujoco is Debian's build)\n",
                 instruction_set());
     std::printf("%-38s %10s %12s %10s   ratios to the analytic row\n", "simulator (double)",
                 "step ns", "jacobians ns", "vjp ns");
     if (!examples::streams_written("bench_mujoco")) return 1;
-    for (const Index poles : {1, 2}) cartpole_rows(poles, source, static_cast<int>(repeats));
-    const MujocoModelPtr pendulum =
-        load_mujoco_model(source + "/examples/models/double_pendulum.xml");
-    const MujocoSimulator<double> sim(*pendulum);
+    for (const Index poles : {1, 2})
+      cartpole_rows(poles, *models.cartpole[poles - 1], static_cast<int>(repeats));
+    const MujocoSimulator<double> sim(*models.double_pendulum);
     std::vector<Vector<double>> states;
     Rng rng(2);
     for (int s = 0; s < 64; ++s) {
@@ -164,7 +189,7 @@ int main(int argc, char** argv) {
     print_row("double pendulum, MuJoCo", measure(sim, states, static_cast<int>(repeats)), nullptr);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_mujoco: %s\n", e.what());
-    return 2;
+    return 1;
   }
   return examples::with_streams_checked("bench_mujoco", 0);
 }

@@ -282,6 +282,21 @@ TEST_CASE("bench and accuracy check --csv before measuring and name the user's p
   }
 }
 
+TEST_CASE("bench_mujoco checks --source before measuring: exit 1, naming the flag", "[programs]") {
+  // Found by a fault probe: the table's header came first, then exit 2 (a bad flag's code) with
+  // load_mujoco_model's message, which did not name --source.
+  const fs::path empty = scratch("source_without_models");
+  fs::create_directories(empty);
+  for (const std::string& source : {std::string("/nonexistent/sbptt"), empty.string()}) {
+    const Result r = run("bench_mujoco", "--repeats 1 --source " + source);
+    INFO(r.output);
+    CHECK(r.status == 1);
+    CHECK(r.output.starts_with("bench_mujoco: --source '" + source + "': "));
+    CHECK(r.output.find("expected the sbptt source tree") != std::string::npos);
+    CHECK(r.output.find("step ns") == std::string::npos);  // nothing was printed before
+  }
+}
+
 TEST_CASE("every program that prints timings states the instruction set it was built for",
           "[programs]") {
   // The programs are built with this test's flags, so its own instruction_set() is theirs

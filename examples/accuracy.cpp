@@ -440,7 +440,7 @@ int main(int argc, char** argv) {
     cli.path("--csv", csv, "also write every point as CSV here (plot: tools/plot_accuracy.py)");
     cli.flag("--integrators-only", "run only the cart pole's integrator axis",
              [&integrators_only] { integrators_only = true; });
-    if (!cli.parse(argc, argv)) return 0;
+    if (!cli.parse(argc, argv)) return sbptt::examples::with_streams_checked("accuracy", 0);
   } catch (const sbptt::InvalidArgument& e) {
     std::fprintf(stderr, "accuracy: %s\n", e.what());
     return 2;

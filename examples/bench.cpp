@@ -170,7 +170,7 @@ bool wanted(const Settings& s, const std::string& task) {
 int main(int argc, char** argv) {
   Settings settings;
   try {
-    if (!parse(argc, argv, settings)) return 0;
+    if (!parse(argc, argv, settings)) return sbptt::examples::with_streams_checked("bench", 0);
   } catch (const sbptt::InvalidArgument& e) {
     std::fprintf(stderr, "bench: %s\n", e.what());
     return 2;

@@ -8,16 +8,29 @@
 
 #include "point_mass.hpp"
 
+namespace {
+
+/// `code`, or 1 in place of 0 if stdout could not take what was printed: the losses (or the
+/// usage) are the program's result.
+int with_stdout_checked(int code) {
+  if (code != 0 || (std::fflush(stdout) == 0 && std::ferror(stdout) == 0)) return code;
+  std::fprintf(stderr, "custom_simulator: standard output was not written in full\n");
+  return 1;
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   std::signal(SIGXFSZ, SIG_IGN);  // past `ulimit -f` a write then fails instead of killing
   if (argc == 2 && std::strcmp(argv[1], "--help") == 0) {
     std::printf("usage: custom_simulator\ntrains the point mass of docs/api.md with the combined "
                 "update, printing its loss every 200 iterations up to 1000; no options\n");
-    return 0;
+    return with_stdout_checked(0);
   }
   if (argc > 1) {
-    std::fprintf(stderr, "custom_simulator takes no arguments (it trains the point mass of "
-                         "docs/api.md); got '%s'\n", argv[1]);
+    const char* unexpected = std::strcmp(argv[1], "--help") == 0 ? argv[2] : argv[1];
+    std::fprintf(stderr, "custom_simulator takes no arguments but --help alone (it trains the "
+                         "point mass of docs/api.md); got '%s'\n", unexpected);
     return 2;
   }
   using Loss = sbptt::SquaredDistanceLoss<PointMass::State>;
@@ -37,8 +50,5 @@ int main(int argc, char** argv) {
                   pair.loss, pair.comparison.cos_modified_regular, pair.comparison.agree_fraction);
     update.step(network.params(), pair.modified, pair.regular);
   }
-  // The printed losses are the result: a stdout that could not take them must not end with 0.
-  if (std::fflush(stdout) == 0 && std::ferror(stdout) == 0) return 0;
-  std::fprintf(stderr, "custom_simulator: standard output was not written in full\n");
-  return 1;
+  return with_stdout_checked(0);
 }

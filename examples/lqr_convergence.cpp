@@ -197,11 +197,12 @@ int main(int argc, char** argv) {
   if (argc == 2 && std::string_view(argv[1]) == "--help") {
     std::printf("usage: lqr_convergence\ncompares R, M and C with the Riccati optimum of a linear "
                 "scene (docs/results.md); no options, about a minute\n");
-    return 0;
+    return sbptt::examples::with_streams_checked("lqr_convergence", 0);
   }
   if (argc > 1) {
-    std::fprintf(stderr, "lqr_convergence: unexpected argument '%s'; the study takes no options\n",
-                 argv[1]);
+    const char* unexpected = std::string_view(argv[1]) == "--help" ? argv[2] : argv[1];
+    std::fprintf(stderr, "lqr_convergence: unexpected argument '%s'; the study takes no options "
+                         "but --help alone\n", unexpected);
     return 2;
   }
   try {

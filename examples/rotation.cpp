@@ -124,7 +124,8 @@ std::string csv_text(const Runs& runs) {
 int main(int argc, char** argv) {
   Settings s;
   try {
-    if (!parse_arguments(argc, argv, s)) return 0;
+    if (!parse_arguments(argc, argv, s))
+      return sbptt::examples::with_streams_checked("rotation", 0);
   } catch (const sbptt::InvalidArgument& e) {
     std::cerr << "rotation: " << e.what() << "\n";
     return 2;

@@ -1,7 +1,8 @@
 // A user's own scene (the point mass of point_mass.hpp) trained with the library's driver:
 // combined update, a test set, a CSV log, the best parameters kept, early stop, checkpoints.
-// Rerun it after a kill and it resumes from the checkpoint, and says so. A template to copy:
-// it and point_mass.hpp need only the installed headers.
+// SIGINT or SIGTERM stops it after the current epoch with its work saved (exit 128 + the
+// signal). Rerun it after a stop or a kill and it resumes from the checkpoint, and says so. A
+// template to copy: it and point_mass.hpp need only the installed headers.
 //   train_own_scene [DIRECTORY]      (writes log.csv, run.checkpoint, best.params there;
 //                                     in the working directory without one)
 #include <csignal>
@@ -17,6 +18,14 @@ namespace {
 constexpr const char* kUsage = "usage: train_own_scene [DIRECTORY]  (an existing directory; "
                                "log.csv, run.checkpoint and best.params go there)";
 
+/// `code`, or 1 in place of 0 if stdout could not take what was printed (a full disk): the
+/// losses (or the usage) are part of the result.
+int with_stdout_checked(int code) {
+  if (code != 0 || (std::fflush(stdout) == 0 && std::ferror(stdout) == 0)) return code;
+  std::fprintf(stderr, "train_own_scene: standard output was not written in full\n");
+  return 1;
+}
+
 /// The run of the file comment with its files in `dir`; returns the exit code.
 int run_in(const std::filesystem::path& dir) {
   using Loss = sbptt::SquaredDistanceLoss<PointMass::State>;
@@ -31,6 +40,7 @@ int run_in(const std::filesystem::path& dir) {
   sbptt::Trainer trainer(sim, network, sbptt::Objective<Loss>{Loss{PointMass::State::Zero()}}, 30,
                          sbptt::Adam<double>({.learning_rate = 3e-3}),
                          {.method = sbptt::Method::Combined, .batch = 16, .shuffle = true});
+  const sbptt::StopSignals stop("train_own_scene");
   const auto result = sbptt::run_training(
       trainer, train, test,
       {.epochs = 200, .evaluate_every = 5, .patience = 10, .restore_best = true,
@@ -42,18 +52,26 @@ int run_in(const std::filesystem::path& dir) {
        .on_epoch = [](const sbptt::EpochRecord& r) {
          if (r.test_loss && r.epoch % 50 == 0)
            std::printf("epoch %3ld  test loss %.3e\n", r.epoch, *r.test_loss);
-       }});
+       },
+       .should_stop = [&](const sbptt::EpochRecord&) { return stop.requested(); }});
+  const std::string saved =
+      result.saved_params.empty()
+          ? std::string()
+          : "; the best parameters so far were saved to '" + result.saved_params + "'";
   switch (result.end) {
     case sbptt::RunEnd::NonFinite:
       std::fprintf(stderr, "train_own_scene: stopped: %s\n",
                    sbptt::describe(*result.stop_event).c_str());
       return 3;
     case sbptt::RunEnd::OutputFailed:
-      std::fprintf(stderr, "train_own_scene: %s\n", result.output_error.c_str());
+      std::fprintf(stderr, "train_own_scene: %s%s\n", result.output_error.c_str(), saved.c_str());
       return 1;
+    case sbptt::RunEnd::Requested:
+      std::fprintf(stderr, "train_own_scene: stopped by %s after epoch %ld; run it again to "
+                   "resume%s\n", sbptt::signal_name(stop.signal()), result.epochs, saved.c_str());
+      return 128 + stop.signal();
     case sbptt::RunEnd::Finished:
     case sbptt::RunEnd::EarlyStop:
-    case sbptt::RunEnd::Requested:
       std::printf("best test loss %.3e in epoch %ld of %ld\n", result.best_loss,
                   result.best_epoch, result.epochs);
       return 0;
@@ -72,7 +90,7 @@ int main(int argc, char** argv) {
   const std::string argument = argc > 1 ? argv[1] : ".";
   if (argument == "--help") {
     std::printf("%s\n", kUsage);
-    return 0;
+    return with_stdout_checked(0);
   }
   if (argc > 2) {
     std::fprintf(stderr, "train_own_scene: %d arguments, expected at most one DIRECTORY (%s)\n",
@@ -90,14 +108,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
-    const int code = run_in(argument);
-    // The printed losses are part of the result: a stdout that could not take them (a full
-    // disk) must not end with 0.
-    if (code == 0 && (std::fflush(stdout) != 0 || std::ferror(stdout) != 0)) {
-      std::fprintf(stderr, "train_own_scene: standard output was not written in full\n");
-      return 1;
-    }
-    return code;
+    return with_stdout_checked(run_in(argument));
   } catch (const std::exception& e) {  // the library's errors name the file and what was wrong
     std::fprintf(stderr, "train_own_scene: %s\n", e.what());
     return 1;

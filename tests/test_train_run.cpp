@@ -51,6 +51,15 @@ RunSettings fresh_checkpoint_run(const std::string& name, long epochs) {
   return settings;
 }
 
+/// Settings of a run of `epochs` epochs with its checkpoint and log at these paths.
+RunSettings logged_checkpoint_run(const fs::path& checkpoint, const fs::path& log, long epochs) {
+  RunSettings settings;
+  settings.epochs = epochs;
+  settings.checkpoint = checkpoint.string();
+  settings.log_csv = log.string();
+  return settings;
+}
+
 }  // namespace
 
 TEST_CASE("run: the log holds exactly the returned rows, evaluated on schedule", "[train]") {
@@ -363,10 +372,7 @@ TEST_CASE("run: a checkpoint or log changed by hand is refused before any work, 
   // log mid-row or repeated epochs, and an impossible Adam state was refused without the file.
   const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
   const fs::path checkpoint = scratch("edited.checkpoint"), log = scratch("edited.csv");
-  RunSettings settings;
-  settings.epochs = 4;
-  settings.checkpoint = checkpoint.string();
-  settings.log_csv = log.string();
+  const RunSettings settings = logged_checkpoint_run(checkpoint, log, 4);
   const auto fresh = [&] {
     fs::remove(checkpoint);
     fs::remove(log);
@@ -450,6 +456,42 @@ TEST_CASE("run: a checkpoint or log changed by hand is refused before any work, 
   CHECK_THROWS_WITH(run_training(again.trainer, train, test, settings),
                     Catch::Contains("edited.checkpoint") &&
                         Catch::Contains("adam_v has a negative entry"));
+}
+
+TEST_CASE("run: a checkpoint resumed without its log names the log's setting and says what it "
+          "needs, before any work", "[train]") {
+  // Found by a fault probe: "cannot open training log '…': No such file or directory" alone
+  // named neither the setting (a program's --csv) nor that a checkpoint continues the log it
+  // was written beside. Two ways to get there: the log deleted, another log path given.
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  const fs::path checkpoint = scratch("own_log.checkpoint"), log = scratch("own_log.csv");
+  RunSettings settings = logged_checkpoint_run(checkpoint, log, 2);
+  settings.setting_names = {{"log_csv", "--csv"}};
+  for (const bool deleted : {true, false}) {
+    fs::remove(checkpoint);
+    fs::remove(log);
+    Setup<double> first(Method::Regular);
+    REQUIRE(run_training(first.trainer, train, test, settings).end == RunEnd::Finished);
+    RunSettings longer = settings;
+    longer.epochs = 4;
+    if (deleted) fs::remove(log);
+    else longer.log_csv = scratch("other_log.csv").string();
+    INFO((deleted ? "log deleted" : "another log path"));
+    Setup<double> again(Method::Regular);
+    bool started = false;
+    RunCallbacks callbacks;
+    callbacks.on_resume = [&](long) { started = true; };
+    callbacks.on_start = [&](long) { started = true; };
+    CHECK_THROWS_WITH(
+        run_training(again.trainer, train, test, longer, callbacks),
+        Catch::Contains("--csv '" + longer.log_csv + "'") &&
+            Catch::Contains("No such file or directory") &&
+            Catch::Contains("checkpoint '" + checkpoint.string() +
+                            "' continues the training log it was written beside (epochs 1 to 2)") &&
+            Catch::Contains("expected --csv to name that log, or no checkpoint to start over"));
+    CHECK_FALSE(started);
+    CHECK_FALSE(fs::exists(longer.log_csv));
+  }
 }
 
 TEST_CASE("run: a log that cannot be written still saves the parameters", "[train]") {

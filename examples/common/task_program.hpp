@@ -10,13 +10,9 @@
 // ones; mujoco: or --check-derivatives found an error that is not finite), 128 + the signal:
 // SIGINT or SIGTERM stopped training after the epoch it came in (its log row, checkpoint and
 // parameters written; a second one ends the program at once; one the program was started
-// ignoring stays ignored: stop_signals.hpp).
-#include <unistd.h>
-
+// ignoring stays ignored: sbptt/train/stop_signals.hpp).
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
-#include <csignal>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
@@ -32,46 +28,9 @@
 
 #include "memory_budget.hpp"
 #include "standard_streams.hpp"
-#include "stop_signals.hpp"
 #include "task_options.hpp"
 
 namespace sbptt::examples {
-
-namespace detail_task {
-
-/// The signal (SIGINT, SIGTERM) that asked training to stop after its current epoch, or 0.
-inline volatile std::sig_atomic_t stop_signal = 0;
-
-/// What the program says the moment SIGINT (0) or SIGTERM (1) comes: an epoch of a large
-/// scene may take minutes, and silence would read as a signal lost. Written before the
-/// handler is installed, since the handler may only write(2) it.
-inline char stop_notice[2][256];
-inline std::size_t stop_notice_size[2];
-
-inline void prepare_stop_notices(const char* name) {
-  for (const int k : {0, 1}) {
-    const char* signal = k == 0 ? "SIGINT" : "SIGTERM";
-    const int size = std::snprintf(stop_notice[k], sizeof stop_notice[k],
-                                   "%s: %s: stopping after the current epoch, which keeps its "
-                                   "work; a second %s stops at once\n",
-                                   name, signal, signal);
-    stop_notice_size[k] =
-        size < 0 ? 0 : std::min(static_cast<std::size_t>(size), sizeof stop_notice[k] - 1);
-  }
-}
-
-/// Notes the signal, says so, and gives it back its default action, so that a second one ends
-/// the program at once.
-extern "C" inline void request_stop(int signal) {
-  stop_signal = signal;
-  std::signal(signal, SIG_DFL);
-  const int k = signal == SIGINT ? 0 : 1;
-  const int saved_errno = errno;  // of the code the signal interrupted
-  [[maybe_unused]] const auto written = ::write(2, stop_notice[k], stop_notice_size[k]);
-  errno = saved_errno;
-}
-
-}  // namespace detail_task
 
 /// "100 steps of dt 0.01, T 1" for the header line (the toy is a map: steps only).
 inline std::string describe(Task task, const Horizon& time) {
@@ -265,12 +224,13 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                        {"evaluate_every", "--evaluate-every"},
                        {"patience", "--patience"},
                        {"learning_rate", "--lr"},
-                       {"epochs", "--epochs"}};
+                       {"epochs", "--epochs"},
+                       {"log_csv", "--csv"}};
   // Skipped batches are listed up to this many, then counted, so that a diverging run does
   // not flood stderr.
   constexpr long shown_skips = 5;
   long skips = 0;
-  const std::vector<int> stop_signals = not_ignored({SIGINT, SIGTERM});
+  std::optional<StopSignals> stop_signals;
   RunCallbacks callbacks;
   callbacks.on_resume = [&](long epoch) {
     std::fprintf(stderr, "%s: resuming after epoch %ld from checkpoint '%s'\n", name, epoch,
@@ -293,8 +253,7 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                    name, epoch == 0 ? "initial" : "resumed",
                    std::string(to_string(where->quantity)).c_str(),
                    detail::concat(where->value).c_str(), describe_where(*where).c_str());
-    detail_task::prepare_stop_notices(name);
-    for (const int signal : stop_signals) std::signal(signal, detail_task::request_stop);
+    stop_signals.emplace(name);
   };
   callbacks.on_non_finite = [&](const NonFiniteEvent& event, bool skipped) {
     if (skipped && ++skips > shown_skips) return;
@@ -312,9 +271,10 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                    r.epoch, r.batch_loss, loss(r.train_loss).c_str(), loss(r.test_loss).c_str(),
                    r.seconds);
   };
-  callbacks.should_stop = [](const EpochRecord&) { return detail_task::stop_signal != 0; };
+  callbacks.should_stop = [&](const EpochRecord&) { return stop_signals->requested(); };
   const RunResult<Scalar> result = run_training(trainer, data.train, data.test, run, callbacks);
-  for (const int signal : stop_signals) std::signal(signal, SIG_DFL);
+  const int signal = stop_signals ? stop_signals->signal() : 0;
+  stop_signals.reset();
   if (skips > shown_skips)
     std::fprintf(stderr, "%s: %ld skipped batches in all (%ld not listed)\n", name, skips,
                  skips - shown_skips);
@@ -352,15 +312,13 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                    name, o.patience, result.epochs, result.best_loss, result.best_epoch);
       break;
     case RunEnd::Requested: {
-      const int signal = detail_task::stop_signal;
       const std::string resume =
           o.checkpoint.empty()
               ? std::string("without --checkpoint a rerun starts from epoch 1")
               : detail::concat("checkpoint '", o.checkpoint,
                                "' holds it: run the same command again to resume");
       std::fprintf(stderr, "%s: stopped by %s after epoch %ld; %s%s\n", name,
-                   signal == SIGINT ? "SIGINT" : "SIGTERM", result.epochs, resume.c_str(),
-                   saved.c_str());
+                   signal_name(signal), result.epochs, resume.c_str(), saved.c_str());
       return 128 + signal;
     }
     case RunEnd::Finished: break;

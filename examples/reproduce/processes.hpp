@@ -23,8 +23,8 @@
 #include <vector>
 
 #include <sbptt/core/atomic_file.hpp>
+#include <sbptt/train/stop_signals.hpp>
 
-#include "stop_signals.hpp"
 #include "text.hpp"
 
 namespace reproduce {
@@ -33,12 +33,12 @@ inline volatile std::sig_atomic_t interrupted = 0;
 extern "C" void on_signal(int signal_number) { interrupted = signal_number; }
 
 /// SIGINT, SIGTERM and SIGHUP stop the sweep, but one the runner was started ignoring
-/// (stop_signals.hpp): `nohup reproduce ... &` must outlive a hangup.
+/// (sbptt/train/stop_signals.hpp): `nohup reproduce ... &` must outlive a hangup.
 inline void install_signal_handlers() {
   struct sigaction action {};
   action.sa_handler = on_signal;
   sigemptyset(&action.sa_mask);
-  for (int s : sbptt::examples::not_ignored({SIGINT, SIGTERM, SIGHUP}))
+  for (int s : sbptt::signals_not_ignored({SIGINT, SIGTERM, SIGHUP}))
     sigaction(s, &action, nullptr);
 }
 

@@ -53,4 +53,5 @@
 #include "sbptt/train/states_io.hpp"
 #include "sbptt/train/trainer.hpp"
 #include "sbptt/train/trainer_state.hpp"
+#include "sbptt/train/stop_signals.hpp"
 #include "sbptt/train/training_log.hpp"

@@ -162,6 +162,19 @@ TEST_CASE("a file beyond a file-size limit is an error naming it, not a silent d
   }
 }
 
+TEST_CASE("train_own_scene: a checkpoint that cannot be written is named, and so are the "
+          "parameters it saved", "[programs]") {
+  // 100 blocks of 512 bytes (dash's unit; bash's is 1024) hold best.params (about 25 kB) but
+  // not the checkpoint, which holds Adam's moments too. The message named only the checkpoint.
+  const fs::path dir = fresh_directory("own_scene_checkpoint_limit");
+  const Outcome r = launch("train_own_scene", dir.string(), "ulimit -f 100; ");
+  INFO(r.output);
+  CHECK(r.status == 1);
+  CHECK(contains(r.output, (dir / "run.checkpoint").string() + "' failed: File too large"));
+  CHECK(contains(r.output, "were saved to '" + (dir / "best.params").string() + "'"));
+  CHECK(fs::exists(dir / "best.params"));
+}
+
 TEST_CASE("output cut short by a file-size limit ends with exit 1, not 0", "[programs]") {
   // The progress lines of 2000 epochs (about 12 KiB) into a file limited to 4 KiB (8 blocks
   // of dash's 512 bytes, or of bash's 1024), as `reproduce` keeps a run's log
@@ -197,6 +210,20 @@ TEST_CASE("stdout that cannot be written: exit 1, and stderr gives the reason", 
                                       ? " was not written in full"
                                       : " or standard error was not written in full: No space "
                                         "left on device")));
+  }
+}
+
+TEST_CASE("a usage (--help) that stdout cannot take: exit 1, not 0", "[programs]") {
+  // The usage is the whole output of --help: a script that reads it must learn that it is
+  // missing, as with every other output.
+  for (const std::string program :
+       {"toy", "cartpole", "guidance", "quantum", "mujoco", "rotation", "accuracy",
+        "lqr_convergence", "bench", "bench_mujoco", "custom_simulator", "train_own_scene",
+        "reproduce"}) {
+    const auto r = sbptt::testing::run(program, "--help", "", "2>&1 >/dev/full");
+    INFO(program << "\n" << r.output);
+    CHECK(r.status == 1);
+    CHECK(contains(r.output, program + ": standard output"));
   }
 }
 
@@ -399,20 +426,63 @@ TEST_CASE("a run started with SIGINT ignored, as a shell starts a background job
   CHECK(without_seconds(file_text(log_path)) == without_seconds(log));
 }
 
+/// The epoch that the checkpoint at `path` was written after, as the file states it.
+std::string checkpoint_epoch(const fs::path& path) {
+  const std::string checkpoint = file_text(path);
+  const std::size_t epoch_line = checkpoint.find("\nepoch ");
+  REQUIRE(epoch_line != std::string::npos);
+  const std::size_t start = epoch_line + 7;
+  return checkpoint.substr(start, checkpoint.find('\n', start) - start);
+}
+
 TEST_CASE("train_own_scene rerun in its directory says that it resumed, and from which epoch",
           "[programs]") {
   const fs::path dir = fresh_directory("own_scene_resume");
   const Outcome first = launch("train_own_scene", dir.string());
   REQUIRE(first.status == 0);
   CHECK_FALSE(contains(first.output, "resumed"));
-  const std::string checkpoint = file_text(dir / "run.checkpoint");
-  const std::size_t epoch_line = checkpoint.find("\nepoch ") + 7;
-  const std::string epoch =
-      checkpoint.substr(epoch_line, checkpoint.find('\n', epoch_line) - epoch_line);
+  const std::string epoch = checkpoint_epoch(dir / "run.checkpoint");
   const Outcome again = launch("train_own_scene", dir.string());
   INFO(again.output);
   CHECK(again.status == 0);
   CHECK(contains(again.output, "resumed from the checkpoint of epoch " + epoch + "\n"));
+}
+
+TEST_CASE("train_own_scene stopped by SIGINT or SIGTERM keeps its work and says so; the rerun "
+          "ends bit for bit as one uninterrupted run", "[programs]") {
+  // Found by a fault probe: it died by the signal's default action, best.params unwritten and
+  // the log possibly an epoch ahead of the checkpoint.
+  const fs::path whole = fresh_directory("own_scene_whole");
+  REQUIRE(launch("train_own_scene", whole.string()).status == 0);
+  const std::string params = file_text(whole / "best.params");
+  const std::string log = file_text(whole / "log.csv");
+  for (const int signal : {SIGINT, SIGTERM}) {
+    const std::string name = signal == SIGINT ? "SIGINT" : "SIGTERM";
+    const fs::path dir = fresh_directory("own_scene_" + name);
+    const auto rows = [&] {
+      const std::string text = file_text(dir / "log.csv");
+      return text.empty() ? 0L : static_cast<long>(std::count(text.begin(), text.end(), '\n')) - 1;
+    };
+    const Outcome stopped =
+        launch("train_own_scene", dir.string(), "", [&] { return rows() >= 3; }, "", signal);
+    INFO(name << "\n" << stopped.output);
+    REQUIRE(stopped.status == 128 + signal);
+    const long done = rows();
+    CHECK(done >= 3);
+    CHECK(checkpoint_epoch(dir / "run.checkpoint") == std::to_string(done));
+    CHECK(contains(stopped.output, "train_own_scene: " + name + ": stopping after the current "
+                                   "epoch, which keeps its work; a second " + name +
+                                   " stops at once"));
+    CHECK(contains(stopped.output, "stopped by " + name + " after epoch " +
+                                       std::to_string(done) + "; run it again to resume"));
+    CHECK(fs::exists(dir / "best.params"));
+    const Outcome rerun = launch("train_own_scene", dir.string());
+    INFO(rerun.output);
+    REQUIRE(rerun.status == 0);
+    CHECK(contains(rerun.output, "resumed from the checkpoint of epoch " + std::to_string(done)));
+    CHECK(file_text(dir / "best.params") == params);
+    CHECK(without_seconds(file_text(dir / "log.csv")) == without_seconds(log));
+  }
 }
 
 TEST_CASE("a checkpoint of other settings is refused, naming the setting", "[programs]") {
@@ -428,6 +498,25 @@ TEST_CASE("a checkpoint of other settings is refused, naming the setting", "[pro
   INFO(seed.output);
   CHECK(seed.status == 2);
   CHECK(contains(seed.output, "; this run has --seed = 7"));
+}
+
+TEST_CASE("a checkpoint resumed with another --csv, or with its log deleted, names --csv and "
+          "says what it needs", "[programs]") {
+  const fs::path dir = fresh_directory("other_log");
+  const std::string checkpoint = "--checkpoint " + (dir / "c").string();
+  const fs::path log = dir / "log.csv";
+  for (const bool deleted : {true, false}) {
+    fs::remove(dir / "c");
+    REQUIRE(launch("toy", "--epochs 2 --csv " + log.string() + " " + checkpoint).status == 0);
+    if (deleted) fs::remove(log);
+    const fs::path given = deleted ? log : dir / "other.csv";
+    const Outcome r = launch("toy", "--epochs 4 --csv " + given.string() + " " + checkpoint);
+    INFO(r.output);
+    CHECK(r.status == 1);
+    CHECK(contains(r.output, "--csv '" + given.string() + "': "));
+    CHECK(contains(r.output, "expected --csv to name that log, or no checkpoint to start over"));
+    CHECK_FALSE(contains(r.output, "epoch 1"));
+  }
 }
 
 TEST_CASE("every finished file is synced, renamed, and its directory synced", "[programs]") {

@@ -201,8 +201,20 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
     result.best_params = resumed->best_params;
     result.skipped_batches = resumed->skipped_batches;
     since_best = resumed->since_best;
-    if (!settings.log_csv.empty())
-      log = TrainingLogFile::resume(settings.log_csv, resumed->log_bytes, resumed->epoch);
+    if (!settings.log_csv.empty()) {
+      // A log deleted, or another log path given: the reason alone would not say that the
+      // checkpoint needs the log it was written beside.
+      try {
+        log = TrainingLogFile::resume(settings.log_csv, resumed->log_bytes, resumed->epoch);
+      } catch (const IoError& e) {
+        const std::string log_csv = caller_name(settings.setting_names, "log_csv");
+        throw IoError(detail::concat(
+            log_csv, " '", settings.log_csv, "': ", e.what(), "; checkpoint '",
+            settings.checkpoint, "' continues the training log it was written beside (epochs 1 to ",
+            resumed->epoch, "); expected ", log_csv, " to name that log, or no checkpoint to "
+            "start over"));
+      }
+    }
     if (callbacks.on_resume) callbacks.on_resume(resumed->epoch);
   } else if (!settings.log_csv.empty()) {
     log = TrainingLogFile::create(settings.log_csv);

@@ -35,9 +35,10 @@
 /// Failures: a step MuJoCo cannot take (a NaN or |value| > 1e10 in the state, control or
 /// acceleration, or a full contact/constraint buffer, after which MuJoCo silently resets its
 /// state), and a step whose result holds such a value (the last step of a rollout too, though
-/// MuJoCo would refuse it only when stepping from it), yields NaN in every output instead, as a diverging analytic simulator would, so the
-/// engine's non-finite report names the step. The adapter keeps MuJoCo from printing these
-/// warnings or writing MUJOCO_LOG.TXT (see `arm_mujoco_warnings`).
+/// MuJoCo would refuse it only when stepping from it), yields NaN in every output instead, as
+/// a diverging analytic simulator would, so the engine's non-finite report names the step. The
+/// adapter keeps MuJoCo from printing these warnings or writing MUJOCO_LOG.TXT (see
+/// `arm_mujoco_warnings`).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -246,8 +247,7 @@ public:
       return;
     }
     mj_step(model_.get(), &d);
-    // MuJoCo checks a state when it is stepped from, so a result it would refuse as the next
-    // step's state is refused here: as the last step of a rollout it would be stepped from never.
+    // MuJoCo checks a state only when it steps from it; the last state of a rollout never is.
     const auto refused = [](const mjtNum* values, Index count) {
       return std::any_of(values, values + count, [](mjtNum v) { return mju_isBad(v) != 0; });
     };

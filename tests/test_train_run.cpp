@@ -462,35 +462,57 @@ TEST_CASE("run: a checkpoint resumed without its log names the log's setting and
           "needs, before any work", "[train]") {
   // Found by a fault probe: "cannot open training log '…': No such file or directory" alone
   // named neither the setting (a program's --csv) nor that a checkpoint continues the log it
-  // was written beside. Two ways to get there: the log deleted, another log path given.
+  // was written beside. Three ways to get there: the log deleted, another log path given, the
+  // log of another run given. The trainer must stay as it was (a caller may start over with
+  // it), and the log given must stay whole.
   const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
   const fs::path checkpoint = scratch("own_log.checkpoint"), log = scratch("own_log.csv");
   RunSettings settings = logged_checkpoint_run(checkpoint, log, 2);
   settings.setting_names = {{"log_csv", "--csv"}};
-  for (const bool deleted : {true, false}) {
+  const fs::path short_log = scratch("short_log.csv");
+  fs::remove(short_log);
+  RunSettings one_epoch = settings;
+  one_epoch.checkpoint.clear();
+  one_epoch.log_csv = short_log.string();
+  one_epoch.epochs = 1;
+  Setup<double> short_run(Method::Regular);
+  REQUIRE(run_training(short_run.trainer, train, test, one_epoch).end == RunEnd::Finished);
+  const std::string short_text = file_text(short_log);
+  enum class Given { Deleted, Missing, Other };
+  for (const Given given : {Given::Deleted, Given::Missing, Given::Other}) {
     fs::remove(checkpoint);
     fs::remove(log);
     Setup<double> first(Method::Regular);
     REQUIRE(run_training(first.trainer, train, test, settings).end == RunEnd::Finished);
     RunSettings longer = settings;
     longer.epochs = 4;
-    if (deleted) fs::remove(log);
-    else longer.log_csv = scratch("other_log.csv").string();
-    INFO((deleted ? "log deleted" : "another log path"));
+    if (given == Given::Deleted) fs::remove(log);
+    if (given == Given::Missing) longer.log_csv = scratch("missing_log.csv").string();
+    if (given == Given::Other) longer.log_csv = short_log.string();
+    INFO("log " << static_cast<int>(given) << ": " << longer.log_csv);
     Setup<double> again(Method::Regular);
+    const Setup<double> fresh(Method::Regular);
     bool started = false;
     RunCallbacks callbacks;
     callbacks.on_resume = [&](long) { started = true; };
     callbacks.on_start = [&](long) { started = true; };
-    CHECK_THROWS_WITH(
-        run_training(again.trainer, train, test, longer, callbacks),
-        Catch::Contains("--csv '" + longer.log_csv + "'") &&
-            Catch::Contains("No such file or directory") &&
-            Catch::Contains("checkpoint '" + checkpoint.string() +
-                            "' continues the training log it was written beside (epochs 1 to 2)") &&
-            Catch::Contains("expected --csv to name that log, or no checkpoint to start over"));
+    const std::string named = "--csv '" + longer.log_csv + "': ";
+    if (given == Given::Other) {
+      CHECK_THROWS_WITH(run_training(again.trainer, train, test, longer, callbacks),
+                        Catch::Contains(named) &&
+                            Catch::Contains("the checkpoint expects at least"));
+      CHECK(file_text(short_log) == short_text);
+    } else {
+      CHECK_THROWS_WITH(
+          run_training(again.trainer, train, test, longer, callbacks),
+          Catch::Contains(named + "No such file or directory; checkpoint '" + checkpoint.string() +
+                          "' continues the training log it was written beside (epochs 1 to 2); "
+                          "expected --csv to name that log, or no checkpoint to start over"));
+      CHECK_FALSE(fs::exists(longer.log_csv));
+    }
     CHECK_FALSE(started);
-    CHECK_FALSE(fs::exists(longer.log_csv));
+    CHECK(again.trainer.epoch() == 0);
+    CHECK(again.policy.params() == fresh.policy.params());
   }
 }
 

@@ -2,8 +2,12 @@
 // actually raised; the task programs and train_own_scene test it end to end (a stopped run's
 // rerun ends bit for bit as one uninterrupted run, tests/programs/test_program_outputs.cpp).
 #include <catch2/catch.hpp>
+#include <fcntl.h>
 #include <signal.h>
+#include <sys/wait.h>
 #include <unistd.h>
+#include <csignal>
+#include <utility>
 #include "sbptt/train/stop_signals.hpp"
 
 namespace {
@@ -35,7 +39,8 @@ TEST_CASE("stop signals: the first signal is noted and gets its default action b
           "[train]") {
   for (const int signal : {SIGINT, SIGTERM}) {
     INFO(sbptt::signal_name(signal));
-    REQUIRE(std::signal(signal, SIG_DFL) != SIG_ERR);
+    REQUIRE(std::signal(SIGINT, SIG_DFL) != SIG_ERR);  // not Catch's own handlers
+    REQUIRE(std::signal(SIGTERM, SIG_DFL) != SIG_ERR);
     {
       const sbptt::StopSignals stop("test");
       CHECK_FALSE(stop.requested());
@@ -43,11 +48,53 @@ TEST_CASE("stop signals: the first signal is noted and gets its default action b
       quietly([&] { REQUIRE(::raise(signal) == 0); });
       CHECK(stop.requested());
       CHECK(stop.signal() == signal);
-      CHECK(disposition(signal) == SIG_DFL);  // a second one would end the process
+      // A second one, of either kind, would end the process.
+      CHECK(disposition(SIGINT) == SIG_DFL);
+      CHECK(disposition(SIGTERM) == SIG_DFL);
     }
     CHECK(disposition(SIGINT) == SIG_DFL);
     CHECK(disposition(SIGTERM) == SIG_DFL);
   }
+}
+
+TEST_CASE("stop signals: a second signal of the other kind ends the process at once",
+          "[train]") {
+  // Ctrl-C, then a SIGTERM from a timeout or a scheduler: found by a review, the SIGTERM was
+  // caught again and replaced the SIGINT. In a child, which the second signal must kill.
+  for (const auto& [first, second] : {std::pair{SIGINT, SIGTERM}, std::pair{SIGTERM, SIGINT}}) {
+    INFO(sbptt::signal_name(first) << " then " << sbptt::signal_name(second));
+    const pid_t child = ::fork();
+    REQUIRE(child >= 0);
+    if (child == 0) {
+      const int null = ::open("/dev/null", O_WRONLY);
+      ::dup2(null, 2);
+      std::signal(SIGINT, SIG_DFL);
+      std::signal(SIGTERM, SIG_DFL);
+      const sbptt::StopSignals stop("child");
+      ::raise(first);
+      ::raise(second);
+      ::_exit(stop.signal() == first ? 100 : 101);  // alive: the second was caught
+    }
+    int status = 0;
+    REQUIRE(::waitpid(child, &status, 0) == child);
+    CHECK(WIFSIGNALED(status));
+    CHECK((WIFSIGNALED(status) ? WTERMSIG(status) : -WEXITSTATUS(status)) == second);
+  }
+}
+
+extern "C" void count_signal(int /*signal*/) {}
+
+TEST_CASE("stop signals: the end gives back the handlers there were before", "[train]") {
+  // A host program's own handler (an interpreter's, a test framework's) must survive a run.
+  REQUIRE(std::signal(SIGINT, count_signal) != SIG_ERR);
+  REQUIRE(std::signal(SIGTERM, SIG_DFL) != SIG_ERR);
+  {
+    const sbptt::StopSignals stop("test");
+    CHECK(disposition(SIGINT) != count_signal);
+  }
+  CHECK(disposition(SIGINT) == count_signal);
+  CHECK(disposition(SIGTERM) == SIG_DFL);
+  REQUIRE(std::signal(SIGINT, SIG_DFL) != SIG_ERR);
 }
 
 TEST_CASE("stop signals: a signal ignored before stays ignored; one lives at a time", "[train]") {

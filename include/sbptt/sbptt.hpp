@@ -51,7 +51,7 @@
 #include "sbptt/train/run.hpp"
 #include "sbptt/train/run_settings.hpp"
 #include "sbptt/train/states_io.hpp"
+#include "sbptt/train/stop_signals.hpp"
 #include "sbptt/train/trainer.hpp"
 #include "sbptt/train/trainer_state.hpp"
-#include "sbptt/train/stop_signals.hpp"
 #include "sbptt/train/training_log.hpp"

@@ -34,11 +34,12 @@
 ///
 /// Failures: a step MuJoCo cannot take (a NaN or |value| > 1e10 in the state, control or
 /// acceleration, or a full contact/constraint buffer, after which MuJoCo silently resets its
-/// state), and a step whose result holds such a value (the last step of a rollout too, though
-/// MuJoCo would refuse it only when stepping from it), yields NaN in every output instead, as
-/// a diverging analytic simulator would, so the engine's non-finite report names the step. The
-/// adapter keeps MuJoCo from printing these warnings or writing MUJOCO_LOG.TXT (see
-/// `arm_mujoco_warnings`).
+/// state) yields NaN in every output instead, as a diverging analytic simulator would, so the
+/// engine's non-finite report names the step. So does `step` when its result holds such a
+/// value (the last step of a rollout too, though MuJoCo would refuse it only when stepping from
+/// it); the Jacobians there stay MuJoCo's differences, which no sweep asks for once the
+/// forward pass has stopped on the NaN state. The adapter keeps MuJoCo from printing these
+/// warnings or writing MUJOCO_LOG.TXT (see `arm_mujoco_warnings`).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>

@@ -30,6 +30,9 @@
 /// part of the identity: a finished run can be continued with a larger `epochs`; a smaller
 /// one than the checkpoint's is refused. A run holds its checkpoint's lock
 /// (`lock_checkpoint`) from before it reads the checkpoint to its end.
+#include <sys/stat.h>
+
+#include <cerrno>
 #include <chrono>
 #include <concepts>
 #include <exception>
@@ -63,6 +66,25 @@ concept AdamLike = requires(O o, Vector<typename O::Scalar> v) {
   o.options().learning_rate;
   o.restore(v, v, Index{});
 };
+
+/// The log that `settings.checkpoint` was written beside, checked for resuming after epoch
+/// `rows` (its first `size` bytes) and not yet cut (`TrainingLogFile::open_for_resume`).
+/// Throws `IoError` naming the log's setting by the caller's name; for a log that does not
+/// exist (deleted, or another path given) it says that the checkpoint needs its own.
+inline TrainingLogFile open_resumed_log(const RunSettings& settings, long long size, long rows) {
+  const std::string name = caller_name(settings.setting_names, "log_csv");
+  struct stat info {};
+  if (::stat(settings.log_csv.c_str(), &info) != 0 && errno == ENOENT)
+    throw IoError(concat(name, " '", settings.log_csv, "': ", os_reason(ENOENT), "; checkpoint '",
+                         settings.checkpoint, "' continues the training log it was written "
+                         "beside (epochs 1 to ", rows, "); expected ", name, " to name that log, "
+                         "or no checkpoint to start over"));
+  try {
+    return TrainingLogFile::open_for_resume(settings.log_csv, size, rows);
+  } catch (const IoError& e) {
+    throw IoError(concat(name, " '", settings.log_csv, "': ", e.what()));
+  }
+}
 
 }  // namespace detail
 
@@ -173,6 +195,8 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
     detail::require(settings.log_csv.empty() || resumed->log_bytes >= 0,
                     "checkpoint '", settings.checkpoint, "' was made without a training log; "
                     "expected one (the run would have a log without its first epochs)");
+    if (!settings.log_csv.empty())
+      log = detail::open_resumed_log(settings, resumed->log_bytes, resumed->epoch);
     if constexpr (detail::AdamLike<Optimizer>) {
       // From a fresh trainer Adam takes at most one step a batch (fewer with skipped batches,
       // or a callback that resets it): more would resume with bias corrections the run never
@@ -201,20 +225,7 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
     result.best_params = resumed->best_params;
     result.skipped_batches = resumed->skipped_batches;
     since_best = resumed->since_best;
-    if (!settings.log_csv.empty()) {
-      // A log deleted, or another log path given: the reason alone would not say that the
-      // checkpoint needs the log it was written beside.
-      try {
-        log = TrainingLogFile::resume(settings.log_csv, resumed->log_bytes, resumed->epoch);
-      } catch (const IoError& e) {
-        const std::string log_csv = caller_name(settings.setting_names, "log_csv");
-        throw IoError(detail::concat(
-            log_csv, " '", settings.log_csv, "': ", e.what(), "; checkpoint '",
-            settings.checkpoint, "' continues the training log it was written beside (epochs 1 to ",
-            resumed->epoch, "); expected ", log_csv, " to name that log, or no checkpoint to "
-            "start over"));
-      }
-    }
+    if (log) log->cut_back();
     if (callbacks.on_resume) callbacks.on_resume(resumed->epoch);
   } else if (!settings.log_csv.empty()) {
     log = TrainingLogFile::create(settings.log_csv);

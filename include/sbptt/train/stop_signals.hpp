@@ -1,11 +1,11 @@
 #pragma once
 /// \file Stopping a run cleanly on SIGINT or SIGTERM. While a `StopSignals` lives, the first of
 /// those signals is noted and announced on stderr at once (an epoch of a large scene may take
-/// minutes, and silence would read as a signal lost), and the signal gets its default action
-/// back, so that a second one ends the process at once. `requested()` as
+/// minutes, and silence would read as a signal lost), and both signals get their default action
+/// back, so that a second one, of either kind, ends the process at once. `requested()` as
 /// `RunCallbacks::should_stop` then ends the run after its current epoch (`RunEnd::Requested`)
 /// with that epoch's log row, a checkpoint and the parameters written (docs/training.md,
-/// "Stopping on a signal").
+/// "Stopping on a signal"). Its end gives back the handlers there were before.
 ///
 /// A signal the process was started ignoring stays ignored: a non-interactive shell starts a
 /// background job (`program &`) with SIGINT ignored, and that choice is its starter's (make
@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <csignal>
 #include <cstdio>
@@ -27,20 +28,28 @@ namespace sbptt {
 
 namespace detail_stop_signals {
 
-inline volatile std::sig_atomic_t caught = 0;  ///< the signal that came, or 0
-inline bool alive = false;                     ///< a StopSignals exists
+constexpr int handled[2] = {SIGINT, SIGTERM};
 
-/// The notice of SIGINT (0) and SIGTERM (1), composed before the handlers are installed:
-/// a handler may only write(2) it.
+// Atomics, not volatile: the handler may run on any of the library's threads.
+static_assert(std::atomic<int>::is_always_lock_free, "a signal handler needs lock-free atomics");
+inline std::atomic<int> caught{0};                   ///< the first signal that came, or 0
+inline std::atomic<bool> installed[2] = {false, false};  ///< per `handled`
+inline std::atomic<bool> alive{false};               ///< a StopSignals exists
+
+/// The notice of each of `handled`, composed before the handlers are installed: a handler may
+/// only write(2) it.
 inline char notice[2][256];
 inline std::size_t notice_size[2];
 
 extern "C" inline void note(int signal) {
-  caught = signal;
-  std::signal(signal, SIG_DFL);
   const int saved_errno = errno;  // of the code the signal interrupted
-  const int k = signal == SIGINT ? 0 : 1;
-  [[maybe_unused]] const auto written = ::write(2, notice[k], notice_size[k]);
+  for (int k = 0; k < 2; ++k)
+    if (installed[k]) std::signal(handled[k], SIG_DFL);
+  int none = 0;
+  if (caught.compare_exchange_strong(none, signal)) {
+    const int k = signal == SIGINT ? 0 : 1;
+    [[maybe_unused]] const auto written = ::write(2, notice[k], notice_size[k]);
+  }
   errno = saved_errno;
 }
 
@@ -69,37 +78,50 @@ class StopSignals {
   /// lives.
   explicit StopSignals(const char* program) {
     namespace s = detail_stop_signals;
-    detail::require(!s::alive, "StopSignals: another one lives; expected one at a time");
-    s::alive = true;
+    bool none = false;
+    detail::require(s::alive.compare_exchange_strong(none, true),
+                    "StopSignals: another one lives; expected one at a time");
     s::caught = 0;
-    for (const int k : {0, 1}) {
-      const char* name = signal_name(k == 0 ? SIGINT : SIGTERM);
+    struct sigaction action {};
+    action.sa_handler = s::note;
+    sigemptyset(&action.sa_mask);
+    for (const int signal : s::handled) sigaddset(&action.sa_mask, signal);  // one at a time
+    for (int k = 0; k < 2; ++k) {
+      const char* name = signal_name(s::handled[k]);
       const int size = std::snprintf(s::notice[k], sizeof s::notice[k],
                                      "%s: %s: stopping after the current epoch, which keeps its "
                                      "work; a second %s stops at once\n",
                                      program, name, name);
       s::notice_size[k] =
           size < 0 ? 0 : std::min(static_cast<std::size_t>(size), sizeof s::notice[k] - 1);
+      s::installed[k] = sigaction(s::handled[k], nullptr, &previous_[k]) == 0 &&
+                        previous_[k].sa_handler != SIG_IGN;
     }
-    installed_ = signals_not_ignored({SIGINT, SIGTERM});
-    for (const int signal : installed_) std::signal(signal, s::note);
+    for (int k = 0; k < 2; ++k)
+      if (s::installed[k]) sigaction(s::handled[k], &action, nullptr);
   }
 
-  /// Gives the signals their default action back.
+  /// Gives back the handlers there were before.
   ~StopSignals() {
-    for (const int signal : installed_) std::signal(signal, SIG_DFL);
-    detail_stop_signals::alive = false;
+    namespace s = detail_stop_signals;
+    for (int k = 0; k < 2; ++k) {
+      if (s::installed[k]) sigaction(s::handled[k], &previous_[k], nullptr);
+      s::installed[k] = false;
+    }
+    s::alive = false;
   }
 
   StopSignals(const StopSignals&) = delete;
   StopSignals& operator=(const StopSignals&) = delete;
+  StopSignals(StopSignals&&) = delete;
+  StopSignals& operator=(StopSignals&&) = delete;
 
-  /// The signal that came (SIGINT or SIGTERM), or 0.
+  /// The first signal that came (SIGINT or SIGTERM), or 0.
   [[nodiscard]] int signal() const { return detail_stop_signals::caught; }
   [[nodiscard]] bool requested() const { return signal() != 0; }
 
  private:
-  std::vector<int> installed_;
+  struct sigaction previous_[2] {};
 };
 
 }  // namespace sbptt

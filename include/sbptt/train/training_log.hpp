@@ -113,6 +113,14 @@ public:
   /// does not start with the header, is shorter than `size`, or its first `size` bytes are not
   /// those rows, whole (a checkpoint or a log edited by hand, or the log of another run).
   static TrainingLogFile resume(const std::string& path, long long size, long rows) {
+    TrainingLogFile log = open_for_resume(path, size, rows);
+    log.cut_back();
+    return log;
+  }
+
+  /// `resume` without its last step: the log checked, nothing cut yet, so that a caller can
+  /// check the rest of a checkpoint before the log changes. Call `cut_back` before appending.
+  static TrainingLogFile open_for_resume(const std::string& path, long long size, long rows) {
     TrainingLogFile log(path);
     struct stat info {};
     detail::require<IoError>(::fstat(log.fd_, &info) == 0 && info.st_size >= size,
@@ -126,11 +134,15 @@ public:
                              "training log '", path, "' does not start with the header '",
                              training_log_header, "'");
     log.require_rows(size, rows);
-    const bool cut = ::ftruncate(log.fd_, size) == 0;  // before errno is read
-    detail::require<IoError>(cut, "cannot cut training log '", path, "' back to ", size,
-                             " bytes: ", detail::os_reason(errno));
     log.size_ = size;
     return log;
+  }
+
+  /// Cuts off the rows after the size `open_for_resume` checked.
+  void cut_back() {
+    const bool cut = ::ftruncate(fd_, size_) == 0;  // before errno is read
+    detail::require<IoError>(cut, "cannot cut training log '", path_, "' back to ", size_,
+                             " bytes: ", detail::os_reason(errno));
   }
 
   TrainingLogFile(TrainingLogFile&& other) noexcept

@@ -9,12 +9,14 @@
 
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 #include <type_traits>
 #include <vector>
 
 #include "sbptt/bptt/engine.hpp"
 #include "sbptt/bptt/losses.hpp"
 #include "sbptt/core/rng.hpp"
+#include "sbptt/nn/network.hpp"
 #include "sbptt/sim/linear.hpp"
 #include "polynomial_policy.hpp"
 
@@ -300,4 +302,69 @@ TEST_CASE("evaluate gives the forward loss without storing the trajectory", "[bp
     CHECK(stored == Approx(expected).epsilon(1e-14));
     CHECK(engine.evaluate(x0) == Approx(expected).epsilon(1e-14));
   }
+}
+
+TEST_CASE("evaluate reports a non-finite initial state where forward does", "[bptt]") {
+  const auto sim = Sim<double>::scalar(0.9, 0.5);
+  PolynomialPolicy<double> policy({1});
+  policy.params()(0) = -0.7;
+  Engine engine(sim, policy, Objective<Loss<double>>{Loss<double>{Sim<double>::State::Zero()}}, 4);
+  Matrix<double> bad(1, 3);
+  bad << 1.0, std::numeric_limits<double>::infinity(), 2.0;
+  engine.forward(bad);
+  REQUIRE(engine.forward_non_finite());
+  const NonFinite from_forward = *engine.forward_non_finite();
+  engine.evaluate(bad);
+  REQUIRE(engine.forward_non_finite());
+  CHECK(engine.forward_non_finite()->quantity == from_forward.quantity);
+  CHECK(engine.forward_non_finite()->step == from_forward.step);
+  CHECK(engine.forward_non_finite()->sample == from_forward.sample);
+  CHECK(engine.forward_non_finite()->quantity == Quantity::State);
+  CHECK(engine.forward_non_finite()->step == 0);
+  CHECK(engine.forward_non_finite()->sample == 1);
+}
+
+namespace {
+
+/// x' = a x + b u that throws when a state exceeds `limit`: a user's step failing mid-rollout.
+struct ThrowsAbove : Sim<double> {
+  double limit = 0;
+  void step(const State& x, const Control& u, State& x_next) const {
+    if (x(0) > limit) throw std::runtime_error("ThrowsAbove: the state left the model's range");
+    Sim<double>::step(x, u, x_next);
+  }
+};
+
+}  // namespace
+
+TEST_CASE("a forward pass that throws leaves no trajectory for a sweep", "[bptt]") {
+  const ThrowsAbove sim{Sim<double>::scalar(2.0, 0.5), 5.0};
+  PolynomialPolicy<double> policy({1});
+  Engine engine(sim, policy, Objective<Loss<double>>{Loss<double>{Sim<double>::State::Zero()}}, 5);
+  Vector<double> g;
+  engine.forward(Matrix<double>::Constant(1, 2, 0.1));  // x_n = 0.1·2ⁿ stays below 5
+  engine.reverse(FlowMode::Full, g);
+  REQUIRE_THROWS_WITH(engine.forward(Matrix<double>::Ones(1, 2)),  // 1, 2, 4, 8: throws at step 3
+                      Catch::Contains("left the model's range"));
+  REQUIRE_THROWS_WITH(engine.reverse(FlowMode::Full, g), Catch::Contains("call forward first"));
+  GradientPair<double> pair;
+  REQUIRE_THROWS_WITH(engine.regular_and_modified(Matrix<double>::Ones(1, 2), pair),
+                      Catch::Contains("left the model's range"));
+  REQUIRE_THROWS_WITH(engine.reverse(FlowMode::Full, g), Catch::Contains("call forward first"));
+  engine.forward(Matrix<double>::Constant(1, 2, 0.1));  // a finished pass can be swept again
+  engine.reverse(FlowMode::Full, g);
+}
+
+TEST_CASE("a squared-distance target of another size than the state is refused when the engine "
+          "is built", "[bptt]") {
+  const LinearSystem<double> sim(Eigen::MatrixXd::Identity(3, 3), Eigen::MatrixXd::Ones(3, 1));
+  const auto policy = Network<double>::mlp(3, {4}, 1);  // parameters zero: every control is 0
+  using DynamicLoss = SquaredDistanceLoss<Eigen::VectorXd>;
+  const Objective<DynamicLoss> objective{DynamicLoss{Eigen::VectorXd::Zero(2)}};
+  REQUIRE_THROWS_AS((Engine(sim, policy, objective, 4)), InvalidArgument);
+  REQUIRE_THROWS_WITH((Engine(sim, policy, objective, 4)),
+                      Catch::Contains("target has 2 entries") &&
+                          Catch::Contains("state_dim = 3"));
+  Engine fits(sim, policy, Objective<DynamicLoss>{DynamicLoss{Eigen::VectorXd::Zero(3)}}, 4);
+  CHECK(fits.forward(Matrix<double>::Ones(3, 2)) == 1.5);  // x stays (1, 1, 1): ½‖x‖²
 }

@@ -229,8 +229,8 @@ TEST_CASE("threads: evaluate reports the same first non-finite value for any thr
   Rng rng(45);
   Matrix<double> set = cartpole_initial_states(sim, rng, 80);
   // Sample 40 (second chunk) overflows to +inf in its state x_1; sample 70 (third chunk) has a
-  // NaN angle, so its control c_0 is NaN. c_0 comes before x_1 in rollout order, so the report
-  // is sample 70's control at step 0, whichever chunk finishes first.
+  // NaN angle in x_0. x_0 comes before x_1 in rollout order, so the report is sample 70's
+  // state at step 0 (as `forward` reports it), whichever chunk finishes first.
   set(0, 40) = 1.79e308;
   set(1, 40) = 1e308;
   set(2, 70) = std::numeric_limits<double>::quiet_NaN();
@@ -245,7 +245,7 @@ TEST_CASE("threads: evaluate reports the same first non-finite value for any thr
   }
   CHECK(std::isnan(losses[0]));
   for (const auto& report : reports) {
-    CHECK(report.quantity == Quantity::Control);
+    CHECK(report.quantity == Quantity::State);
     CHECK(report.step == 0);
     CHECK(report.sample == 70);
   }

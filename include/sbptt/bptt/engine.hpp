@@ -114,6 +114,8 @@ public:
     detail::require(controller.output_dim() == sim.control_dim(),
                     "Engine: controller output_dim = ", controller.output_dim(),
                     "; expected the simulator's control_dim = ", sim.control_dim());
+    if constexpr (requires(const Loss& loss) { loss.check_state_dim(Index{}); })
+      objective_.state_loss.check_state_dim(sim.state_dim());
     detail::require(std::isfinite(objective_.step_weight), "Engine: step_weight = ",
                     objective_.step_weight, "; expected a finite number");
     detail::require(std::isfinite(objective_.control_weight) && objective_.control_weight >= 0,
@@ -179,7 +181,8 @@ public:
 
   /// Rolls out the batch `initial_states` (state_dim × B), stores the trajectory and returns
   /// the batch-mean loss. With threads, the rollout and the next `reverse` go one way
-  /// (`SweepThreading`).
+  /// (`SweepThreading`). A rollout that throws (the simulator's or the controller's exception
+  /// passes through) leaves no trajectory: `reverse` then refuses, as before any forward pass.
   Scalar forward(const Matrix<Scalar>& initial_states) {
     return forward_for(initial_states, detail::SweepKind::Lone);
   }
@@ -309,7 +312,7 @@ private:
   }
 
   void check_sweep(const FlowSchedule& schedule, Index truncation) const {
-    detail::require(trajectory_.batch() > 0 && trajectory_.steps() == steps_,
+    detail::require(trajectory_stored_,
                     "Engine::reverse: no stored trajectory; call forward first");
     detail::require(truncation >= 0, "Engine::reverse: truncation = ", truncation,
                     "; expected 0 (none) or a window of at least 1 step");
@@ -330,6 +333,14 @@ private:
   /// at every step, or, for a lone sweep, when the decision says `Never` (batch_threading.hpp).
   Scalar forward_for(const Matrix<Scalar>& initial_states, detail::SweepKind kind) {
     check_initial_states(initial_states, "forward");
+    trajectory_stored_ = false;  // until this rollout ends: one that throws leaves none to sweep
+    const Scalar loss = roll_out_for(initial_states, kind);
+    trajectory_stored_ = true;
+    return loss;
+  }
+
+  /// The rollout of `forward_for` into the trajectory, its batch loss returned.
+  Scalar roll_out_for(const Matrix<Scalar>& initial_states, detail::SweepKind kind) {
     const bool decided =
         pool_ != nullptr && (kind == detail::SweepKind::Lone
                                  ? batch_threading_.decides_lone(lone_plan().meets_threads)
@@ -425,6 +436,7 @@ private:
   detail::PackedController<Ctrl> packed_controller_{controller_};
 
   Trajectory<Scalar, typename Ctrl::Workspace> trajectory_;
+  bool trajectory_stored_ = false;  ///< a forward pass ended and stored `trajectory_`
   std::optional<NonFinite> forward_non_finite_;
   std::vector<Scratch> forward_scratch_;
   detail::ForwardInParts<Scalar> forward_in_parts_;  ///< `forward` on several threads

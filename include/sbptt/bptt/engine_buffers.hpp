@@ -126,6 +126,7 @@ struct EvaluationChunk {
     Scratch& t = *scratch;
     non_finite.value.reset();
     state = x0;
+    non_finite.note(Quantity::State, 0, state, first);
     next.resize(sim.state_dim(), batch);
     losses.setZero();
     for (Index n = 0; n < steps; ++n) {

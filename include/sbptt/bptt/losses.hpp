@@ -1,5 +1,6 @@
 #pragma once
 /// \file Generic state losses (task losses live beside their simulators).
+#include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt {
@@ -8,6 +9,13 @@ namespace sbptt {
 template <class State>
 struct SquaredDistanceLoss {
   State target;
+
+  /// Throws `InvalidArgument` unless the target has `state_dim` entries; the engine calls it
+  /// when it is built (a dynamic-size target can have any size).
+  void check_state_dim(Index state_dim) const {
+    detail::require(target.size() == state_dim, "SquaredDistanceLoss: the target has ",
+                    target.size(), " entries; expected the simulator's state_dim = ", state_dim);
+  }
 
   typename State::Scalar operator()(const State& x, State* grad) const {
     if (grad) *grad = x - target;

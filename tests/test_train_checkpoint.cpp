@@ -84,6 +84,7 @@ TEST_CASE("checkpoint: an error names the line that is wrong, whichever it is", 
   c.epoch = 3;
   c.adam_t = 6;
   c.params = Vector<double>::Constant(3, 0.5);
+  c.best_epoch = 2;
   c.best_params = c.params;
   c.adam_m = Vector<double>::Constant(3, 0.25);
   c.adam_v = c.adam_m;
@@ -109,6 +110,26 @@ TEST_CASE("checkpoint: an error names the line that is wrong, whichever it is", 
   const std::string cut = text.substr(0, text.size() - 1);
   CHECK_THROWS_WITH(parse_checkpoint<double>(cut, "test.checkpoint"),
                     Catch::Contains("line " + std::to_string(lines.size()) + ": the line has no end"));
+}
+
+TEST_CASE("checkpoint: best parameters exactly when an epoch was best, or refused", "[train]") {
+  // A run keeps θ of its best epoch from the first evaluation on, and none before it; resumed
+  // with best_epoch > 0 and no best_params, restore_best emptied the controller.
+  Checkpoint<double> c;
+  c.shuffle_state = Rng(1).state();
+  c.epoch = 3;
+  c.params = Vector<double>::Constant(3, 0.5);
+  c.best_epoch = 2;
+  c.best_params = Vector<double>::Constant(3, 0.25);
+  REQUIRE_NOTHROW(parse_checkpoint<double>(checkpoint_text(c), "test.checkpoint"));
+  c.best_params.resize(0);
+  CHECK_THROWS_WITH(parse_checkpoint<double>(checkpoint_text(c), "test.checkpoint"),
+                    Catch::Contains("best_epoch 2 with 0 numbers in best_params"));
+  c.best_epoch = 0;
+  REQUIRE_NOTHROW(parse_checkpoint<double>(checkpoint_text(c), "test.checkpoint"));
+  c.best_params = c.params;
+  CHECK_THROWS_WITH(parse_checkpoint<double>(checkpoint_text(c), "test.checkpoint"),
+                    Catch::Contains("best_epoch 0 with 3 numbers in best_params"));
 }
 
 TEST_CASE("checkpoint: a second run of a checkpoint in use is refused before any work",

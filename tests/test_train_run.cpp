@@ -326,6 +326,16 @@ TEST_CASE("run: a set of the wrong shape is refused before the log is replaced o
                       "run_training: the test set has 2 rows; expected the state dimension 1");
     CHECK_THROWS_WITH(run_training(s.trainer, Matrix<double>(1, 0), test, settings, callbacks),
                       "run_training: the train set has 0 samples; expected at least 1");
+    // A non-finite initial state: refused before the epoch it would have spoiled.
+    Matrix<double> infinite = test, not_a_number = good;
+    infinite(0, 1) = std::numeric_limits<double>::infinity();
+    not_a_number(0, 4) = std::numeric_limits<double>::quiet_NaN();
+    CHECK_THROWS_WITH(run_training(s.trainer, good, infinite, settings, callbacks),
+                      "run_training: the test set has inf in sample 1, entry 0; expected finite "
+                      "initial states");
+    CHECK_THROWS_WITH(run_training(s.trainer, not_a_number, test, settings, callbacks),
+                      "run_training: the train set has nan in sample 4, entry 0; expected finite "
+                      "initial states");
     CHECK_FALSE(started);
     CHECK(file_text(log) == earlier);
   }

@@ -251,6 +251,7 @@ template <class Scalar>
   c.skipped_batches = in.integer("skipped_batches");
   c.since_best = in.integer("since_best", 0, static_cast<double>(c.epoch));
   c.best_epoch = in.integer("best_epoch", 0, static_cast<double>(c.epoch));
+  const std::string best_epoch_line = in.where();
   c.best_loss = in.number<double>("best_loss");
   const std::string_view last = in.value("last");
   if (!last.empty()) {
@@ -285,6 +286,10 @@ template <class Scalar>
   };
   c.best_params = in.vector<Scalar>("best_params");
   require_length(c.best_params, "best_params");
+  detail::require<ParseError>((c.best_epoch > 0) == (c.best_params.size() > 0), best_epoch_line,
+                              ": best_epoch ", c.best_epoch, " with ", c.best_params.size(),
+                              " numbers in best_params; expected the best parameters exactly "
+                              "when an epoch was best (best_epoch > 0)");
   c.adam_t = in.integer("adam_t");
   const std::string adam_t_line = in.where();
   c.adam_m = in.vector<Scalar>("adam_m");

@@ -27,6 +27,7 @@
 
 #include "sbptt/bptt/engine.hpp"
 #include "sbptt/bptt/sweep_threading.hpp"
+#include "sbptt/core/non_finite.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/optim/clip.hpp"
 #include "sbptt/optim/combined_update.hpp"
@@ -235,7 +236,7 @@ public:
   [[nodiscard]] const TrainerOptions& options() const { return options_; }
 
   /// Throws `InvalidArgument`, in `caller`'s name, unless `train` is state_dim × N with N ≥ 1
-  /// and `test` state_dim × M (M = 0: no test set), as `train_epoch` needs them.
+  /// and `test` state_dim × M (M = 0: no test set), all finite, as `train_epoch` needs them.
   void check_sets(const Matrix<Scalar>& train, const Matrix<Scalar>& test,
                   const char* caller) const {
     auto check = [&](const Matrix<Scalar>& set, const char* name, Index min_samples) {
@@ -244,6 +245,12 @@ public:
       detail::require(set.cols() == 0 || set.rows() == state_dim_, caller, ": the ", name,
                       " set has ", set.rows(), " rows; expected the state dimension ",
                       state_dim_);
+      if (const std::optional<EntryIndex> at = first_non_finite(set)) {
+        throw InvalidArgument(detail::concat(caller, ": the ", name, " set has ",
+                                             set(at->row, at->column), " in sample ", at->column,
+                                             ", entry ", at->row,
+                                             "; expected finite initial states"));
+      }
     };
     check(train, "train", 1);
     check(test, "test", 0);

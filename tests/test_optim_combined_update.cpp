@@ -270,3 +270,54 @@ TEMPLATE_TEST_CASE("CombinedUpdate::step_combined with g_C formed beforehand is 
                     Catch::Contains("agreement = 1.5; expected a fraction in [0, 1]"));
   CHECK(from_combined.inner().iterations() == 20);
 }
+
+TEMPLATE_TEST_CASE("a step the update wrappers refuse changes nothing, and they name themselves",
+                   "[optim][combine]", float, double) {
+  // Refused for its sizes, a step left the logged norm and agreement of the vector it had
+  // already combined and clipped, and the message named Adam::step. Then every later step
+  // must be that of a run that never saw the refused one.
+  using Scalar = TestType;
+  using Combined = sbptt::CombinedUpdate<sbptt::Adam<Scalar>>;
+  using Clipped = sbptt::ClippedUpdate<sbptt::Adam<Scalar>>;
+  const Vector<Scalar> g_m = vec<Scalar>({3.0, -0.5, -2.0, 1.0});
+  const Vector<Scalar> g_r = vec<Scalar>({1.0, 1.0, -1.0, 1.0});
+  const Vector<Scalar> short_m = vec<Scalar>({9.0, 9.0, 9.0});
+  Combined refused(sbptt::Adam<Scalar>(), ClipMode::Norm, Scalar(1));
+  Combined reference(sbptt::Adam<Scalar>(), ClipMode::Norm, Scalar(1));
+  Clipped refused_clipped(sbptt::Adam<Scalar>(), ClipMode::Norm, Scalar(1));
+  Clipped reference_clipped(sbptt::Adam<Scalar>(), ClipMode::Norm, Scalar(1));
+  Vector<Scalar> theta = Vector<Scalar>::Zero(4), theta_ref = theta;
+  Vector<Scalar> phi = Vector<Scalar>::Zero(4), phi_ref = phi;
+  refused.step(theta, g_m, g_r);
+  reference.step(theta_ref, g_m, g_r);
+  refused_clipped.step(phi, g_m);
+  reference_clipped.step(phi_ref, g_m);
+  const double norm2 = refused.last_norm2();
+  const Scalar agreement = refused.last_agreement();
+
+  CHECK_THROWS_WITH(refused.step(theta, short_m, short_m),
+                    Catch::Contains("CombinedUpdate::step: gradient size = 3, expected the "
+                                    "parameter size 4"));
+  Vector<Scalar> short_c = short_m;
+  CHECK_THROWS_WITH(refused.step_combined(theta, short_c, Scalar(0)),
+                    Catch::Contains("CombinedUpdate::step_combined: gradient size = 3"));
+  CHECK(short_c == short_m);
+  Vector<Scalar> longer = Vector<Scalar>::Zero(5), long_c = Vector<Scalar>::Ones(5);
+  // Sizes that agree, but not with Adam's state: Adam's own check refuses it.
+  CHECK_THROWS_WITH(refused.step_combined(longer, long_c, Scalar(0)),
+                    Catch::Contains("Adam::step: parameter size = 5"));
+  CHECK(refused.last_norm2() == norm2);
+  CHECK(refused.last_agreement() == agreement);
+  CHECK_THROWS_WITH(refused_clipped.step(phi, short_m),
+                    Catch::Contains("ClippedUpdate::step: gradient size = 3, expected the "
+                                    "parameter size 4"));
+  CHECK(refused_clipped.last_norm2() == reference_clipped.last_norm2());
+
+  refused.step(theta, g_r, g_m);
+  reference.step(theta_ref, g_r, g_m);
+  refused_clipped.step(phi, g_r);
+  reference_clipped.step(phi_ref, g_r);
+  CHECK(theta == theta_ref);
+  CHECK(phi == phi_ref);
+  CHECK(refused.inner().iterations() == 2);
+}

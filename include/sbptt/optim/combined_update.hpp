@@ -29,6 +29,7 @@
 #include "sbptt/core/sign.hpp"  // signs_agree, agreement_pass, sign_agreement
 #include "sbptt/core/types.hpp"
 #include "sbptt/optim/clip.hpp"
+#include "sbptt/optim/step_checks.hpp"
 
 namespace sbptt {
 
@@ -79,19 +80,20 @@ public:
     detail::require_clip_threshold(mode_, threshold_);
   }
 
-  /// Clips a copy of `grad` (size n) and steps `params` (size n) with it.
+  /// Clips a copy of `grad` (size n) and steps `params` (size n) with it. A step refused
+  /// (sizes that differ, or the inner optimizer's own checks) changes nothing.
   void step(Vector<Scalar>& params, const Vector<Scalar>& grad) {
+    detail::require_step_sizes(params, grad, 0, false, "ClippedUpdate::step");
     scratch_ = grad;
-    step_in_place(params, scratch_);
+    clip_and_step(params, scratch_);
   }
 
   /// As `step`, but clips `update` (size n) itself: for callers that own a scratch vector
-  /// and do not need it afterwards (saves a copy of n).
+  /// and do not need it afterwards (saves a copy of n). Refused for its sizes, it leaves
+  /// `update` as it was; refused by the inner optimizer, `update` is clipped, nothing else.
   void step_in_place(Vector<Scalar>& params, Vector<Scalar>& update) {
-    const Scalar norm = clip(update, mode_, threshold_);
-    // Squared in double: a finite float norm beyond 1.8e19 would overflow to inf.
-    last_norm2_ = static_cast<double>(norm) * static_cast<double>(norm);
-    inner_.step(params, update);
+    detail::require_step_sizes(params, update, 0, false, "ClippedUpdate::step_in_place");
+    clip_and_step(params, update);
   }
 
   /// ‖vector‖² before clipping, of the last step (the reference's logged "update size").
@@ -103,6 +105,14 @@ public:
   [[nodiscard]] const Inner& inner() const { return inner_; }
 
 private:
+  /// The figure it logs is set only once the inner optimizer has taken the step.
+  void clip_and_step(Vector<Scalar>& params, Vector<Scalar>& update) {
+    const Scalar norm = clip(update, mode_, threshold_);
+    inner_.step(params, update);
+    // Squared in double: a finite float norm beyond 1.8e19 would overflow to inf.
+    last_norm2_ = static_cast<double>(norm) * static_cast<double>(norm);
+  }
+
   Inner inner_;
   ClipMode mode_;
   Scalar threshold_;
@@ -124,21 +134,23 @@ public:
   /// Steps `params` (size n) with combine(g_M, g_R), clipped; g_M and g_R have size n.
   void step(Vector<Scalar>& params, const Vector<Scalar>& g_modified,
             const Vector<Scalar>& g_regular) {
+    detail::require_step_sizes(params, g_modified, 0, false, "CombinedUpdate::step");
     const Index agreeing = detail::combine_counting(g_modified, g_regular, combined_);
-    step_combined(params, combined_,
-                  detail::agreement_fraction<Scalar>(agreeing, g_modified.size()));
+    clipped_.step_in_place(params, combined_);
+    last_agreement_ = detail::agreement_fraction<Scalar>(agreeing, g_modified.size());
   }
 
   /// As `step`, with g_C already formed (size n, e.g. `GradientPair::combined`, which the
   /// engine forms in the pass that compares g_M with g_R): clips `combined` in place and steps
   /// `params` (size n) with it. `agreement` in [0, 1] is the fraction of g_M that it kept,
-  /// reported by `last_agreement`.
+  /// reported by `last_agreement`. A step refused changes nothing (see `ClippedUpdate`).
   void step_combined(Vector<Scalar>& params, Vector<Scalar>& combined, Scalar agreement) {
     detail::require(agreement >= Scalar(0) && agreement <= Scalar(1),
                     "CombinedUpdate::step_combined: agreement = ", agreement,
                     "; expected a fraction in [0, 1]");
-    last_agreement_ = agreement;
+    detail::require_step_sizes(params, combined, 0, false, "CombinedUpdate::step_combined");
     clipped_.step_in_place(params, combined);
+    last_agreement_ = agreement;
   }
 
   /// ‖g_C‖² before clipping, of the last step.

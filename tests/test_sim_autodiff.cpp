@@ -148,6 +148,12 @@ TEST_CASE("AutoDiffSimulator rejects sizes that disagree", "[sim][autodiff]") {
   Vector<double> next;
   CHECK_THROWS_WITH(chain.step(Vector<double>::Zero(4), Vector<double>::Zero(2), next),
                     Catch::Contains("x has size 4"));
+  // An adjoint of another size: Aᵀλ would be a product of mismatched sizes (an abort).
+  Vector<double> lambda_x, lambda_u;
+  CHECK_THROWS_WITH(chain.vjp(Vector<double>::Zero(5), Vector<double>::Zero(2),
+                              Vector<double>::Ones(3), &lambda_x, &lambda_u),
+                    Catch::Contains("AutoDiffSimulator: lambda has size 3") &&
+                        Catch::Contains("state_dim() = 5"));
 }
 
 TEST_CASE("An automatic simulator gives the engine the gradient of its analytic twin",

@@ -279,6 +279,40 @@ TEST_CASE("Integrated rejects a bad time step and an odd second-order state", "[
                     Catch::Contains("expected a finite time step"));
 }
 
+namespace {
+
+/// ẋ_i = tanh(x_{i+1}) − x_i + u_{i mod k}, with sizes known at run time.
+struct DynamicRing {
+  static constexpr int kStateSize = Eigen::Dynamic, kControlSize = Eigen::Dynamic;
+  Index n = 5, k = 2;
+  [[nodiscard]] Index state_dim() const { return n; }
+  [[nodiscard]] Index control_dim() const { return k; }
+  template <class T>
+  void derivative(const ColumnOf<T, Eigen::Dynamic>& x, const ColumnOf<T, Eigen::Dynamic>& u,
+                  ColumnOf<T, Eigen::Dynamic>& rate) const {
+    using std::tanh;
+    for (Index i = 0; i < n; ++i) rate(i) = tanh(x((i + 1) % n)) - x(i) + u(i % k);
+  }
+};
+
+}  // namespace
+
+TEST_CASE("Integrated with dynamic sizes rejects inputs and adjoints of another size",
+          "[sim][integrators]") {
+  const Integrated<DynamicRing, RungeKutta4> sim({}, 0.1);
+  Vector<double> next, lambda_x, lambda_u;
+  CHECK_THROWS_WITH(sim.step(Vector<double>::Zero(4), Vector<double>::Zero(2), next),
+                    Catch::Contains("x has size 4"));
+  // An adjoint of another size: the reverse sweep over the stages read past it (an abort).
+  CHECK_THROWS_WITH(sim.vjp(Vector<double>::Zero(5), Vector<double>::Zero(2),
+                            Vector<double>::Ones(3), &lambda_x, &lambda_u),
+                    Catch::Contains("Integrated: lambda has size 3") &&
+                        Catch::Contains("state_dim() = 5"));
+  const auto check = check_jacobians(sim, Vector<double>::Constant(5, 0.3),
+                                     Vector<double>::Constant(2, -0.2));
+  CHECK(check.worst() < 1e-8);
+}
+
 TEST_CASE("The cart pole's equations reproduce CartPole through SemiImplicitEuler and the adapter",
           "[sim][integrators][cartpole]") {
   // Interleaved layout, velocity first: the same map as the hand-written simulator, hence the

@@ -139,6 +139,17 @@ void check_input_sizes(const Sim& sim, const typename Sim::State& x,
   }
 }
 
+/// `check_input_sizes`, and an adjoint λ of the state's size.
+template <class Sim>
+void check_vjp_sizes(const Sim& sim, const typename Sim::State& x, const typename Sim::Control& u,
+                     const typename Sim::State& lambda, const char* who) {
+  check_input_sizes(sim, x, u, who);
+  if constexpr (Sim::State::RowsAtCompileTime == Eigen::Dynamic) {
+    require(lambda.size() == sim.state_dim(), who, ": lambda has size ", lambda.size(),
+            "; expected state_dim() = ", sim.state_dim());
+  }
+}
+
 }  // namespace detail
 
 /// Value and Jacobians of r = g(x, u) by one forward-mode pass with N + K directions.
@@ -225,6 +236,7 @@ public:
   /// *lambda_x = Aᵀλ (state_dim), *lambda_u = Bᵀλ (control_dim); a null pointer skips it.
   void vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
            Control* lambda_u) const {
+    detail::check_vjp_sizes(*this, x, u, lambda, "AutoDiffSimulator");
     if (lambda_x == nullptr && lambda_u == nullptr) return;
     StateJacobian a;
     ControlJacobian b;

@@ -364,7 +364,7 @@ public:
   /// the stages (never forming A). A null pointer skips that product.
   void vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
            Control* lambda_u) const {
-    check_sizes(x, u);
+    detail::check_vjp_sizes(*this, x, u, lambda, "Integrated");
     if (lambda_x == nullptr && lambda_u == nullptr) return;
     const Rhs rhs(model_);
     const Index n = state_dim(), m = control_dim();

@@ -298,6 +298,8 @@ TEMPLATE_TEST_CASE("a step the update wrappers refuse changes nothing, and they 
   CHECK_THROWS_WITH(refused.step(theta, short_m, short_m),
                     Catch::Contains("CombinedUpdate::step: gradient size = 3, expected the "
                                     "parameter size 4"));
+  CHECK_THROWS_WITH(refused.step(theta, g_m, short_m),
+                    Catch::StartsWith("CombinedUpdate::step: ") && Catch::Contains("3"));
   Vector<Scalar> short_c = short_m;
   CHECK_THROWS_WITH(refused.step_combined(theta, short_c, Scalar(0)),
                     Catch::Contains("CombinedUpdate::step_combined: gradient size = 3"));
@@ -306,6 +308,7 @@ TEMPLATE_TEST_CASE("a step the update wrappers refuse changes nothing, and they 
   // Sizes that agree, but not with Adam's state: Adam's own check refuses it.
   CHECK_THROWS_WITH(refused.step_combined(longer, long_c, Scalar(0)),
                     Catch::Contains("Adam::step: parameter size = 5"));
+  CHECK(static_cast<double>(long_c.norm()) == Approx(1.0));  // clipped, as documented
   CHECK(refused.last_norm2() == norm2);
   CHECK(refused.last_agreement() == agreement);
   CHECK_THROWS_WITH(refused_clipped.step(phi, short_m),

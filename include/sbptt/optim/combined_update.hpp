@@ -105,6 +105,9 @@ public:
   [[nodiscard]] const Inner& inner() const { return inner_; }
 
 private:
+  template <FlatOptimizer>
+  friend class CombinedUpdate;  // checks the sizes in its own name, then clips and steps
+
   /// The figure it logs is set only once the inner optimizer has taken the step.
   void clip_and_step(Vector<Scalar>& params, Vector<Scalar>& update) {
     const Scalar norm = clip(update, mode_, threshold_);
@@ -135,8 +138,9 @@ public:
   void step(Vector<Scalar>& params, const Vector<Scalar>& g_modified,
             const Vector<Scalar>& g_regular) {
     detail::require_step_sizes(params, g_modified, 0, false, "CombinedUpdate::step");
+    detail::require_same_size(g_modified, g_regular, "CombinedUpdate::step");
     const Index agreeing = detail::combine_counting(g_modified, g_regular, combined_);
-    clipped_.step_in_place(params, combined_);
+    clipped_.clip_and_step(params, combined_);
     last_agreement_ = detail::agreement_fraction<Scalar>(agreeing, g_modified.size());
   }
 
@@ -149,7 +153,7 @@ public:
                     "CombinedUpdate::step_combined: agreement = ", agreement,
                     "; expected a fraction in [0, 1]");
     detail::require_step_sizes(params, combined, 0, false, "CombinedUpdate::step_combined");
-    clipped_.step_in_place(params, combined);
+    clipped_.clip_and_step(params, combined);
     last_agreement_ = agreement;
   }
 

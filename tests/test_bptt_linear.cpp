@@ -368,3 +368,23 @@ TEST_CASE("a squared-distance target of another size than the state is refused w
   Engine fits(sim, policy, Objective<DynamicLoss>{DynamicLoss{Eigen::VectorXd::Zero(3)}}, 4);
   CHECK(fits.forward(Matrix<double>::Ones(3, 2)) == 1.5);  // x stays (1, 1, 1): ½‖x‖²
 }
+
+TEST_CASE("LinearSystem with dynamic sizes refuses inputs and adjoints of another size", "[sim]") {
+  Eigen::MatrixXd a(2, 2), b(2, 1);
+  a << 0.9, 0.2, -0.1, 1.1;
+  b << 0.5, 2.0;
+  const LinearSystem<double> sim(a, b);
+  Eigen::VectorXd next, lambda_x, lambda_u;
+  CHECK_THROWS_WITH(sim.step(Eigen::VectorXd::Zero(3), Eigen::VectorXd::Zero(1), next),
+                    Catch::Contains("LinearSystem: x has size 3"));
+  CHECK_THROWS_WITH(sim.vjp(Eigen::VectorXd::Zero(2), Eigen::VectorXd::Zero(1),
+                            Eigen::VectorXd::Ones(3), &lambda_x, &lambda_u),
+                    Catch::Contains("LinearSystem: lambda has size 3") &&
+                        Catch::Contains("state_dim() = 2"));
+  Eigen::VectorXd lambda(2);
+  lambda << 1.0, -2.0;
+  sim.vjp(Eigen::VectorXd::Zero(2), Eigen::VectorXd::Zero(1), lambda, &lambda_x, &lambda_u);
+  CHECK(lambda_x(0) == Approx(0.9 * 1.0 - 0.1 * -2.0));  // Aᵀλ
+  CHECK(lambda_x(1) == Approx(0.2 * 1.0 + 1.1 * -2.0));
+  CHECK(lambda_u(0) == Approx(0.5 * 1.0 + 2.0 * -2.0));  // Bᵀλ
+}

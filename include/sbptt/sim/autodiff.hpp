@@ -36,6 +36,7 @@
 
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
+#include "sbptt/sim/input_sizes.hpp"
 
 namespace sbptt {
 
@@ -126,30 +127,6 @@ void check_model_sizes(const M& model, const char* who) {
           " (-1 means dynamic)");
 }
 
-/// Requires dynamic-size inputs to match the simulator's sizes (fixed sizes are checked by
-/// their types).
-template <class Sim>
-void check_input_sizes(const Sim& sim, const typename Sim::State& x,
-                       const typename Sim::Control& u, const char* who) {
-  if constexpr (Sim::State::RowsAtCompileTime == Eigen::Dynamic ||
-                Sim::Control::RowsAtCompileTime == Eigen::Dynamic) {
-    require(x.size() == sim.state_dim() && u.size() == sim.control_dim(), who, ": x has size ",
-            x.size(), " and u size ", u.size(), "; expected state_dim() = ", sim.state_dim(),
-            " and control_dim() = ", sim.control_dim());
-  }
-}
-
-/// `check_input_sizes`, and an adjoint λ of the state's size.
-template <class Sim>
-void check_vjp_sizes(const Sim& sim, const typename Sim::State& x, const typename Sim::Control& u,
-                     const typename Sim::State& lambda, const char* who) {
-  check_input_sizes(sim, x, u, who);
-  if constexpr (Sim::State::RowsAtCompileTime == Eigen::Dynamic) {
-    require(lambda.size() == sim.state_dim(), who, ": lambda has size ", lambda.size(),
-            "; expected state_dim() = ", sim.state_dim());
-  }
-}
-
 }  // namespace detail
 
 /// Value and Jacobians of r = g(x, u) by one forward-mode pass with N + K directions.
@@ -238,9 +215,10 @@ public:
            Control* lambda_u) const {
     detail::check_vjp_sizes(*this, x, u, lambda, "AutoDiffSimulator");
     if (lambda_x == nullptr && lambda_u == nullptr) return;
+    State value;
     StateJacobian a;
     ControlJacobian b;
-    jacobians(x, u, a, b);
+    automatic_jacobians<Scalar>(stepper(), x, u, state_dim(), value, a, b);
     if (lambda_x != nullptr) lambda_x->noalias() = a.transpose() * lambda;
     if (lambda_u != nullptr) lambda_u->noalias() = b.transpose() * lambda;
   }

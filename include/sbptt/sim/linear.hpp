@@ -10,6 +10,7 @@
 
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/error.hpp"
+#include "sbptt/sim/input_sizes.hpp"
 
 namespace sbptt {
 
@@ -50,17 +51,20 @@ public:
   [[nodiscard]] Scalar dt() const { return dt_; }
 
   void step(const State& x, const Control& u, State& x_next) const {
+    detail::check_input_sizes(*this, x, u, "LinearSystem");
     x_next.noalias() = a_ * x;
     x_next.noalias() += b_ * u;
   }
 
-  void jacobians(const State&, const Control&, StateJacobian& a, ControlJacobian& b) const {
+  void jacobians(const State& x, const Control& u, StateJacobian& a, ControlJacobian& b) const {
+    detail::check_input_sizes(*this, x, u, "LinearSystem");
     a = a_;
     b = b_;
   }
 
-  void vjp(const State&, const Control&, const State& lambda, State* lambda_x,
+  void vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
            Control* lambda_u) const {
+    detail::check_vjp_sizes(*this, x, u, lambda, "LinearSystem");
     if (lambda_x) lambda_x->noalias() = a_.transpose() * lambda;
     if (lambda_u) lambda_u->noalias() = b_.transpose() * lambda;
   }

@@ -1,5 +1,5 @@
-# docs/headers.md lists every public header, and only headers that exist: a header added
-# without a line there, or a line left for a header that is gone, fails.
+# docs/headers.md lists every public header in a row of its tables, and only headers that exist:
+# a header added without its row, or a row left for a header that is gone, fails.
 #   cmake -DSOURCE_DIR=<repository> -P header_map.cmake
 cmake_minimum_required(VERSION 3.21)
 get_filename_component(SOURCE_DIR "${SOURCE_DIR}" ABSOLUTE)
@@ -10,9 +10,9 @@ endif()
 file(READ "${SOURCE_DIR}/docs/headers.md" _page)
 set(_problems "")
 foreach(_header IN LISTS _headers)
-  string(FIND "${_page}" "`${_header}`" _at)
+  string(FIND "${_page}" "| `${_header}` |" _at)  # a row of a table, not any mention
   if(_at EQUAL -1)
-    string(APPEND _problems "  include/${_header} has no line in docs/headers.md\n")
+    string(APPEND _problems "  include/${_header} has no row in docs/headers.md\n")
   endif()
 endforeach()
 string(REGEX MATCHALL "`sbptt/[A-Za-z0-9_/]+\\.hpp`" _listed "${_page}")
@@ -27,4 +27,4 @@ if(_problems)
   message(FATAL_ERROR "docs/headers.md and the headers disagree:\n${_problems}")
 endif()
 list(LENGTH _headers _count)
-message(STATUS "header map: ${_count} headers, each with its line in docs/headers.md")
+message(STATUS "header map: ${_count} headers, each with its row in docs/headers.md")

@@ -182,7 +182,8 @@ public:
   /// Rolls out the batch `initial_states` (state_dim × B), stores the trajectory and returns
   /// the batch-mean loss. With threads, the rollout and the next `reverse` go one way
   /// (`SweepThreading`). A rollout that throws (the simulator's or the controller's exception
-  /// passes through) leaves no trajectory: `reverse` then refuses, as before any forward pass.
+  /// passes through) leaves no trajectory to sweep: `reverse` then refuses, as before any
+  /// forward pass, and `trajectory()` holds the broken rollout's first steps, not a rollout.
   Scalar forward(const Matrix<Scalar>& initial_states) {
     return forward_for(initial_states, detail::SweepKind::Lone);
   }

@@ -44,11 +44,12 @@ concept FlatOptimizer = std::floating_point<typename O::Scalar> &&
 
 namespace detail {
 
-/// `combine`, returning how many components kept g_M.
+/// `combine`, returning how many components kept g_M; a size mismatch is refused in `caller`'s
+/// name.
 template <std::floating_point Scalar>
 Index combine_counting(const Vector<Scalar>& g_modified, const Vector<Scalar>& g_regular,
-                       Vector<Scalar>& out) {
-  require_same_size(g_modified, g_regular, "combine");
+                       Vector<Scalar>& out, const char* caller = "combine") {
+  require_same_size(g_modified, g_regular, caller);
   // Sizes are equal here, so the resize is a no-op when `out` aliases an input, and each
   // component is read before it is written: aliasing either input is safe.
   out.resize(g_modified.size());
@@ -138,8 +139,8 @@ public:
   void step(Vector<Scalar>& params, const Vector<Scalar>& g_modified,
             const Vector<Scalar>& g_regular) {
     detail::require_step_sizes(params, g_modified, 0, false, "CombinedUpdate::step");
-    detail::require_same_size(g_modified, g_regular, "CombinedUpdate::step");
-    const Index agreeing = detail::combine_counting(g_modified, g_regular, combined_);
+    const Index agreeing =
+        detail::combine_counting(g_modified, g_regular, combined_, "CombinedUpdate::step");
     clipped_.clip_and_step(params, combined_);
     last_agreement_ = detail::agreement_fraction<Scalar>(agreeing, g_modified.size());
   }

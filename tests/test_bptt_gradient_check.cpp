@@ -163,6 +163,35 @@ TEST_CASE("The engine rejects a fixed-size State whose size disagrees with state
                     Catch::Contains("State holds 4 numbers but its state_dim() = 3"));
 }
 
+TEST_CASE("The engine refuses a quantum or guidance objective made for another size of scene "
+          "when it is built", "[bptt][engine]") {
+  // With run-time sizes the loss and the simulator are built apart, and nothing else ties them.
+  using Quantum = Schrodinger1D<double, Eigen::Dynamic>;
+  const Quantum grid8(8), grid6(6);
+  auto quantum_network = small_network<double>(grid8.state_dim(), 1, 3);
+  const auto made_for_six = quantum_objective(grid6, 2);
+  REQUIRE_THROWS_AS((Engine(grid8, quantum_network, made_for_six, 4)), InvalidArgument);
+  REQUIRE_THROWS_WITH((Engine(grid8, quantum_network, made_for_six, 4)),
+                      Catch::Contains("QuantumInfidelityLoss") && Catch::Contains("12 entries") &&
+                          Catch::Contains("state_dim = 16"));
+  Engine quantum_fits(grid8, quantum_network, quantum_objective(grid8, 2), 4);
+  Rng rng(5);
+  CHECK(std::isfinite(quantum_fits.forward(grid8.initial_states(rng, 2))));
+
+  using Guidance = GuidanceByRepulsion<double, Eigen::Dynamic, Eigen::Dynamic>;
+  const Guidance three_evaders(2, 3), four_evaders(2, 4);
+  auto guidance_network = small_network<double>(three_evaders.state_dim(),
+                                                three_evaders.control_dim(), 4);
+  const auto made_for_four = guidance_objective(four_evaders, 0.0);
+  REQUIRE_THROWS_AS((Engine(three_evaders, guidance_network, made_for_four, 4)),
+                    InvalidArgument);
+  REQUIRE_THROWS_WITH((Engine(three_evaders, guidance_network, made_for_four, 4)),
+                      Catch::Contains("GuidanceLoss") && Catch::Contains("24 numbers") &&
+                          Catch::Contains("state_dim = 20"));
+  Engine guidance_fits(three_evaders, guidance_network, guidance_objective(three_evaders, 0.0), 4);
+  CHECK(std::isfinite(guidance_fits.forward(guidance_initial_states(three_evaders, rng, 2))));
+}
+
 TEST_CASE("check_gradient reports a NaN loss gradient as NaN", "[bptt][gradient_check]") {
   const CartPole<double, 1> sim;
   auto network = small_network<double>(4, 1, 1);

@@ -36,10 +36,18 @@ public:
                     ", evaders = ", evaders, ", expected both >= 1");
   }
 
+  /// Throws `InvalidArgument` unless the loss's agents fill `state_dim` numbers; the engine
+  /// calls it when it is built (with run-time agent counts the loss may have other counts).
+  void check_state_dim(Index state_dim) const {
+    detail::require(state_size() == state_dim, "GuidanceLoss: ", drivers_, " drivers and ",
+                    evaders_, " evaders make states of ", state_size(),
+                    " numbers; expected the simulator's state_dim = ", state_dim);
+  }
+
   /// Returns ℓ(x) (x: 4(D+E)); if `grad` is not null sets *grad = ∂ℓ/∂x (p_e / E on evader
   /// positions, 0 elsewhere). Throws InvalidArgument on a wrong state size.
   Scalar operator()(const State& x, State* grad) const {
-    const Index n = 4 * (drivers_ + evaders_);
+    const Index n = state_size();
     detail::require(x.size() == n, "GuidanceLoss: state size ", x.size(), ", expected ", n);
     const Scalar inv_e = Scalar(1) / static_cast<Scalar>(evaders_);
     if (grad != nullptr) grad->setZero(n);
@@ -53,6 +61,8 @@ public:
   }
 
 private:
+  [[nodiscard]] Index state_size() const { return 4 * (drivers_ + evaders_); }
+
   Index drivers_, evaders_;
 };
 

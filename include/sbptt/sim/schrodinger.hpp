@@ -412,6 +412,13 @@ public:
   QuantumInfidelityLoss(const Sim& sim, Index target)
       : target_index_(target), target_(sim.eigenstate(target)) {}
 
+  /// Throws `InvalidArgument` unless φ_n has `state_dim` entries; the engine calls it when it
+  /// is built (with `Nx = Eigen::Dynamic` the loss may come from a grid of another size).
+  void check_state_dim(Index state_dim) const {
+    detail::require(target_.size() == state_dim, "QuantumInfidelityLoss: the target state has ",
+                    target_.size(), " entries; expected the simulator's state_dim = ", state_dim);
+  }
+
   /// ℓ(x) for x (2Nx); `grad` (2Nx, optional) receives ∂ℓ/∂x.
   Scalar operator()(const State& x, State* grad) const {
     const Scalar f = detail::interleaved_fidelity(target_, x, grad);

@@ -51,6 +51,7 @@
 #include <vector>
 
 #include "sbptt/bptt/batch_threading.hpp"
+#include "sbptt/bptt/chunked_evaluation.hpp"
 #include "sbptt/bptt/diagnostics.hpp"
 #include "sbptt/bptt/flow_mode.hpp"
 #include "sbptt/bptt/objective.hpp"
@@ -89,7 +90,7 @@ public:
 
   /// Samples per independently rolled-out chunk of `evaluate` (a constant, so that the result
   /// does not depend on the number of threads).
-  static constexpr Index kEvaluateChunk = 32;
+  static constexpr Index kEvaluateChunk = detail::kEvaluationChunk;
 
   /// `set_threads`' default `split_above_ns`.
   static constexpr double kDefaultSplitAboveNs = detail::ForkDecision::default_threshold_ns;
@@ -195,27 +196,9 @@ public:
   /// out independently (in parallel with threads).
   Scalar evaluate(const Matrix<Scalar>& initial_states) {
     check_initial_states(initial_states, "evaluate");
-    const Index batch = initial_states.cols();
-    const Index chunks = (batch + kEvaluateChunk - 1) / kEvaluateChunk;
-    if (static_cast<Index>(chunks_.size()) < chunks)
-      chunks_.resize(static_cast<std::size_t>(chunks));
-    eval_losses_.resize(batch);
     packed_controller_.pack();
-    auto task = [&](Index k, Index) {
-      const Index first = k * kEvaluateChunk;
-      const Index size = std::min(kEvaluateChunk, batch - first);
-      chunks_[static_cast<std::size_t>(k)].roll_out(sim_, packed_controller_, objective_, steps_,
-                                                    initial_states.middleCols(first, size), first,
-                                                    eval_losses_.segment(first, size));
-    };
-    if (pool_) {
-      pool_->run(chunks, task);
-    } else {
-      for (Index k = 0; k < chunks; ++k) task(k, 0);
-    }
-    forward_non_finite_ = detail::first_in_rollout_order(
-        chunks, [&](Index k) -> auto& { return chunks_[static_cast<std::size_t>(k)].non_finite; });
-    return detail::mean_of_samples(eval_losses_, steps_, forward_non_finite_);
+    return evaluation_.run(sim_, packed_controller_, objective_, steps_, initial_states,
+                           pool_.get(), forward_non_finite_);
   }
 
   /// Reverse sweep over the stored trajectory. Sets `gradient` (num_params) to the vector of
@@ -294,7 +277,7 @@ public:
 private:
   using Scratch = detail::SampleScratch<State, Control>;
   using Sweep = detail::SweepBuffers<Scalar, Scratch>;
-  using EvalChunk = detail::EvaluationChunk<Scalar, typename Ctrl::Workspace, Scratch>;
+  using Evaluation = detail::ChunkedEvaluation<Scalar, typename Ctrl::Workspace, Scratch>;
 
   using Controller = Ctrl;
   using Handoff = typename detail::ParamHandoffOf<Ctrl>::Type;
@@ -404,22 +387,22 @@ private:
     const Index batch = trajectory_.batch();
     const Scalar w = static_cast<Scalar>(objective_.step_weight);
     const Index first = objective_.timing == LossTiming::Final ? steps_ : 1;
-    eval_losses_.setZero(batch);
+    sample_losses_.setZero(batch);
     fork_[2].for_samples(pool_.get(), batch, forward_scratch_, batch_threading_.threaded(),
                          [&](Index b, Scratch& t) {
       for (Index n = first; n <= steps_; ++n) {
         t.x = trajectory_.states[static_cast<std::size_t>(n)].col(b);
-        eval_losses_(b) += w * objective_.state_loss(t.x, static_cast<State*>(nullptr));
+        sample_losses_(b) += w * objective_.state_loss(t.x, static_cast<State*>(nullptr));
       }
       if (objective_.control_weight > 0) {
         Scalar squares = 0;
         for (const auto& c : trajectory_.controls) squares += c.col(b).squaredNorm();
-        eval_losses_(b) += static_cast<Scalar>(objective_.control_weight /
-                                               static_cast<double>(steps_ * sim_.control_dim())) *
-                           squares;
+        sample_losses_(b) += static_cast<Scalar>(objective_.control_weight /
+                                                 static_cast<double>(steps_ * sim_.control_dim())) *
+                             squares;
       }
     });
-    return detail::mean_of_samples(eval_losses_, steps_, forward_non_finite_);
+    return detail::mean_of_samples(sample_losses_, steps_, forward_non_finite_);
   }
 
   void note_non_finite(Quantity quantity, Index n, const Matrix<Scalar>& values) {
@@ -449,8 +432,8 @@ private:
   typename detail::LayerAdjointsOf<Ctrl>::Type sweep_adjoints_[2];
   /// Both sweeps' VJPs in one `vjp_batch` call, for a simulator without `vjp_batch_pair`.
   detail::PairedColumns<Scalar> paired_columns_;
-  std::vector<EvalChunk> chunks_;
-  Vector<Scalar> eval_losses_;
+  Evaluation evaluation_;
+  Vector<Scalar> sample_losses_;  ///< `batch_loss`'s
   // Last, so that it is destroyed first: its workers stop before the buffers they work on go.
   std::unique_ptr<detail::ThreadPool> pool_;
 };

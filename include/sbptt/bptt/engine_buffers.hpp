@@ -1,13 +1,11 @@
 #pragma once
-/// \file The engine's reusable buffers (per thread, per sweep, per evaluation chunk) and its
-/// scan for the first non-finite value. Implementation details of `sbptt::Engine`.
+/// \file The engine's reusable buffers (per thread, per sweep) and its scan for the first
+/// non-finite value. Implementation details of `sbptt::Engine`.
 #include <cmath>
 #include <optional>
 #include <vector>
 
-#include "sbptt/bptt/batch_physics.hpp"
 #include "sbptt/bptt/diagnostics.hpp"
-#include "sbptt/bptt/objective.hpp"
 #include "sbptt/core/non_finite.hpp"
 #include "sbptt/core/types.hpp"
 
@@ -99,52 +97,6 @@ struct SweepBuffers {
     diagnostics.grad_norm2 = static_cast<double>(squares);
     if (!diagnostics.first_non_finite && !squares_show_all_finite(squares))
       diagnostics.first_non_finite = first_non_finite_component(gradient, Quantity::Gradient);
-  }
-};
-
-/// One independently rolled-out chunk of `Engine::evaluate`: its states, controls, controller
-/// workspace and the first non-finite value it met.
-template <class Scalar, class Workspace, class Scratch>
-struct EvaluationChunk {
-  Matrix<Scalar> state, next, control;
-  Workspace workspace;
-  std::optional<Scratch> scratch;
-  RolloutNonFinite non_finite;
-
-  /// Rolls out `x0` (state_dim × b, samples first … first + b − 1 of the set) for `steps`
-  /// steps with `controller` (packed) through `sim`, and sets `losses` (b) to each sample's
-  /// loss under `objective`.
-  template <class Sim, class Controller, class Loss, class Initial, class Losses>
-  void roll_out(const Sim& sim, const Controller& controller, const Objective<Loss>& objective,
-                Index steps, const Initial& x0, Index first, Losses&& losses) {
-    using State = typename Sim::State;
-    const Index batch = x0.cols();
-    const auto w = static_cast<Scalar>(objective.step_weight);
-    const auto control_scale = static_cast<Scalar>(
-        objective.control_weight / static_cast<double>(steps * sim.control_dim()));
-    if (!scratch) scratch.emplace(sim.state_dim(), sim.control_dim());
-    Scratch& t = *scratch;
-    non_finite.value.reset();
-    state = x0;
-    non_finite.note(Quantity::State, 0, state, first);
-    next.resize(sim.state_dim(), batch);
-    losses.setZero();
-    for (Index n = 0; n < steps; ++n) {
-      controller.forward(state, control, workspace);
-      non_finite.note(Quantity::Control, n, control, first);
-      step_columns(sim, state, control, next, [&](auto&& body) {
-        for (Index b = 0; b < batch; ++b) body(b, t);
-      });
-      for (Index b = 0; b < batch; ++b) {
-        t.x_next = next.col(b);
-        if (objective.control_weight > 0)
-          losses(b) += control_scale * control.col(b).squaredNorm();
-        if (objective.timing == LossTiming::Continuous || n + 1 == steps)
-          losses(b) += w * objective.state_loss(t.x_next, static_cast<State*>(nullptr));
-      }
-      state.swap(next);
-      non_finite.note(Quantity::State, n + 1, state, first);
-    }
   }
 };
 

@@ -355,6 +355,31 @@ TEST_CASE("a forward pass that throws leaves no trajectory for a sweep", "[bptt]
   engine.reverse(FlowMode::Full, g);
 }
 
+TEST_CASE("a timed engine's first batch at a size stays untimed when the forward pass before it "
+          "threw", "[bptt][threads]") {
+  // The first finished batch of a size runs on the threads out of the schedule (it sizes their
+  // buffers); a rollout that threw finished nothing, so the batch after it is still the first.
+  const ThrowsAbove sim{Sim<double>::scalar(2.0, 0.5), 5.0};
+  PolynomialPolicy<double> policy({1});
+  Engine engine(sim, policy, Objective<Loss<double>>{Loss<double>{Sim<double>::State::Zero()}}, 5);
+  engine.set_threads(2, 0.0, SweepThreading::Timed);  // every per-sample loop split once timed
+  Vector<double> g;
+  auto batch = [&](Index samples) {
+    engine.forward(Matrix<double>::Constant(1, samples, 0.1));
+    engine.reverse(FlowMode::Full, g);
+  };
+  batch(3);  // times the loops; until then no batch is the decision's
+  REQUIRE(engine.sweep_tally().threaded + engine.sweep_tally().alone == 0);
+  REQUIRE_THROWS_WITH(engine.forward(Matrix<double>::Ones(1, 2)),
+                      Catch::Contains("left the model's range"));
+  constexpr int probes = detail::SweepThreadingDecision::probes;
+  for (int k = 0; k < 1 + probes; ++k) batch(2);
+  CHECK(engine.sweep_tally().threaded == 1 + probes);  // the first, the threaded probes
+  CHECK(engine.sweep_tally().alone == 0);
+  for (int k = 0; k < probes; ++k) batch(2);
+  CHECK(engine.sweep_tally().alone == probes);  // the probes alone
+}
+
 TEST_CASE("a squared-distance target of another size than the state is refused when the engine "
           "is built", "[bptt]") {
   const LinearSystem<double> sim(Eigen::MatrixXd::Identity(3, 3), Eigen::MatrixXd::Ones(3, 1));

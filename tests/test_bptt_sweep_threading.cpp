@@ -69,9 +69,10 @@ TEST_CASE("sweep threading: the timed decision keeps the faster way by its best 
   follow(decision, shortest, true);
   probe(decision, {4, 4, 4}, {4, 5, 5});  // a tie: the threads are kept only when faster
   follow(decision, 3, false);
-  decision.count_unscheduled(true);  // a batch at a new size, out of the schedule
-  follow(decision, 1, false);
   CHECK(decision.first_at(8));
+  CHECK(decision.first_at(8));  // until a batch of 8 finishes
+  decision.finished_first_at(8, true);  // out of the schedule
+  follow(decision, 1, false);
   CHECK_FALSE(decision.first_at(8));
   CHECK(decision.first_at(7));
   const SweepTally tally = decision.tally();

@@ -98,7 +98,7 @@ public:
   void finish(SweepKind kind, Index samples) {
     SweepThreadingDecision& decision = decision_of(kind);
     if (!scheduled_) {
-      decision.count_unscheduled(threaded_);
+      decision.finished_first_at(samples, threaded_);
       return;
     }
     const std::chrono::duration<double, std::nano> took =

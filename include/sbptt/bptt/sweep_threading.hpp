@@ -84,7 +84,7 @@ public:
   [[nodiscard]] SweepThreading policy() const { return policy_; }
 
   /// Whether the next batch runs on the threads; a batch that is `first_at_size` does when
-  /// timed, and is then left out of the schedule (`count_unscheduled`).
+  /// timed, and is then left out of the schedule (`finished_first_at`).
   [[nodiscard]] bool next_threaded(bool first_at_size = false) const {
     if (policy_ != SweepThreading::Timed) return policy_ == SweepThreading::Always;
     return first_at_size || (probing() ? batches_ < probes : threaded_);
@@ -104,16 +104,17 @@ public:
     if (++batches_ == 2 * probes + between_) batches_ = 0;
   }
 
-  /// Counts a batch that ran outside the schedule, `threaded` or not.
-  void count_unscheduled(bool threaded) { ++(threaded ? tally_.threaded : tally_.alone); }
-
-  /// Whether a batch of `samples` is the first of this kind at that size since the last, and
-  /// notes the size.
-  [[nodiscard]] bool first_at(Index samples) {
-    const bool first = samples != samples_;
+  /// Counts the first batch of this kind at `samples`, which ran outside the schedule,
+  /// `threaded` or not, and notes its size: a batch that did not finish (its forward pass or
+  /// sweep threw) sized nothing for sure, so the next one is still the first.
+  void finished_first_at(Index samples, bool threaded) {
     samples_ = samples;
-    return first;
+    ++(threaded ? tally_.threaded : tally_.alone);
   }
+
+  /// Whether a batch of `samples` is the first of this kind to finish at that size since the
+  /// last size.
+  [[nodiscard]] bool first_at(Index samples) const { return samples != samples_; }
 
   [[nodiscard]] const SweepTally& tally() const { return tally_; }
 

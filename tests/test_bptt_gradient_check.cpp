@@ -1,8 +1,9 @@
 // check_gradient compares the engine's R gradient and the objective's ∂ℓ/∂x with central
 // differences of the rollout loss: the shipped scenes pass (double and float), and a loss whose
-// gradient is wrong, or a simulator whose VJP is wrong, fails. The engine also rejects a
-// fixed-size State whose size disagrees with state_dim(). Quantum control runs the batched
-// simulator path (step_batch / vjp_batch) of the engine.
+// gradient is wrong, or a simulator whose VJP is wrong, fails. The engine also rejects a fixed-size
+// State whose size disagrees with state_dim(), and a quantum or guidance loss made for a scene of
+// another size. Quantum control runs the batched simulator path (step_batch / vjp_batch) of the
+// engine.
 #include <cmath>
 #include <limits>
 

@@ -94,7 +94,7 @@ public:
   }
 
   /// The end of the current batch of `samples`, to the decision of kind `kind`: its time per
-  /// sample, or only its way for a batch out of the schedule.
+  /// sample, or its way and its size for the first at that size (out of the schedule).
   void finish(SweepKind kind, Index samples) {
     SweepThreadingDecision& decision = decision_of(kind);
     if (!scheduled_) {

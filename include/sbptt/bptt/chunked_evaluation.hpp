@@ -3,8 +3,8 @@
 /// The set is cut into chunks of a fixed number of samples (`kEvaluationChunk`, not the thread
 /// count, so that the result is the same on any number of threads), each rolled out from x_0 to
 /// x_m on its own (c_n = N(x_n; θ), x_{n+1} = P(x_n, c_n), engine.hpp) with buffers of its own,
-/// in parallel with threads. Memory is O(chunk · (state_dim + network widths)) whatever the
-/// horizon. Implementation detail of `Engine`.
+/// in parallel with threads. Memory is O(B · (state_dim + network widths)) whatever the horizon:
+/// each chunk keeps its buffers from call to call. Implementation detail of `Engine`.
 #include <algorithm>
 #include <cstddef>
 #include <optional>

@@ -44,12 +44,14 @@
 /// `add_param_gradient` concurrently with itself on different steps, with different `scaled`
 /// buffers and gradients (`Network`'s are all of
 /// these), and the loss functor must be thread-safe (a `const` pure function).
+#include <algorithm>
 #include <cmath>
 #include <initializer_list>
 #include <memory>
 #include <optional>
 #include <vector>
 
+#include "sbptt/bptt/batch_physics.hpp"
 #include "sbptt/bptt/batch_threading.hpp"
 #include "sbptt/bptt/chunked_evaluation.hpp"
 #include "sbptt/bptt/diagnostics.hpp"

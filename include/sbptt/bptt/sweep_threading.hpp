@@ -105,15 +105,16 @@ public:
   }
 
   /// Counts the first batch of this kind at `samples`, which ran outside the schedule,
-  /// `threaded` or not, and notes its size: a batch that did not finish (its forward pass or
-  /// sweep threw) sized nothing for sure, so the next one is still the first.
+  /// `threaded` or not, and notes its size. Only a batch whose sweep ended comes here: one whose
+  /// forward pass or sweep threw, or that no sweep followed, may have sized nothing, so the
+  /// next one is still the first.
   void finished_first_at(Index samples, bool threaded) {
     samples_ = samples;
     ++(threaded ? tally_.threaded : tally_.alone);
   }
 
-  /// Whether a batch of `samples` is the first of this kind to finish at that size since the
-  /// last size.
+  /// Whether no batch of this kind has finished at `samples` since one finished at another
+  /// size.
   [[nodiscard]] bool first_at(Index samples) const { return samples != samples_; }
 
   [[nodiscard]] const SweepTally& tally() const { return tally_; }
@@ -128,7 +129,7 @@ private:
 
   SweepThreading policy_;
   SweepTally tally_;
-  Index samples_ = 0;       ///< the size of the last batch
+  Index samples_ = 0;       ///< the size of the last first batch that finished (0: none)
   int batches_ = 0;         ///< of the schedule, since the last probing began
   bool threaded_ = true;    ///< the last probing's choice
   /// Batches from the last probing's end to the next; half the shortest before the first

@@ -38,6 +38,8 @@ public:
 
   /// Throws `InvalidArgument` unless the loss's agents fill `state_dim` numbers; the engine
   /// calls it when it is built (with run-time agent counts the loss may have other counts).
+  /// Only the total can be told from `state_dim`: counts swapped (3 drivers and 2 evaders
+  /// against 2 and 3) pass.
   void check_state_dim(Index state_dim) const {
     detail::require(state_size() == state_dim, "GuidanceLoss: ", drivers_, " drivers and ",
                     evaders_, " evaders make states of ", state_size(),

@@ -1,10 +1,10 @@
 #pragma once
 /// \file `Engine::evaluate`: the batch-mean loss of a large set without storing its trajectory.
-/// The set is cut into chunks of a fixed number of samples (`kEvaluationChunk`, not the thread
-/// count, so that the result is the same on any number of threads), each rolled out from x_0 to
-/// x_m on its own (c_n = N(x_n; θ), x_{n+1} = P(x_n, c_n), engine.hpp) with buffers of its own,
-/// in parallel with threads. Memory is O(B · (state_dim + network widths)) whatever the horizon:
-/// each chunk keeps its buffers from call to call. Implementation detail of `Engine`.
+/// The set is cut into chunks of a fixed number of samples (`evaluation_chunk_samples`, not the
+/// thread count, so that the result is the same on any number of threads), each rolled out from
+/// x_0 to x_m on its own (c_n = N(x_n; θ), x_{n+1} = P(x_n, c_n), engine.hpp) with buffers of its
+/// own, in parallel with threads. Memory is O(B · (state_dim + network widths)) whatever the
+/// horizon: each chunk keeps its buffers from call to call. Implementation detail of `Engine`.
 #include <algorithm>
 #include <cstddef>
 #include <optional>
@@ -19,7 +19,8 @@
 
 namespace sbptt::detail {
 
-inline constexpr Index kEvaluationChunk = 32;  ///< samples per chunk of `ChunkedEvaluation`
+/// Samples per chunk of `ChunkedEvaluation`.
+inline constexpr Index evaluation_chunk_samples = 32;
 
 /// One independently rolled-out chunk of `Engine::evaluate`: its states, controls, controller
 /// workspace and the first non-finite value it met.
@@ -80,12 +81,12 @@ public:
              Index steps, const Matrix<Scalar>& initial_states, ThreadPool* pool,
              std::optional<NonFinite>& non_finite) {
     const Index batch = initial_states.cols();
-    const Index count = (batch + kEvaluationChunk - 1) / kEvaluationChunk;
+    const Index count = (batch + evaluation_chunk_samples - 1) / evaluation_chunk_samples;
     if (static_cast<Index>(chunks_.size()) < count) chunks_.resize(static_cast<std::size_t>(count));
     losses_.resize(batch);
     auto task = [&](Index k, Index) {
-      const Index first = k * kEvaluationChunk;
-      const Index size = std::min(kEvaluationChunk, batch - first);
+      const Index first = k * evaluation_chunk_samples;
+      const Index size = std::min(evaluation_chunk_samples, batch - first);
       chunks_[static_cast<std::size_t>(k)].roll_out(sim, controller, objective, steps,
                                                     initial_states.middleCols(first, size), first,
                                                     losses_.segment(first, size));

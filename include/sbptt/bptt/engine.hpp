@@ -92,7 +92,7 @@ public:
 
   /// Samples per independently rolled-out chunk of `evaluate` (a constant, so that the result
   /// does not depend on the number of threads).
-  static constexpr Index kEvaluateChunk = detail::kEvaluationChunk;
+  static constexpr Index kEvaluateChunk = detail::evaluation_chunk_samples;
 
   /// `set_threads`' default `split_above_ns`.
   static constexpr double kDefaultSplitAboveNs = detail::ForkDecision::default_threshold_ns;

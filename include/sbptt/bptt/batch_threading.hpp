@@ -64,11 +64,9 @@ public:
   /// \return whether the batch runs on the threads.
   bool begin(SweepKind kind, bool decided, Index samples) {
     SweepThreadingDecision& decision = decision_of(kind);
-    const bool first_at_size = decided && decision.first_at(samples);
-    threaded_ = !decided || decision.next_threaded(first_at_size);
+    threaded_ = !decided || decision.next_threaded(decision.first_at(samples));
     way_of_ = decided ? std::optional<SweepKind>(kind) : std::nullopt;
     end_awaited_ = decided;
-    scheduled_ = !first_at_size;
     start_ = std::chrono::steady_clock::now();
     return threaded_;
   }
@@ -97,7 +95,7 @@ public:
   /// sample, or its way and its size for the first at that size (out of the schedule).
   void finish(SweepKind kind, Index samples) {
     SweepThreadingDecision& decision = decision_of(kind);
-    if (!scheduled_) {
+    if (decision.first_at(samples)) {  // none has finished at this size since `begin` either
       decision.finished_first_at(samples, threaded_);
       return;
     }
@@ -115,7 +113,6 @@ private:
   bool threaded_ = true;             ///< the way of the current batch
   std::optional<SweepKind> way_of_;  ///< the decision that chose it, if one did
   bool end_awaited_ = false;         ///< that decision still awaits the batch's end
-  bool scheduled_ = true;            ///< the batch is in its decision's schedule
   std::chrono::steady_clock::time_point start_;
 };
 

@@ -290,6 +290,37 @@ TEST_CASE("two outputs, or an input and an output, that are one file are refused
   }
 }
 
+TEST_CASE("an output that is the program's own stdout or stderr is refused before any work",
+          "[programs]") {
+  // Streams redirected to a file: the finished output would be renamed over that file, and all
+  // the program printed afterwards would go to the old, unlinked one (and its exit code be 0).
+  for (const std::string flag : {"--csv", "--save-params", "--dump-gradients", "--checkpoint"}) {
+    for (const std::string stream : {"/dev/stdout", "/dev/stderr"}) {
+      const std::string epochs = flag == "--dump-gradients" ? "" : "--epochs 2 ";
+      const Outcome r = launch("toy", epochs + flag + " " + stream);  // > file 2>&1
+      INFO(flag << " " << stream << "\n" << r.output);
+      CHECK(r.status == 1);
+      CHECK(contains(r.output, flag + " '" + stream +
+                                   "' is this program's standard output and error; expected"));
+      CHECK_FALSE(contains(r.output, "epoch 1"));
+      CHECK_FALSE(contains(r.output, "epoch,batch_loss"));
+    }
+  }
+  // Only stderr to a file.
+  const fs::path errors = scratch("stderr.txt");
+  const auto alone = sbptt::testing::run("toy", "--epochs 2 --csv /dev/stderr", "",
+                                         "2> " + errors.string());
+  INFO(file_text(errors));
+  CHECK(alone.status == 1);
+  CHECK(contains(file_text(errors), "--csv '/dev/stderr' is this program's standard error;"));
+  // Through a pipe: a special file, refused as such before any work, naming the flag.
+  const auto piped = sbptt::testing::run("toy", "--epochs 2 --csv /dev/stdout");
+  INFO(piped.output);
+  CHECK(piped.status == 1);
+  CHECK(contains(piped.output, "--csv '/dev/stdout' exists and is not a regular file"));
+  CHECK_FALSE(contains(piped.output, "epoch,batch_loss"));
+}
+
 TEST_CASE("a symbolic link as --csv gets its target written", "[programs]") {
   const fs::path dir = fresh_directory("link");
   fs::create_directories(dir / "real");

@@ -21,7 +21,8 @@
 /// An existing target keeps its permission bits (and its group and owner where the writer may
 /// set them); a target the writer may not write (a write-protected file) is refused rather
 /// than replaced, and so is a special file (a device, a FIFO). `check_output_path` makes the
-/// same checks up front, before any work.
+/// same checks up front, before any work, and also refuses the file of the program's standard
+/// output or error: replacing it would send what the program prints next to the old file.
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/file.h>
@@ -222,11 +223,31 @@ inline void check_output_path(const std::string& path, std::string_view what) {
   const std::filesystem::path target = detail::final_target(path);
   std::error_code error;
   const auto status = std::filesystem::status(target, error);
+  // The kernel's own resolution too: /dev/stdout and /proc/self/fd/N name an open file, not a
+  // path, and a pipe there reads as a missing file to `final_target`.
+  struct stat opened {};
+  const bool opens = ::stat(path.c_str(), &opened) == 0;
+  const bool directory_opens = opens && S_ISDIR(opened.st_mode);
   detail::require<IoError>(
-      !std::filesystem::exists(status) || std::filesystem::is_regular_file(status), what, " '",
-      path, "' exists and is not a regular file (",
-      std::filesystem::is_directory(status) ? "a directory" : "a special file",
+      (!std::filesystem::exists(status) || std::filesystem::is_regular_file(status)) &&
+          (!opens || S_ISREG(opened.st_mode)),
+      what, " '", path, "' exists and is not a regular file (",
+      std::filesystem::is_directory(status) || directory_opens ? "a directory" : "a special file",
       "); expected a file path to write");
+  auto is_stream = [&](int fd) {
+    struct stat stream {};
+    return opens && ::fstat(fd, &stream) == 0 && stream.st_dev == opened.st_dev &&
+           stream.st_ino == opened.st_ino;
+  };
+  const bool output = is_stream(STDOUT_FILENO), error_stream = is_stream(STDERR_FILENO);
+  detail::require<IoError>(!output && !error_stream, what, " '", path,
+                           "' is this program's standard ",
+                           output && error_stream ? "output and error"
+                           : output               ? "output"
+                                                  : "error",
+                           "; expected a file of its own (a finished output replaces its file, "
+                           "and what the program printed after that would be lost with the "
+                           "old one)");
   const std::filesystem::path directory = detail::directory_of(target);
   detail::require<IoError>(std::filesystem::exists(directory, error), what, " '", path,
                            "': directory '", directory.string(), "' does not exist");

@@ -52,6 +52,8 @@ std::string describe_coordinates(const mjModel& model) {
 /// it holds nq numbers.
 Vector<double> target_positions(const std::vector<double>& values, const mjModel& model,
                                 const std::string& file) {
+  detail::require(model.nq >= 1, "'", file, "' has no position coordinate (nq = 0), so --target ",
+                  "has nothing to aim at; expected a model with at least one hinge or slide joint");
   detail::require(!values.empty(), "--target is required: ", model.nq,
                   " comma-separated positions, one per coordinate of '", file, "': ",
                   describe_coordinates(model));

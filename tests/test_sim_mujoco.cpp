@@ -375,6 +375,10 @@ TEST_CASE("mujoco: models that cannot be used are refused with a reason", "[sim]
                 "<mujoco><worldbody><body><joint type='hinge'/><geom size='0.1'/></body>"
                 "</worldbody></mujoco>",
                 "no actuator (nu = 0)"},
+        Refused{"jointless.xml",
+                "<mujoco><worldbody><body><geom size='0.1'/><site name='s'/></body></worldbody>"
+                "<actuator><motor site='s' gear='1 0 0 0 0 0'/></actuator></mujoco>",
+                "no joint (nv = 0) and no actuator activation (na = 0), so its state is empty"},
         Refused{"nan_damping.xml",
                 "<mujoco><worldbody><body><joint name='j' type='hinge' damping='nan'/><geom "
                 "size='0.1'/></body></worldbody><actuator><motor joint='j'/></actuator></mujoco>",

@@ -132,6 +132,16 @@ TEST_CASE("mujoco refuses a model or target it cannot use, naming it", "[program
   std::ofstream(ball) << "<mujoco><worldbody><body><joint name='j' type='ball'/><geom "
                          "size='0.1'/></body></worldbody><actuator><general joint='j' "
                          "gear='1 0 0 0 0 0'/></actuator></mujoco>";
+  // No joint: a site motor drives nothing. Without an activation the state is empty; with one
+  // (a filter) it is the activation alone, and no position is there for --target to aim.
+  const fs::path jointless = scratch("jointless.xml"), activation = scratch("activation.xml");
+  const std::string site_body =
+      "<mujoco><worldbody><body><geom size='0.1'/><site name='s'/></body></worldbody>";
+  std::ofstream(jointless) << site_body
+                           << "<actuator><motor site='s' gear='1 0 0 0 0 0'/></actuator></mujoco>";
+  std::ofstream(activation) << site_body
+                            << "<actuator><general site='s' dyntype='filter' dynprm='1' "
+                               "gear='1 0 0 0 0 0'/></actuator></mujoco>";
   struct Case {
     std::string arguments, expected;
   };
@@ -140,6 +150,11 @@ TEST_CASE("mujoco refuses a model or target it cannot use, naming it", "[program
        {Case{"--model " + broken.string() + " --target 0", "XML_ERROR_MISMATCHED_ELEMENT"},
         Case{"--model " + passive.string() + " --target 0", "no actuator (nu = 0)"},
         Case{"--model " + ball.string() + " --target 0,0,0,0", "quaternion"},
+        Case{"--model " + jointless.string() + " --target 0",
+             "no joint (nv = 0) and no actuator activation (na = 0), so its state is empty"},
+        Case{"--model " + jointless.string() + " --check-derivatives", "its state is empty"},
+        Case{"--model " + activation.string(),
+             "has no position coordinate (nq = 0), so --target has nothing to aim at"},
         Case{acrobot + " --target 1,2,3",
              "--target '1,2,3' has 3 value(s); expected nq = 2, one per position coordinate"},
         Case{acrobot + " --target 1,2,3", "shoulder (hinge), elbow (hinge)"},

@@ -196,7 +196,8 @@ public:
   using ControlJacobian = Matrix<Scalar>;  ///< (2 nv + na) × nu
 
   /// Copies `model` (later changes to it do not reach the simulator). Throws InvalidArgument
-  /// for a model with nq ≠ nv, without actuators, with a NaN or ±Inf, or a bad option.
+  /// for a model with nq ≠ nv, without actuators, with an empty state, with a NaN or ±Inf, or a
+  /// bad option.
   explicit MujocoSimulator(const mjModel& model, const MujocoOptions& options = {})
       : options_(options) {
     detail::require(model.nq == model.nv, "MujocoSimulator: the model has nq = ", model.nq,
@@ -207,6 +208,9 @@ public:
                     "so only models of hinge and slide joints are supported");
     detail::require(model.nu >= 1, "MujocoSimulator: the model has no actuator (nu = 0), "
                                    "so a controller has nothing to drive; expected nu >= 1");
+    detail::require(model.nv + model.na >= 1,
+                    "MujocoSimulator: the model has no joint (nv = 0) and no actuator activation "
+                    "(na = 0), so its state is empty; expected at least one hinge or slide joint");
     detail::require(std::isfinite(options.fd_step) && options.fd_step > 0,
                     "MujocoSimulator: fd_step = ", options.fd_step, ", expected a finite ε > 0");
     const std::string non_finite = detail::first_non_finite_field(model);

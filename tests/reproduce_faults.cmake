@@ -227,6 +227,31 @@ execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${out}" TIMEOUT 20 RESULT_
 check("the folder moved away: the sweep redoes the run (${rc})"
       rc EQUAL 0 AND EXISTS "${runs}/cartpole_p4_R_norm_s44.csv")
 
+# A file where the runner keeps its runs folder, or a folder where it writes its summary: the
+# dry run and --emit said nothing, the sweep and --merge failed with a bare "filesystem error"
+# or "cannot rename". Every mode now refuses --out before any work, naming the part.
+foreach(part runs summary.csv)
+  set(layout "${WORK_DIR}/layout_${part}")
+  file(REMOVE_RECURSE "${layout}")
+  if(part STREQUAL "runs")
+    file(WRITE "${layout}/runs" "a user's file\n")
+    set(layout_expected "'runs' in it is a file. expected the folder")
+  else()
+    file(WRITE "${layout}/summary.csv/notes.txt" "a user's file\n")
+    set(layout_expected "'summary.csv' in it is a folder. expected the runner's summary file")
+  endif()
+  foreach(mode "" --merge --dry-run "--emit;parallel")
+    execute_process(COMMAND "${REPRODUCE}" ${grid} ${mode} --out "${layout}" TIMEOUT 20
+                    RESULT_VARIABLE rc OUTPUT_VARIABLE said ERROR_VARIABLE err)
+    string(APPEND said "${err}")
+    check("${part} of the wrong kind, mode '${mode}': exit 2 naming --out and it (${rc})\n${said}"
+          rc EQUAL 2 AND said MATCHES "--out '[^']*layout_${part}': ${layout_expected}" AND
+          NOT said MATCHES "filesystem error|cannot rename|measured|cartpole_p")
+  endforeach()
+  check("${part} of the wrong kind: the user's file kept"
+        EXISTS "${layout}/runs" OR EXISTS "${layout}/summary.csv/notes.txt")
+endforeach()
+
 # --- 2. limits shared with the task programs; a missing python ------------------------------
 foreach(flag epochs samples)
   execute_process(COMMAND "${REPRODUCE}" ${grid} --${flag} 2000000 --out "${WORK_DIR}/limits"

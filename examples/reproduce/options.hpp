@@ -113,6 +113,30 @@ inline void probe_output_folder(const Options& o, const fs::path& existing) {
   fs::remove(probe, ignored);
 }
 
+/// The parts of an existing --out that the runner writes are, where they exist, of the kind it
+/// writes: otherwise the sweep and --merge would fail at their first write with the file
+/// system's words, after the dry run and --emit had said nothing.
+inline void require_output_layout(const Options& o, const fs::path& out) {
+  struct Part {
+    const char* name;
+    bool folder;
+    const char* role;
+  };
+  for (const Part& part : {Part{"runs", true, "the folder where the runner keeps its runs"},
+                           Part{"plots", true, "the folder of the plots"},
+                           Part{"slurm", true, "the folder of --emit slurm's script and logs"},
+                           Part{"summary.csv", false, "the runner's summary file"}}) {
+    std::error_code error;
+    const fs::file_status status = fs::status(out / part.name, error);
+    if (!fs::exists(status)) continue;
+    const bool folder = fs::is_directory(status), file = fs::is_regular_file(status);
+    if (part.folder ? folder : file) continue;
+    throw bad_out(o, concat("'", part.name, "' in it is ",
+                            folder ? "a folder" : file ? "a file" : "a special file",
+                            "; expected ", part.role, " (move it away, then run again)"));
+  }
+}
+
 /// --out is a folder, or a path where one can be made, that this user may write in (a dry
 /// run only reads it): otherwise every mode would fail at its first write, with the file
 /// system's words and without the flag.
@@ -144,6 +168,7 @@ inline void require_output_folder(const Options& o) {
                                  itself ? "" : concat(": '", existing.string(), "'"), " ", what,
                                  "; ", expected_out));
   }
+  if (existing == out) require_output_layout(o, out);
   if (o.dry_run) return;
   if (::access(existing.c_str(), W_OK | X_OK) != 0) {
     const int reason = errno;

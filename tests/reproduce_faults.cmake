@@ -209,18 +209,26 @@ endforeach()
 # A folder where a run's file belongs (a user's mkdir, an unpacked archive): the sweep said
 # "the run is redone", then failed to remove the folder and exited 1 with a bare "filesystem
 # error". Every mode now refuses it before any work, names it, and leaves it and its contents.
+# Runs the grid on `out_dir` in every mode; each must exit `code`, say what matches
+# `said_regex` and nothing that matches `work_regex` (a refusal before any work), and leave
+# `kept`.
+function(check_refused_in_every_mode label out_dir code said_regex work_regex kept)
+  foreach(mode "" --merge --dry-run "--emit;parallel")
+    execute_process(COMMAND "${REPRODUCE}" ${grid} ${mode} --out "${out_dir}" TIMEOUT 20
+                    RESULT_VARIABLE rc OUTPUT_VARIABLE said ERROR_VARIABLE err)
+    string(APPEND said "${err}")
+    check("${label}, mode '${mode}': exit ${code} naming it, no work (${rc})\n${said}"
+          rc EQUAL ${code} AND said MATCHES "${said_regex}" AND NOT said MATCHES "${work_regex}")
+    check("${label}, mode '${mode}': the user's file kept" EXISTS "${kept}")
+  endforeach()
+endfunction()
+
 file(REMOVE "${runs}/cartpole_p4_R_norm_s44.csv")
 file(WRITE "${runs}/cartpole_p4_R_norm_s44.csv/notes.txt" "a user's file\n")
-foreach(mode "" --merge --dry-run "--emit;parallel")
-  execute_process(COMMAND "${REPRODUCE}" ${grid} ${mode} --out "${out}" TIMEOUT 20
-                  RESULT_VARIABLE rc OUTPUT_VARIABLE said ERROR_VARIABLE err)
-  string(APPEND said "${err}")
-  check("a folder as a run's .csv, mode '${mode}': exit 1 naming it, no work (${rc})\n${said}"
-        rc EQUAL 1 AND said MATCHES "cartpole_p4_R_norm_s44.csv' is a folder" AND
-        NOT said MATCHES "redone|filesystem error|measured")
-  check("a folder as a run's .csv, mode '${mode}': the folder and its file kept"
-        EXISTS "${runs}/cartpole_p4_R_norm_s44.csv/notes.txt")
-endforeach()
+check_refused_in_every_mode("a folder as a run's .csv" "${out}" 1
+                            "cartpole_p4_R_norm_s44.csv' is a folder"
+                            "redone|filesystem error|measured"
+                            "${runs}/cartpole_p4_R_norm_s44.csv/notes.txt")
 file(REMOVE_RECURSE "${runs}/cartpole_p4_R_norm_s44.csv")
 execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${out}" TIMEOUT 20 RESULT_VARIABLE rc
                 OUTPUT_QUIET ERROR_QUIET)
@@ -234,22 +242,16 @@ foreach(part runs summary.csv)
   set(layout "${WORK_DIR}/layout_${part}")
   file(REMOVE_RECURSE "${layout}")
   if(part STREQUAL "runs")
-    file(WRITE "${layout}/runs" "a user's file\n")
+    set(kept "${layout}/runs")
     set(layout_expected "'runs' in it is a file. expected the folder")
   else()
-    file(WRITE "${layout}/summary.csv/notes.txt" "a user's file\n")
+    set(kept "${layout}/summary.csv/notes.txt")
     set(layout_expected "'summary.csv' in it is a folder. expected the runner's summary file")
   endif()
-  foreach(mode "" --merge --dry-run "--emit;parallel")
-    execute_process(COMMAND "${REPRODUCE}" ${grid} ${mode} --out "${layout}" TIMEOUT 20
-                    RESULT_VARIABLE rc OUTPUT_VARIABLE said ERROR_VARIABLE err)
-    string(APPEND said "${err}")
-    check("${part} of the wrong kind, mode '${mode}': exit 2 naming --out and it (${rc})\n${said}"
-          rc EQUAL 2 AND said MATCHES "--out '[^']*layout_${part}': ${layout_expected}" AND
-          NOT said MATCHES "filesystem error|cannot rename|measured|cartpole_p")
-  endforeach()
-  check("${part} of the wrong kind: the user's file kept"
-        EXISTS "${layout}/runs" OR EXISTS "${layout}/summary.csv/notes.txt")
+  file(WRITE "${kept}" "a user's file\n")
+  check_refused_in_every_mode("${part} of the wrong kind" "${layout}" 2
+                              "--out '[^']*layout_${part}': ${layout_expected}"
+                              "filesystem error|cannot rename|measured|cartpole_p" "${kept}")
 endforeach()
 
 # --- 2. limits shared with the task programs; a missing python ------------------------------

@@ -206,9 +206,6 @@ foreach(suffix .csv .log .run)
   check("the redone run's ${suffix} is a regular file" rc EQUAL 0)
 endforeach()
 
-# A folder where a run's file belongs (a user's mkdir, an unpacked archive): the sweep said
-# "the run is redone", then failed to remove the folder and exited 1 with a bare "filesystem
-# error". Every mode now refuses it before any work, names it, and leaves it and its contents.
 # Runs the grid on `out_dir` in every mode; each must exit `code`, say what matches
 # `said_regex` and nothing that matches `work_regex` (a refusal before any work), and leave
 # `kept`.
@@ -223,6 +220,9 @@ function(check_refused_in_every_mode label out_dir code said_regex work_regex ke
   endforeach()
 endfunction()
 
+# A folder where a run's file belongs (a user's mkdir, an unpacked archive): the sweep said
+# "the run is redone", then failed to remove the folder and exited 1 with a bare "filesystem
+# error". Every mode now refuses it before any work, names it, and leaves it and its contents.
 file(REMOVE "${runs}/cartpole_p4_R_norm_s44.csv")
 file(WRITE "${runs}/cartpole_p4_R_norm_s44.csv/notes.txt" "a user's file\n")
 check_refused_in_every_mode("a folder as a run's .csv" "${out}" 1

@@ -49,7 +49,7 @@ std::string describe_coordinates(const mjModel& model) {
 }
 
 /// --target as a vector; throws naming the flag, the value and the model's coordinates unless
-/// it holds nq numbers.
+/// it holds nq numbers, and naming the model if it has no position (nq = 0) to aim at.
 Vector<double> target_positions(const std::vector<double>& values, const mjModel& model,
                                 const std::string& file) {
   detail::require(model.nq >= 1, "'", file, "' has no position coordinate (nq = 0), so --target ",

@@ -235,23 +235,46 @@ execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${out}" TIMEOUT 20 RESULT_
 check("the folder moved away: the sweep redoes the run (${rc})"
       rc EQUAL 0 AND EXISTS "${runs}/cartpole_p4_R_norm_s44.csv")
 
-# A file where the runner keeps its runs folder, or a folder where it writes its summary: the
-# dry run and --emit said nothing, the sweep and --merge failed with a bare "filesystem error"
-# or "cannot rename". Every mode now refuses --out before any work, naming the part.
-foreach(part runs summary.csv)
+# A file where the runner keeps its runs or plots folder, a link to nothing there, or a folder
+# where it writes its summary: the dry run and --emit said nothing, the sweep and --merge
+# failed with a bare "filesystem error" or "cannot rename". Every mode now refuses --out before
+# any work, naming the part.
+foreach(part runs summary.csv plots runs_link)
   set(layout "${WORK_DIR}/layout_${part}")
   file(REMOVE_RECURSE "${layout}")
-  if(part STREQUAL "runs")
-    set(kept "${layout}/runs")
-    set(layout_expected "'runs' in it is a file. expected the folder")
-  else()
+  file(MAKE_DIRECTORY "${layout}")
+  if(part STREQUAL "runs" OR part STREQUAL "plots")
+    set(kept "${layout}/${part}")
+    set(layout_expected "'${part}' in it is a file. expected the folder")
+  elseif(part STREQUAL "summary.csv")
     set(kept "${layout}/summary.csv/notes.txt")
     set(layout_expected "'summary.csv' in it is a folder. expected the runner's summary file")
+  else()
+    file(CREATE_LINK "${layout}/nowhere" "${layout}/runs" SYMBOLIC)
+    set(kept "${layout}")
+    set(layout_expected "'runs' in it is a symbolic link to nothing. expected the folder")
   endif()
-  file(WRITE "${kept}" "a user's file\n")
+  if(NOT part STREQUAL "runs_link")
+    file(WRITE "${kept}" "a user's file\n")
+  endif()
+  set(whole_grid ${grid})
+  if(part STREQUAL "plots")  # checked only where the figures are drawn
+    list(REMOVE_ITEM grid --no-plot)
+  endif()
   check_refused_in_every_mode("${part} of the wrong kind" "${layout}" 2
                               "--out '[^']*layout_${part}': ${layout_expected}"
                               "filesystem error|cannot rename|measured|cartpole_p" "${kept}")
+  set(grid ${whole_grid})
+endforeach()
+# Only what this invocation writes is checked: a file named plots under --no-plot, or one named
+# slurm without --emit slurm, is the user's business.
+foreach(part plots slurm)
+  file(WRITE "${WORK_DIR}/layout_unused_${part}/${part}" "a user's file\n")
+  execute_process(COMMAND "${REPRODUCE}" ${grid} --dry-run  # the grid has --no-plot
+                          --out "${WORK_DIR}/layout_unused_${part}" TIMEOUT 20 RESULT_VARIABLE rc
+                  OUTPUT_QUIET ERROR_VARIABLE err)
+  check("a file named ${part} that this invocation does not write: exit 0 (${rc})\n${err}"
+        rc EQUAL 0)
 endforeach()
 
 # --- 2. limits shared with the task programs; a missing python ------------------------------

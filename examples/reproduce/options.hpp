@@ -113,27 +113,38 @@ inline void probe_output_folder(const Options& o, const fs::path& existing) {
   fs::remove(probe, ignored);
 }
 
-/// The parts of an existing --out that the runner writes are, where they exist, of the kind it
-/// writes: otherwise the sweep and --merge would fail at their first write with the file
-/// system's words, after the dry run and --emit had said nothing.
+/// The parts of an existing --out that this invocation's work writes (the sweep, --merge, the
+/// plots, the Slurm script) are, where they exist, of the kind it writes: otherwise the sweep
+/// and --merge would fail at their first write with the file system's words, after the dry run
+/// and --emit had said nothing.
 inline void require_output_layout(const Options& o, const fs::path& out) {
   struct Part {
     const char* name;
-    bool folder;
+    bool folder, written;
     const char* role;
   };
-  for (const Part& part : {Part{"runs", true, "the folder where the runner keeps its runs"},
-                           Part{"plots", true, "the folder of the plots"},
-                           Part{"slurm", true, "the folder of --emit slurm's script and logs"},
-                           Part{"summary.csv", false, "the runner's summary file"}}) {
+  for (const Part& part :
+       {Part{"runs", true, true, "the folder where the runner keeps its runs"},
+        Part{"summary.csv", false, true, "the runner's summary file"},
+        Part{"plots", true, o.plot, "the folder of the plots, or --no-plot"},
+        Part{"slurm", true, o.emit == "slurm", "the folder of --emit slurm's script and logs"}}) {
+    if (!part.written) continue;
+    auto refused = [&](const char* kind) {
+      return bad_out(o, concat("'", part.name, "' in it is ", kind, "; expected ", part.role,
+                               " (move it away, then run again)"));
+    };
     std::error_code error;
-    const fs::file_status status = fs::status(out / part.name, error);
-    if (!fs::exists(status)) continue;
+    const fs::path path = out / part.name;
+    const fs::file_status status = fs::status(path, error);
+    if (!fs::exists(status)) {
+      // A link to nothing: the first write would fail where it leads, in the system's words.
+      if (fs::is_symlink(fs::symlink_status(path, error)))
+        throw refused("a symbolic link to nothing");
+      continue;
+    }
     const bool folder = fs::is_directory(status), file = fs::is_regular_file(status);
     if (part.folder ? folder : file) continue;
-    throw bad_out(o, concat("'", part.name, "' in it is ",
-                            folder ? "a folder" : file ? "a file" : "a special file",
-                            "; expected ", part.role, " (move it away, then run again)"));
+    throw refused(folder ? "a folder" : file ? "a file" : "a special file");
   }
 }
 

@@ -306,13 +306,18 @@ TEST_CASE("an output that is the program's own stdout or stderr is refused befor
       CHECK_FALSE(contains(r.output, "epoch,batch_loss"));
     }
   }
-  // Only stderr to a file.
-  const fs::path errors = scratch("stderr.txt");
-  const auto alone = sbptt::testing::run("toy", "--epochs 2 --csv /dev/stderr", "",
-                                         "2> " + errors.string());
+  // Only stderr to a file, or only stdout (stderr on the pipe).
+  const fs::path errors = scratch("stderr.txt"), printed = scratch("stdout.txt");
+  const auto error_alone = sbptt::testing::run("toy", "--epochs 2 --csv /dev/stderr", "",
+                                               "2> " + errors.string());
   INFO(file_text(errors));
-  CHECK(alone.status == 1);
+  CHECK(error_alone.status == 1);
   CHECK(contains(file_text(errors), "--csv '/dev/stderr' is this program's standard error;"));
+  const auto output_alone = sbptt::testing::run("toy", "--epochs 2 --csv /dev/stdout", "",
+                                                "2>&1 > " + printed.string());
+  INFO(output_alone.output);
+  CHECK(output_alone.status == 1);
+  CHECK(contains(output_alone.output, "--csv '/dev/stdout' is this program's standard output;"));
   // Through a pipe: a special file, refused as such before any work, naming the flag.
   const auto piped = sbptt::testing::run("toy", "--epochs 2 --csv /dev/stdout");
   INFO(piped.output);

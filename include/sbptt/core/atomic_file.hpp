@@ -214,8 +214,9 @@ inline void remove_dead_writers_temporaries(const std::filesystem::path& target)
 
 /// Fails before any work, with `IoError` naming `what` (e.g. "--csv") and the reason, when a
 /// file could not later be written at `path` the way `write_file_atomically` writes it: empty
-/// path; a directory or special file there; a missing or unwritable directory; a
-/// write-protected existing file; an append-only file or directory; or a name too long for
+/// path; a directory or special file there; the file of this process's standard output or
+/// error (what it printed after the rename would be lost); a missing or unwritable directory;
+/// a write-protected existing file; an append-only file or directory; or a name too long for
 /// the file system once the temporary suffix is added.
 inline void check_output_path(const std::string& path, std::string_view what) {
   detail::require<IoError>(!path.empty(), what, ": the path is empty; expected a file path to "

@@ -210,7 +210,8 @@ public:
                                    "so a controller has nothing to drive; expected nu >= 1");
     detail::require(model.nv + model.na >= 1,
                     "MujocoSimulator: the model has no joint (nv = 0) and no actuator activation "
-                    "(na = 0), so its state is empty; expected at least one hinge or slide joint");
+                    "(na = 0), so its state is empty; expected at least one hinge or slide joint, "
+                    "or an actuator with activation dynamics");
     detail::require(std::isfinite(options.fd_step) && options.fd_step > 0,
                     "MujocoSimulator: fd_step = ", options.fd_step, ", expected a finite ε > 0");
     const std::string non_finite = detail::first_non_finite_field(model);

@@ -224,17 +224,15 @@ inline void check_output_path(const std::string& path, std::string_view what) {
   const std::filesystem::path target = detail::final_target(path);
   std::error_code error;
   const auto status = std::filesystem::status(target, error);
-  // The kernel's own resolution too: /dev/stdout and /proc/self/fd/N name an open file, not a
-  // path, and a pipe there reads as a missing file to `final_target`.
+  // What is there, as the kernel resolves the path: the same file as `final_target` for a
+  // chain of links, and also for /dev/stdout and /proc/self/fd/N, which name an open file (a
+  // pipe there reads as a missing file to `final_target`).
   struct stat opened {};
   const bool opens = ::stat(path.c_str(), &opened) == 0;
-  const bool directory_opens = opens && S_ISDIR(opened.st_mode);
-  detail::require<IoError>(
-      (!std::filesystem::exists(status) || std::filesystem::is_regular_file(status)) &&
-          (!opens || S_ISREG(opened.st_mode)),
-      what, " '", path, "' exists and is not a regular file (",
-      std::filesystem::is_directory(status) || directory_opens ? "a directory" : "a special file",
-      "); expected a file path to write");
+  detail::require<IoError>(!opens || S_ISREG(opened.st_mode), what, " '", path,
+                           "' exists and is not a regular file (",
+                           S_ISDIR(opened.st_mode) ? "a directory" : "a special file",
+                           "); expected a file path to write");
   auto is_stream = [&](int fd) {
     struct stat stream {};
     return opens && ::fstat(fd, &stream) == 0 && stream.st_dev == opened.st_dev &&

@@ -130,7 +130,7 @@ int run(TaskOptions o) {
   detail::require(!o.model.empty(), "--model is required: the MJCF file of the scene");
   std::vector<std::string> warnings;
   const MujocoModelPtr model =
-      examples::reading_flag("--model", [&] { return load_mujoco_model(o.model, &warnings); });
+      detail::prefixing_errors("--model", [&] { return load_mujoco_model(o.model, &warnings); });
   for (const std::string& warning : warnings)
     std::fprintf(stderr, "mujoco: --model '%s': MuJoCo warns: %s\n", o.model.c_str(),
                  warning.c_str());

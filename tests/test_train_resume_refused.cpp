@@ -30,11 +30,18 @@ fs::path scratch(const std::string& name) {
   return dir / name;
 }
 
-/// Settings of a run of `epochs` epochs with its checkpoint and log at these paths.
-RunSettings logged_checkpoint_run(const fs::path& checkpoint, const fs::path& log, long epochs) {
+/// Settings of a run of `epochs` epochs with its checkpoint at this path (removed), and no log.
+RunSettings checkpoint_run(const fs::path& checkpoint, long epochs) {
+  fs::remove(checkpoint);
   RunSettings settings;
   settings.epochs = epochs;
   settings.checkpoint = checkpoint.string();
+  return settings;
+}
+
+/// The same with its log at `log`.
+RunSettings logged_checkpoint_run(const fs::path& checkpoint, const fs::path& log, long epochs) {
+  RunSettings settings = checkpoint_run(checkpoint, epochs);
   settings.log_csv = log.string();
   return settings;
 }
@@ -244,11 +251,8 @@ TEST_CASE("run: a checkpoint made without a log is refused with a log, before re
   // had announced the resume; it is a setting of the run that differs.
   const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
   const fs::path checkpoint = scratch("no_log.checkpoint"), log = scratch("no_log.csv");
-  fs::remove(checkpoint);
   fs::remove(log);
-  RunSettings settings;
-  settings.epochs = 2;
-  settings.checkpoint = checkpoint.string();
+  RunSettings settings = checkpoint_run(checkpoint, 2);
   Setup<double> first(Method::Regular);
   REQUIRE(run_training(first.trainer, train, test, settings).end == RunEnd::Finished);
 
@@ -264,4 +268,75 @@ TEST_CASE("run: a checkpoint made without a log is refused with a log, before re
                     Catch::Contains("made without a training log"));
   CHECK_FALSE(announced);
   CHECK_FALSE(fs::exists(log));
+}
+
+TEST_CASE("run: a checkpoint made beside a log is refused without one, naming the log's "
+          "setting, before resuming", "[train]") {
+  // Found by a fault probe: resumed without its log, the run went on and the log silently
+  // ended at the checkpoint's epoch. The mirror of the case above.
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  const fs::path checkpoint = scratch("with_log.checkpoint"), log = scratch("with_log.csv");
+  fs::remove(log);
+  RunSettings settings = logged_checkpoint_run(checkpoint, log, 2);
+  settings.setting_names = {{"log_csv", "--csv"}};
+  Setup<double> first(Method::Regular);
+  REQUIRE(run_training(first.trainer, train, test, settings).end == RunEnd::Finished);
+  const std::string log_text = file_text(log);
+  const std::string checkpoint_text = file_text(checkpoint);
+
+  Setup<double> again(Method::Regular);
+  const Setup<double> fresh(Method::Regular);
+  settings.epochs = 4;
+  settings.log_csv.clear();
+  bool started = false;
+  RunCallbacks callbacks;
+  callbacks.on_resume = [&](long) { started = true; };
+  callbacks.on_start = [&](long) { started = true; };
+  CHECK_THROWS_AS(run_training(again.trainer, train, test, settings, callbacks),
+                  InvalidArgument);
+  CHECK_THROWS_WITH(run_training(again.trainer, train, test, settings, callbacks),
+                    Catch::Contains("checkpoint '" + checkpoint.string() +
+                                    "' was made beside a training log (epochs 1 to 2), and this "
+                                    "run has no --csv; expected --csv to name that log"));
+  CHECK_FALSE(started);
+  CHECK(again.trainer.epoch() == 0);
+  CHECK(again.policy.params() == fresh.policy.params());
+  CHECK(file_text(log) == log_text);
+  CHECK(file_text(checkpoint) == checkpoint_text);
+}
+
+TEST_CASE("run: the caller's name for the checkpoint leads every refusal of it", "[train]") {
+  // Found by a fault probe: a program's refusals said "checkpoint '…'", never --checkpoint.
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  const fs::path checkpoint = scratch("named.checkpoint");
+  RunSettings settings = checkpoint_run(checkpoint, 2);
+  Setup<double> first(Method::Regular);
+  REQUIRE(run_training(first.trainer, train, test, settings).end == RunEnd::Finished);
+
+  settings.setting_names = {{"checkpoint", "--checkpoint"}, {"epochs", "--epochs"}};
+  const std::string named = "--checkpoint: checkpoint '" + checkpoint.string() + "'";
+  settings.epochs = 1;  // past --epochs: a check of the resume
+  Setup<double> shorter(Method::Regular);
+  CHECK_THROWS_AS(run_training(shorter.trainer, train, test, settings), InvalidArgument);
+  CHECK_THROWS_WITH(run_training(shorter.trainer, train, test, settings),
+                    Catch::StartsWith(named + " is at epoch 2, past --epochs = 1"));
+  settings.epochs = 4;
+  Setup<double> other(Method::Modified);  // another setting: a check while loading
+  CHECK_THROWS_AS(run_training(other.trainer, train, test, settings), InvalidArgument);
+  CHECK_THROWS_WITH(run_training(other.trainer, train, test, settings),
+                    Catch::StartsWith(named + " was made with method = "));
+  {
+    // Held by another run: the lock's refusal (the same process cannot take it twice).
+    const detail::FileLock held = lock_checkpoint(checkpoint.string());
+    Setup<double> twice(Method::Regular);
+    CHECK_THROWS_AS(run_training(twice.trainer, train, test, settings), IoError);
+    CHECK_THROWS_WITH(run_training(twice.trainer, train, test, settings),
+                      Catch::StartsWith(named + " is in use"));
+  }
+  std::ofstream(checkpoint, std::ios::trunc) << "not a checkpoint\n";
+  Setup<double> garbled(Method::Regular);
+  CHECK_THROWS_AS(run_training(garbled.trainer, train, test, settings), ParseError);
+  CHECK_THROWS_WITH(run_training(garbled.trainer, train, test, settings),
+                    Catch::StartsWith("--checkpoint: '" + checkpoint.string() +
+                                      "' is not an sbptt checkpoint"));
 }

@@ -142,19 +142,6 @@ inline std::vector<RunSetting> task_identity(const TaskOptions& o) {
   return identity;
 }
 
-/// `read()`, which reads the file given to `flag`, with the flag in front of its error: the
-/// readers name the file, not which flag gave it.
-template <class Read>
-decltype(auto) reading_flag(const char* flag, Read&& read) {
-  try {
-    return read();
-  } catch (const ParseError& e) {
-    throw ParseError(detail::concat(flag, ": ", e.what()));
-  } catch (const IoError& e) {
-    throw IoError(detail::concat(flag, ": ", e.what()));
-  }
-}
-
 /// Trains `controller` for o.epochs epochs (or dumps gradients) with `run_training`, printing
 /// progress and every non-finite event to stderr.
 template <class Sim, class Ctrl, class Loss>
@@ -174,9 +161,9 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                           {"--dump-gradients", o.dump_gradients, true},
                           {"--checkpoint", o.checkpoint, true}});
   if (!o.init_params.empty())
-    reading_flag("--init-params", [&] { load_parameters(o.init_params, controller); });
+    detail::prefixing_errors("--init-params", [&] { load_parameters(o.init_params, controller); });
   if (!o.init_states.empty())
-    data.train = reading_flag(
+    data.train = detail::prefixing_errors(
         "--init-states", [&] { return load_states<Scalar>(o.init_states, sim.state_dim()); });
   if (!o.dump_gradients.empty())
     return dump_gradients(o, sim, controller, objective, steps, data.train);
@@ -225,7 +212,12 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                        {"patience", "--patience"},
                        {"learning_rate", "--lr"},
                        {"epochs", "--epochs"},
-                       {"log_csv", "--csv"}};
+                       {"log_csv", "--csv"},
+                       {"checkpoint", "--checkpoint"},
+                       {"scalar", "scalar (--float)"},
+                       {"initial parameters", "initial parameters (--init-params, else --seed)"},
+                       {"train set", "train set (--init-states, else --seed and --samples)"},
+                       {"test set", "test set (--seed and --samples)"}};
   // Skipped batches are listed up to this many, then counted, so that a diverging run does
   // not flood stderr.
   constexpr long shown_skips = 5;

@@ -59,5 +59,22 @@ void require(bool condition, Parts&&... parts) {
   if (!condition) throw Exception(concat(std::forward<Parts>(parts)...));
 }
 
+/// `work()`, with "`prefix`: " in front of the message of any sbptt error it throws, of the
+/// same type: a reader names its file, and only its caller knows which flag or setting gave it.
+template <class Work>
+decltype(auto) prefixing_errors(const std::string& prefix, Work&& work) {
+  try {
+    return work();
+  } catch (const InvalidArgument& e) {
+    throw InvalidArgument(concat(prefix, ": ", e.what()));
+  } catch (const ParseError& e) {
+    throw ParseError(concat(prefix, ": ", e.what()));
+  } catch (const IoError& e) {
+    throw IoError(concat(prefix, ": ", e.what()));
+  } catch (const NonFiniteError& e) {
+    throw NonFiniteError(concat(prefix, ": ", e.what()));
+  }
+}
+
 }  // namespace detail
 }  // namespace sbptt

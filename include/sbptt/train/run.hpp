@@ -86,6 +86,15 @@ inline TrainingLogFile open_resumed_log(const RunSettings& settings, long long s
   }
 }
 
+/// `work()`, its errors prefixed with the caller's name for the checkpoint where it has one
+/// (a program's flag): the checkpoint's own messages name its file, not the flag that gave it.
+template <class Work>
+decltype(auto) naming_checkpoint(const RunSettings& settings, Work&& work) {
+  const std::string name = caller_name(settings.setting_names, "checkpoint");
+  if (name == "checkpoint") return work();
+  return prefixing_errors(name, std::forward<Work>(work));
+}
+
 }  // namespace detail
 
 /// Runs `trainer` from its current state (or from `settings.checkpoint`) to `settings.epochs`
@@ -133,7 +142,8 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   require_distinct_files({{"training log", settings.log_csv, true},
                           {"checkpoint", settings.checkpoint, true},
                           {"parameters file", settings.save_params, true}});
-  const detail::FileLock checkpoint_lock = lock_checkpoint(settings.checkpoint);
+  const detail::FileLock checkpoint_lock =
+      detail::naming_checkpoint(settings, [&] { return lock_checkpoint(settings.checkpoint); });
 
   // Before the log or a checkpoint is touched: it refuses a controller whose copy would share
   // the parameters.
@@ -175,46 +185,59 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   std::optional<TrainingLogFile> log;
   std::optional<Checkpoint<Scalar>> resumed;
   if (!settings.checkpoint.empty()) {
-    resumed = load_checkpoint<Scalar>(settings.checkpoint, [&](const auto& found) {
-      require_same_settings(identity, found, settings.checkpoint, settings.setting_names);
+    resumed = detail::naming_checkpoint(settings, [&] {
+      return load_checkpoint<Scalar>(settings.checkpoint, [&](const auto& found) {
+        require_same_settings(identity, found, settings.checkpoint, settings.setting_names);
+      });
     });
   }
   if (resumed) {
-    const bool fresh = trainer.epoch() == 0;
-    detail::require<ParseError>(resumed->params.size() == params.size(), "checkpoint '",
-                                settings.checkpoint, "' has ", resumed->params.size(),
-                                " parameters; expected ", params.size());
-    // Resumed, it would end at once and hand back the parameters of the later epoch as if
-    // they were those of `epochs`.
-    const std::string epochs = caller_name(settings.setting_names, "epochs");
-    detail::require(resumed->epoch <= settings.epochs, "checkpoint '", settings.checkpoint,
-                    "' is at epoch ", resumed->epoch, ", past ", epochs, " = ", settings.epochs,
-                    "; expected ", epochs, " >= ", resumed->epoch, " (a run is not wound back: "
-                    "for ", settings.epochs, " epochs, start without this checkpoint)");
-    // A setting of the run that differs, like those above: refused before the resume begins.
-    detail::require(settings.log_csv.empty() || resumed->log_bytes >= 0,
-                    "checkpoint '", settings.checkpoint, "' was made without a training log; "
-                    "expected one (the run would have a log without its first epochs)");
+    detail::naming_checkpoint(settings, [&] {
+      detail::require<ParseError>(resumed->params.size() == params.size(), "checkpoint '",
+                                  settings.checkpoint, "' has ", resumed->params.size(),
+                                  " parameters; expected ", params.size());
+      // Resumed, it would end at once and hand back the parameters of the later epoch as if
+      // they were those of `epochs`.
+      const std::string epochs = caller_name(settings.setting_names, "epochs");
+      detail::require(resumed->epoch <= settings.epochs, "checkpoint '", settings.checkpoint,
+                      "' is at epoch ", resumed->epoch, ", past ", epochs, " = ",
+                      settings.epochs, "; expected ", epochs, " >= ", resumed->epoch,
+                      " (a run is not wound back: for ", settings.epochs,
+                      " epochs, start without this checkpoint)");
+      // Settings of the run that differ, like those above: refused before the resume begins.
+      const std::string log_name = caller_name(settings.setting_names, "log_csv");
+      detail::require(settings.log_csv.empty() || resumed->log_bytes >= 0, "checkpoint '",
+                      settings.checkpoint, "' was made without a training log, and this run "
+                      "has ", log_name, " '", settings.log_csv, "'; expected no ", log_name,
+                      " (the log would lack epochs 1 to ", resumed->epoch, "), or no "
+                      "checkpoint to start over");
+      detail::require(!settings.log_csv.empty() || resumed->log_bytes < 0, "checkpoint '",
+                      settings.checkpoint, "' was made beside a training log (epochs 1 to ",
+                      resumed->epoch, "), and this run has no ", log_name, "; expected ",
+                      log_name, " to name that log (the log would end at epoch ",
+                      resumed->epoch, " without a word), or no checkpoint to start over");
+      if constexpr (detail::AdamLike<Optimizer>) {
+        // From a fresh trainer Adam takes at most one step a batch (fewer with skipped
+        // batches, or a callback that resets it): more would resume with bias corrections the
+        // run never had. A trainer that had trained before this call has counts of its own.
+        const long long batches = (train.cols() + o.batch - 1) / o.batch;
+        detail::require<ParseError>(resumed->skipped_batches <= resumed->epoch * batches,
+                                    "checkpoint '", settings.checkpoint, "': skipped_batches ",
+                                    resumed->skipped_batches, " after ", resumed->epoch,
+                                    " epochs of ", batches, " batches; expected at most ",
+                                    resumed->epoch * batches);
+        const long long steps = resumed->epoch * batches - resumed->skipped_batches;
+        detail::require<ParseError>(
+            trainer.epoch() > 0 || resumed->adam_t <= steps, "checkpoint '",
+            settings.checkpoint, "': adam_t ", resumed->adam_t, " after ", resumed->epoch,
+            " epochs of ", batches, " batches, ", resumed->skipped_batches,
+            " of them skipped; expected at most ", steps, " (one step a batch)");
+      }
+    });
     if (!settings.log_csv.empty())
       log = detail::open_resumed_log(settings, resumed->log_bytes, resumed->epoch);
-    if constexpr (detail::AdamLike<Optimizer>) {
-      // From a fresh trainer Adam takes at most one step a batch (fewer with skipped batches,
-      // or a callback that resets it): more would resume with bias corrections the run never
-      // had. A trainer that had trained before this call has counts of its own.
-      const long long batches = (train.cols() + o.batch - 1) / o.batch;
-      detail::require<ParseError>(resumed->skipped_batches <= resumed->epoch * batches,
-                                  "checkpoint '", settings.checkpoint, "': skipped_batches ",
-                                  resumed->skipped_batches, " after ", resumed->epoch,
-                                  " epochs of ", batches, " batches; expected at most ",
-                                  resumed->epoch * batches);
-      const long long steps = resumed->epoch * batches - resumed->skipped_batches;
-      detail::require<ParseError>(
-          !fresh || resumed->adam_t <= steps, "checkpoint '", settings.checkpoint, "': adam_t ",
-          resumed->adam_t, " after ", resumed->epoch, " epochs of ", batches, " batches, ",
-          resumed->skipped_batches, " of them skipped; expected at most ", steps,
-          " (one step a batch)");
+    if constexpr (detail::AdamLike<Optimizer>)
       trainer.optimizer().restore(resumed->adam_m, resumed->adam_v, resumed->adam_t);
-    }
     trainer.resume_at(resumed->epoch, resumed->shuffle_state);
     params = resumed->params;
     result.resumed_from = resumed->epoch;

@@ -136,13 +136,8 @@ int run(TaskOptions o) {
                  warning.c_str());
   o.time = examples::resolve_mujoco_time(o, model->opt.timestep);
   model->opt.timestep = o.time.dt;
-  const MujocoSimulator<Scalar> sim = [&] {
-    try {
-      return MujocoSimulator<Scalar>(*model);
-    } catch (const InvalidArgument& e) {
-      throw InvalidArgument(detail::concat("--model '", o.model, "': ", e.what()));
-    }
-  }();
+  const MujocoSimulator<Scalar> sim = detail::prefixing_errors(
+      detail::concat("--model '", o.model, "'"), [&] { return MujocoSimulator<Scalar>(*model); });
   Rng data_rng(o.seed);
   if (o.check_derivatives) return check_derivatives(sim, o, data_rng);
   const Vector<double> target = target_positions(o.positions, *model, o.model);

@@ -1,6 +1,8 @@
 // The training driver (train/run.hpp) refusing to resume, before any work and with the
 // trainer as it was: a checkpoint or log changed by hand, a checkpoint without its log, one
-// past the epochs asked for, one made without a log. Split from test_train_run.cpp.
+// past the epochs asked for, one made without a log, one made beside a log resumed without it,
+// and the caller's name for the checkpoint in front of each refusal. Split from
+// test_train_run.cpp.
 #include <catch2/catch.hpp>
 
 #include <filesystem>
@@ -39,7 +41,7 @@ RunSettings checkpoint_run(const fs::path& checkpoint, long epochs) {
   return settings;
 }
 
-/// The same with its log at `log`.
+/// The same with its log at `log` (left as it is).
 RunSettings logged_checkpoint_run(const fs::path& checkpoint, const fs::path& log, long epochs) {
   RunSettings settings = checkpoint_run(checkpoint, epochs);
   settings.log_csv = log.string();
@@ -284,10 +286,16 @@ TEST_CASE("run: a checkpoint made beside a log is refused without one, naming th
   const std::string log_text = file_text(log);
   const std::string checkpoint_text = file_text(checkpoint);
 
+  // Rerun finished, it trains nothing and its log lacks nothing: that goes on.
+  settings.log_csv.clear();
+  Setup<double> rerun(Method::Regular);
+  CHECK(run_training(rerun.trainer, train, test, settings).end == RunEnd::Finished);
+  CHECK(rerun.policy.params() == first.policy.params());
+  CHECK(file_text(log) == log_text);
+
   Setup<double> again(Method::Regular);
   const Setup<double> fresh(Method::Regular);
   settings.epochs = 4;
-  settings.log_csv.clear();
   bool started = false;
   RunCallbacks callbacks;
   callbacks.on_resume = [&](long) { started = true; };
@@ -297,7 +305,8 @@ TEST_CASE("run: a checkpoint made beside a log is refused without one, naming th
   CHECK_THROWS_WITH(run_training(again.trainer, train, test, settings, callbacks),
                     Catch::Contains("checkpoint '" + checkpoint.string() +
                                     "' was made beside a training log (epochs 1 to 2), and this "
-                                    "run has no --csv; expected --csv to name that log"));
+                                    "run has no --csv: the log would stop at epoch 2 while "
+                                    "training goes on; expected --csv to name that log"));
   CHECK_FALSE(started);
   CHECK(again.trainer.epoch() == 0);
   CHECK(again.policy.params() == fresh.policy.params());

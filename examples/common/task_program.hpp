@@ -215,9 +215,13 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                        {"log_csv", "--csv"},
                        {"checkpoint", "--checkpoint"},
                        {"scalar", "scalar (--float)"},
-                       {"initial parameters", "initial parameters (--init-params, else --seed)"},
-                       {"train set", "train set (--init-states, else --seed and --samples)"},
-                       {"test set", "test set (--seed and --samples)"}};
+                       // Compared after --seed and --samples: what differs here is a file's
+                       // content, or the way another build draws the sets and parameters.
+                       {"initial parameters", "initial parameters (--init-params' content, "
+                                              "else as this build draws them)"},
+                       {"train set", "train set (--init-states' content, else as this build "
+                                     "draws it)"},
+                       {"test set", "test set (as this build draws it)"}};
   // Skipped batches are listed up to this many, then counted, so that a diverging run does
   // not flood stderr.
   constexpr long shown_skips = 5;

@@ -567,14 +567,16 @@ TEST_CASE("a checkpoint's refusals name --checkpoint and the flag of what differ
                           params.string());
   INFO(other_params.output);
   CHECK(other_params.status == 2);
-  CHECK(other_params.output.find(named + "was made with initial parameters (--init-params, "
-                                         "else --seed) = ") != std::string::npos);
+  CHECK(other_params.output.find(named + "was made with initial parameters (--init-params' "
+                                         "content, else as this build draws them) = ") !=
+        std::string::npos);
 
   const Result no_log = run("cartpole", arguments + " --epochs 3");
   INFO(no_log.output);
   CHECK(no_log.status == 2);
   CHECK(no_log.output.find(named + "was made beside a training log (epochs 1 to 2), and this "
-                                   "run has no --csv; expected --csv to name that log") !=
+                                   "run has no --csv: the log would stop at epoch 2 while "
+                                   "training goes on; expected --csv to name that log") !=
         std::string::npos);
   for (const Result* refused : {&other_params, &no_log}) {
     CHECK(refused->output.find("test loss") == std::string::npos);

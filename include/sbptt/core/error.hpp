@@ -59,8 +59,9 @@ void require(bool condition, Parts&&... parts) {
   if (!condition) throw Exception(concat(std::forward<Parts>(parts)...));
 }
 
-/// `work()`, with "`prefix`: " in front of the message of any sbptt error it throws, of the
-/// same type: a reader names its file, and only its caller knows which flag or setting gave it.
+/// `work()`, with "`prefix`: " in front of the message of an `InvalidArgument`, `ParseError`,
+/// `IoError` or `NonFiniteError` it throws, rethrown as that type: a reader names its file, and
+/// only its caller knows which flag or setting gave it.
 template <class Work>
 decltype(auto) prefixing_errors(const std::string& prefix, Work&& work) {
   try {

@@ -100,7 +100,9 @@ decltype(auto) naming_checkpoint(const RunSettings& settings, Work&& work) {
 /// Runs `trainer` from its current state (or from `settings.checkpoint`) to `settings.epochs`
 /// on `train` (state_dim × N, N ≥ 1) and `test` (state_dim × M; M = 0: no test set).
 /// Throws before any work for bad settings (`InvalidArgument`), unwritable or colliding
-/// outputs (`IoError`) and a checkpoint of another run (`InvalidArgument` naming the setting).
+/// outputs (`IoError`) and a checkpoint of another run (`InvalidArgument` naming the setting;
+/// also one made without a training log resumed with one, and one made beside a log resumed
+/// without it before its last epoch).
 template <class TrainerT>
 RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
                                                   const Matrix<typename TrainerT::Scalar>& train,
@@ -211,11 +213,14 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
                       "has ", log_name, " '", settings.log_csv, "'; expected no ", log_name,
                       " (the log would lack epochs 1 to ", resumed->epoch, "), or no "
                       "checkpoint to start over");
-      detail::require(!settings.log_csv.empty() || resumed->log_bytes < 0, "checkpoint '",
-                      settings.checkpoint, "' was made beside a training log (epochs 1 to ",
-                      resumed->epoch, "), and this run has no ", log_name, "; expected ",
-                      log_name, " to name that log (the log would end at epoch ",
-                      resumed->epoch, " without a word), or no checkpoint to start over");
+      // A finished run rerun without its log trains nothing, so its log lacks nothing.
+      detail::require(!settings.log_csv.empty() || resumed->log_bytes < 0 ||
+                          resumed->epoch == settings.epochs,
+                      "checkpoint '", settings.checkpoint, "' was made beside a training log "
+                      "(epochs 1 to ", resumed->epoch, "), and this run has no ", log_name,
+                      ": the log would stop at epoch ", resumed->epoch, " while training goes "
+                      "on; expected ", log_name, " to name that log, or no checkpoint to start "
+                      "over");
       if constexpr (detail::AdamLike<Optimizer>) {
         // From a fresh trainer Adam takes at most one step a batch (fewer with skipped
         // batches, or a callback that resets it): more would resume with bias corrections the

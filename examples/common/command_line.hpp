@@ -28,6 +28,7 @@ public:
     app_.allow_extras();  // unknown flags are reported by parse(), in the words of the others
     app_.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
     app_.set_help_flag("--help", "print every flag with its meaning, default and range; exit");
+    switches_.emplace_back("--help");
     app_.get_formatter()->column_width(40);
   }
 

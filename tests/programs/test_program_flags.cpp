@@ -244,6 +244,10 @@ TEST_CASE("numbers beyond the type's range, numbers not in decimals, contradicti
              "--evaluate-beside alone"},
         Case{"cartpole", "--shuffle=foo --epochs 1", "--shuffle=foo: --shuffle is a switch"},
         Case{"reproduce", "--dry-run=1", "--dry-run=1: --dry-run is a switch"},
+        // --help=0 printed the help and exited 0, as if the value meant something.
+        Case{"cartpole", "--help=0", "--help=0: --help is a switch and takes no value; expected "
+                                     "--help alone"},
+        Case{"reproduce", "--help=no", "--help=no: --help is a switch"},
         // The --model callback ran after --physical's whatever the order given and reset it:
         // both ran the model of --model, --physical silently dropped.
         Case{"cartpole", "--physical --model reference --epochs 1",

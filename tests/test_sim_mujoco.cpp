@@ -171,6 +171,59 @@ TEST_CASE("mujoco: A and B of mjd_transitionFD equal CartPole's analytic Jacobia
   }
 }
 
+TEST_CASE("mujoco: A and B are the derivatives of the step with every integrator",
+          "[sim][mujoco]") {
+  // A cart with a double pendulum and three kinds of actuator (motor, position, velocity:
+  // their forces depend on ctrl, qpos and qvel). Two truths that need only the step: sbptt's
+  // own central differences of it (check_jacobians), and the Taylor remainder
+  // |P(x + h v, u + h w) − P(x, u) − h (A v + B w)|, which must fall 4-fold when h halves.
+  // MuJoCo 2.2's mjd_transitionFD gave B off by up to 8e6 (relative) with RK4: it reuses
+  // the unperturbed state's position and velocity stages in RK4's later stages.
+  const std::string arm =
+      "<mujoco><option timestep='0.005' integrator='INTEGRATOR'><flag contact='disable'/>"
+      "</option><default><joint damping='0.1'/><geom contype='0' conaffinity='0'/></default>"
+      "<worldbody><body><joint name='slider' type='slide' axis='1 0 0'/>"
+      "<geom type='box' size='0.2 0.1 0.05' mass='1'/><body><joint name='h1' type='hinge' "
+      "axis='0 1 0'/><geom type='capsule' fromto='0 0 0 0 0 0.6' size='0.03' mass='0.3'/>"
+      "<body pos='0 0 0.6'><joint name='h2' type='hinge' axis='0 1 0'/><geom type='capsule' "
+      "fromto='0 0 0 0 0 0.5' size='0.03' mass='0.2'/></body></body></body></worldbody>"
+      "<actuator><motor joint='slider' gear='5'/><position joint='h1' kp='20'/>"
+      "<velocity joint='h2' kv='2'/></actuator></mujoco>";
+  for (const std::string integrator : {"Euler", "implicit", "RK4"}) {
+    std::string text = arm;
+    text.replace(text.find("INTEGRATOR"), 10, integrator);
+    const MujocoModelPtr model = load_mujoco_model(write_temp_model("arm.xml", text));
+    const MujocoSimulator<double> sim(*model);
+    Rng rng(21);
+    for (int trial = 0; trial < 5; ++trial) {
+      Vector<double> x(6), u(3), v(6), w(3);
+      for (auto* vector : {&x, &u, &v, &w})
+        for (Index i = 0; i < vector->size(); ++i) (*vector)(i) = rng.uniform(-1.0, 1.0);
+      const auto check = check_jacobians(sim, x, u);
+      Matrix<double> a, b;
+      sim.jacobians(x, u, a, b);
+      Vector<double> base(6), moved(6);
+      sim.step(x, u, base);
+      std::vector<double> remainders;
+      for (const double h : {4e-2, 2e-2, 1e-2}) {
+        sim.step(Vector<double>(x + h * v), Vector<double>(u + h * w), moved);
+        remainders.push_back((moved - base - h * (a * v + b * w)).norm());
+      }
+      INFO(integrator << ", trial " << trial << ": A " << check.state_jacobian_error << ", B "
+                      << check.control_jacobian_error << ", VJP " << check.vjp_error
+                      << "; remainders " << remainders[0] << ", " << remainders[1] << ", "
+                      << remainders[2]);
+      CHECK(check.state_jacobian_error < 1e-6);
+      CHECK(check.control_jacobian_error < 1e-6);
+      CHECK(check.vjp_error < 1e-6);
+      for (std::size_t k = 1; k < remainders.size(); ++k) {
+        CHECK(remainders[k - 1] / remainders[k] > 3.5);
+        CHECK(remainders[k - 1] / remainders[k] < 4.5);
+      }
+    }
+  }
+}
+
 TEST_CASE("mujoco: the finite-difference step is an option and matters as theory says",
           "[sim][mujoco]") {
   // ε = 1e-2 leaves a truncation error ε² |x'''|/6 far above ε = 1e-6's; both stay close.
@@ -195,6 +248,11 @@ TEST_CASE("mujoco: the finite-difference step is an option and matters as theory
   CHECK(error_coarse < 1e-4);
   CHECK_THROWS_WITH(MujocoSimulator<double>(*model, MujocoOptions{0.0}),
                     Catch::Contains("fd_step = 0"));
+  // A step of 2e10 took probes past MuJoCo's bound of 1e10, which reset the mjData and so
+  // printed its warning to stdout and MUJOCO_LOG.TXT; a step past 1 is no derivative anyway.
+  CHECK_THROWS_WITH(MujocoSimulator<double>(*model, MujocoOptions{2e10}),
+                    Catch::Contains("fd_step = 20000000000, expected a finite ε in (0, 1]"));
+  CHECK_NOTHROW(MujocoSimulator<double>(*model, MujocoOptions{1.0}));
 }
 
 TEST_CASE("mujoco: threads never share an mjData and never change a bit", "[sim][mujoco]") {

@@ -17,6 +17,9 @@
 ///
 /// so one call costs 2 (2 nv + na + nu) + 1 steps and is accurate to O(ε²) + O(δ/ε), δ the
 /// rounding error of one step. The VJP forms A and B and returns Aᵀλ, Bᵀλ: the same cost.
+/// With the RK4 integrator the same differences are taken of whole `mj_step`s instead (2 (2 nv
+/// + na + nu) of them): MuJoCo 2.2's `mjd_transitionFD` skips stages that RK4's later stages
+/// need recomputed, and its B was off by a factor of up to 5e6.
 ///
 /// Refused: models whose qpos and qvel differ in size (free and ball joints hold a quaternion
 /// in qpos and an angular velocity in qvel). `mjd_transitionFD` differentiates in the tangent
@@ -64,7 +67,7 @@ namespace sbptt {
 /// Settings of `MujocoSimulator`.
 struct MujocoOptions {
   /// ε of the centered differences of `mjd_transitionFD` (absolute, in state and control
-  /// units; > 0). MuJoCo's own suggestion is 1e-6.
+  /// units; in (0, 1]). MuJoCo's own suggestion is 1e-6.
   double fd_step = 1e-6;
 };
 
@@ -119,13 +122,16 @@ inline std::string first_non_finite_field(const mjModel& model) {
   return found;
 }
 
-/// One `mjData` with the row-major Jacobian buffers of `mjd_transitionFD`.
+/// One `mjData` with the row-major Jacobian buffers of `mjd_transitionFD`, and the probes of
+/// the whole-step differences that replace it for RK4.
 struct MujocoSlot {
   struct DataDeleter {
     void operator()(mjData* released) const { mj_deleteData(released); }
   };
   std::unique_ptr<mjData, DataDeleter> data;
   std::vector<mjtNum> state_jacobian, control_jacobian;  ///< n × n and n × nu, row-major
+  std::vector<mjtNum> probe;                            ///< (x, u) moved: n + nu
+  std::vector<mjtNum> plus, minus;                      ///< the probes' next states: n
 };
 
 /// A pool of `MujocoSlot`s: `lease()` hands out a slot no other caller holds, and takes it
@@ -167,6 +173,9 @@ public:
         2 * static_cast<std::size_t>(model_->nv) + static_cast<std::size_t>(model_->na);
     slot->state_jacobian.resize(n * n);
     slot->control_jacobian.resize(n * static_cast<std::size_t>(model_->nu));
+    slot->probe.resize(n + static_cast<std::size_t>(model_->nu));
+    slot->plus.resize(n);
+    slot->minus.resize(n);
     return {*this, std::move(slot)};
   }
 
@@ -212,8 +221,12 @@ public:
                     "MujocoSimulator: the model has no joint (nv = 0) and no actuator activation "
                     "(na = 0), so its state is empty; expected at least one hinge or slide joint, "
                     "or an actuator with activation dynamics");
-    detail::require(std::isfinite(options.fd_step) && options.fd_step > 0,
-                    "MujocoSimulator: fd_step = ", options.fd_step, ", expected a finite ε > 0");
+    // Past 1 a difference is no derivative, and probes past MuJoCo's bound of 1e10 make it
+    // reset the mjData, after which its warnings print.
+    detail::require(std::isfinite(options.fd_step) && options.fd_step > 0 &&
+                        options.fd_step <= 1,
+                    "MujocoSimulator: fd_step = ", options.fd_step,
+                    ", expected a finite ε in (0, 1]");
     const std::string non_finite = detail::first_non_finite_field(model);
     detail::require(non_finite.empty(), "MujocoSimulator: the model's ", non_finite,
                     "; expected finite numbers in all its options and arrays");
@@ -334,17 +347,71 @@ private:
     const Index n = state_dim();
     TransitionJacobians out{RowMajorMap(slot.state_jacobian.data(), n, n),
                             RowMajorMap(slot.control_jacobian.data(), n, nu_)};
-    const bool loaded = load(x, u, *slot.data);
-    if (loaded) {
+    bool failed = !load(x, u, *slot.data);
+    if (!failed && model_->opt.integrator == mjINT_RK4) {
+      failed = !whole_step_differences(slot);
+    } else if (!failed) {
       mjd_transitionFD(model_.get(), slot.data.get(), options_.fd_step, 1,
                        slot.state_jacobian.data(), slot.control_jacobian.data(), nullptr, nullptr);
+      failed = detail::mujoco_step_failed(*slot.data);
     }
-    if (!loaded || detail::mujoco_step_failed(*slot.data)) {
+    if (failed) {
       constexpr mjtNum not_a_number = std::numeric_limits<mjtNum>::quiet_NaN();
       std::fill(slot.state_jacobian.begin(), slot.state_jacobian.end(), not_a_number);
       std::fill(slot.control_jacobian.begin(), slot.control_jacobian.end(), not_a_number);
     }
     return out;
+  }
+
+  /// The slot's A and B by centered differences of whole `mj_step`s from the state loaded in
+  /// its mjData, each probe loaded afresh; false if MuJoCo refused any probe. For RK4 only:
+  /// MuJoCo 2.2's `mjd_transitionFD` reuses the unperturbed state's position and velocity
+  /// stages in RK4's three later stages, which gave B off by up to 5e6 (relative) on a cart
+  /// with a double pendulum (tests/test_sim_mujoco.cpp). A whole step costs more than the
+  /// stages it skips, as many steps as `mjd_transitionFD` takes.
+  bool whole_step_differences(detail::MujocoSlot& slot) const {
+    mjData& d = *slot.data;
+    const Index n = state_dim();
+    std::copy(d.qpos, d.qpos + nv_, slot.probe.begin());
+    std::copy(d.qvel, d.qvel + nv_, slot.probe.begin() + nv_);
+    std::copy(d.act, d.act + na_, slot.probe.begin() + 2 * nv_);
+    std::copy(d.ctrl, d.ctrl + nu_, slot.probe.begin() + n);
+    bool refused = false;
+    const auto step_from_probe = [&](std::vector<mjtNum>& next) {
+      std::copy(slot.probe.begin(), slot.probe.begin() + nv_, d.qpos);
+      std::copy(slot.probe.begin() + nv_, slot.probe.begin() + 2 * nv_, d.qvel);
+      std::copy(slot.probe.begin() + 2 * nv_, slot.probe.begin() + n, d.act);
+      std::copy(slot.probe.begin() + n, slot.probe.end(), d.ctrl);
+      std::fill(d.qacc_warmstart, d.qacc_warmstart + nv_, mjtNum{0});
+      d.time = 0;
+      detail::arm_mujoco_warnings(d);
+      mj_step(model_.get(), &d);
+      refused = refused || detail::mujoco_step_failed(d);
+      std::copy(d.qpos, d.qpos + nv_, next.begin());
+      std::copy(d.qvel, d.qvel + nv_, next.begin() + nv_);
+      std::copy(d.act, d.act + na_, next.begin() + 2 * nv_);
+    };
+    const mjtNum eps = options_.fd_step;
+    for (Index j = 0; j < n + nu_; ++j) {
+      const mjtNum centre = slot.probe[static_cast<std::size_t>(j)];
+      slot.probe[static_cast<std::size_t>(j)] = centre + eps;
+      step_from_probe(slot.plus);
+      slot.probe[static_cast<std::size_t>(j)] = centre - eps;
+      step_from_probe(slot.minus);
+      slot.probe[static_cast<std::size_t>(j)] = centre;
+      for (Index i = 0; i < n; ++i) {
+        const auto row = static_cast<std::size_t>(i);
+        const mjtNum slope = (slot.plus[row] - slot.minus[row]) / (2 * eps);
+        if (j < n) {
+          slot.state_jacobian[row * static_cast<std::size_t>(n) + static_cast<std::size_t>(j)] =
+              slope;
+        } else {
+          slot.control_jacobian[row * static_cast<std::size_t>(nu_) +
+                                static_cast<std::size_t>(j - n)] = slope;
+        }
+      }
+    }
+    return !refused;
   }
 
   std::shared_ptr<const mjModel> model_;

@@ -1,6 +1,7 @@
 # Installs sbptt into a scratch prefix, then configures, builds and runs examples/consumer
 # and examples/consumer_mujoco (the opt-in MuJoCo component, on the cart pole of
-# tests/models) against it; the plain consumer also with sbptt::native; and a copy of
+# tests/models) against it; the plain consumer also with sbptt::native, and a strict one with
+# -Wall -Wextra -Werror; and a copy of
 # examples/train_own_scene.cpp with point_mass.hpp alone in a folder of its own, which the docs
 # offer as the template to copy (it must need nothing else). Any failing step fails
 # the test, and so does a plain consumer compiled for the same instruction set as the native one
@@ -17,6 +18,7 @@ run_step(${WORK_DIR}/consumer/consumer)
 string(REGEX MATCH "^[^ ]+" plain "${step_output}")
 run_step(${WORK_DIR}/consumer/consumer_native)
 string(REGEX MATCH "^[^ ]+" native "${step_output}")
+run_step(${WORK_DIR}/consumer/consumer_strict)
 if(plain STREQUAL native AND NOT native STREQUAL "SSE2")
   message(FATAL_ERROR "the plain consumer was compiled for ${plain}, as the native one: "
                       "sbptt::sbptt forces the build machine's instruction set on consumers")

@@ -8,6 +8,7 @@
 #include <algorithm>
 
 #include "sbptt/core/concepts.hpp"
+#include "sbptt/core/simulator_output.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/core/unroll.hpp"
 
@@ -19,10 +20,13 @@ struct SampleScratch {
   State x, x_next, seed, lambda_sample, lambda_x;
   Control u, lambda_u;
 
+  /// Zeroed, not only sized: the engine copies one scratch to every thread, and a copy of
+  /// fixed-size vectors never written reads indeterminate values (GCC's -Wmaybe-uninitialized
+  /// in a user's build).
   SampleScratch(Index state_dim, Index control_dim) {
-    for (State* v : {&x, &x_next, &seed, &lambda_sample, &lambda_x}) v->resize(state_dim);
-    u.resize(control_dim);
-    lambda_u.resize(control_dim);
+    for (State* v : {&x, &x_next, &seed, &lambda_sample, &lambda_x}) v->setZero(state_dim);
+    u.setZero(control_dim);
+    lambda_u.setZero(control_dim);
   }
 };
 
@@ -32,6 +36,7 @@ struct SampleScratch {
 template <class Sim, class Scratch>
 SBPTT_ONE_COPY void step_sample(const Sim& sim, Scratch& t) {
   sim.step(t.x, t.u, t.x_next);
+  check_step_output(t.x_next, t.x.size());
 }
 
 /// x_next = P(x, u) for every column (x_next sized state_dim × B by the caller).
@@ -40,6 +45,7 @@ void step_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>&
                   Matrix<Scalar>& x_next, ForEachSample&& for_each_sample) {
   if constexpr (BatchSimulator<Sim>) {
     sim.step_batch(x, u, x_next);
+    check_batch_output("step_batch wrote x_next", x_next, "state_dim() × B", x.rows(), x.cols());
   } else {
     for_each_sample([&](Index b, auto& t) {
       t.x = x.col(b);
@@ -92,6 +98,15 @@ void vjp_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& 
                  const Sweeps& sweeps, bool physics, bool seeded, Seed&& seed,
                  ForEachSample&& for_each_sample, PairedColumns<Scalar>& paired) {
   if constexpr (BatchSimulator<Sim>) {
+    const auto check_outputs = [&] {
+      for (auto* s : sweeps) {
+        check_batch_output("vjp_batch wrote lambda_u (Bᵀλ)", s->mu, "control_dim() × B",
+                           u.rows(), x.cols());
+        if (physics)
+          check_batch_output("vjp_batch wrote lambda_x (Aᵀλ)", s->propagated, "state_dim() × B",
+                             x.rows(), x.cols());
+      }
+    };
     if (seeded) for_each_sample(seed);
     if (sweeps.size() == 2) {
       auto* first = *sweeps.begin();
@@ -110,10 +125,12 @@ void vjp_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& 
         if (physics)
           PairedColumns<Scalar>::split(paired.lambda_x, first->propagated, second->propagated);
       }
+      check_outputs();
       return;
     }
     for (auto* s : sweeps)
       sim.vjp_batch(x, u, s->lambda, physics ? &s->propagated : nullptr, &s->mu);
+    check_outputs();
   } else {
     for_each_sample([&](Index b, auto& t) {
       if (seeded) seed(b, t);
@@ -122,6 +139,7 @@ void vjp_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& 
       for (auto* s : sweeps) {
         t.lambda_sample = s->lambda.col(b);
         sim.vjp(t.x, t.u, t.lambda_sample, physics ? &t.lambda_x : nullptr, &t.lambda_u);
+        check_vjp_output(physics ? &t.lambda_x : nullptr, &t.lambda_u, t.x.size(), t.u.size());
         s->mu.col(b) = t.lambda_u;
         if (physics) s->propagated.col(b) = t.lambda_x;
       }

@@ -12,6 +12,7 @@
 #include <limits>
 
 #include "sbptt/core/concepts.hpp"
+#include "sbptt/core/simulator_output.hpp"
 
 namespace sbptt {
 
@@ -84,6 +85,7 @@ void vjp_transposes(const Sim& sim, const typename Sim::State& x, const typename
     lambda.setZero();
     lambda(i) = Scalar(1);
     sim.vjp(x, u, lambda, &lambda_x, &lambda_u);
+    check_vjp_output(&lambda_x, &lambda_u, n, k);
     // Entry by entry: GCC 12 -O3 warns (stringop-overread) on a vectorised column copy from a
     // fixed 2-vector into a column of run-time length.
     for (Index r = 0; r < n; ++r) at(r, i) = lambda_x(r);
@@ -126,11 +128,13 @@ template <Simulator Sim>
   auto step_in_x = [&](const Vector<Scalar>& xv, Vector<Scalar>& out) {
     x_probe = xv;
     sim.step(x_probe, u, next);
+    detail::check_step_output(next, n);
     out = next;
   };
   auto step_in_u = [&](const Vector<Scalar>& uv, Vector<Scalar>& out) {
     u_probe = uv;
     sim.step(x, u_probe, next);
+    detail::check_step_output(next, n);
     out = next;
   };
   const Matrix<Scalar> fd_a = finite_difference_jacobian<Scalar>(step_in_x, x, n, step);
@@ -141,6 +145,9 @@ template <Simulator Sim>
     typename Sim::StateJacobian a;
     typename Sim::ControlJacobian b;
     sim.jacobians(x, u, a, b);
+    detail::check_batch_output("jacobians wrote A", a, "state_dim() × state_dim()", n, n);
+    detail::check_batch_output("jacobians wrote B", b, "state_dim() × control_dim()", n,
+                               sim.control_dim());
     result.has_jacobians = true;
     result.state_jacobian_error = relative_error<Scalar>(Matrix<Scalar>(a), fd_a);
     result.control_jacobian_error = relative_error<Scalar>(Matrix<Scalar>(b), fd_b);

@@ -26,6 +26,9 @@
 /// Everything Eigen offers on a scalar type works inside the step: sin, cos, sqrt, exp,
 /// comparisons (on the value), and dense solves, e.g. `M.ldlt().solve(rhs)` or
 /// `M.partialPivLu().solve(rhs)` for a mass matrix M(q) of a Lagrangian system.
+/// A part whose slope is infinite at a point gives NaN there even inside a smooth whole
+/// (|v| v at v = 0 written with sqrt or norm: ∞ · 0): branch on the value or smooth the term
+/// (docs/scenes.md).
 /// Constants in a step that must also compile in float are written `constant<T>(0.5)`: a
 /// `double` times a float dual number is a narrowing conversion.
 #include <concepts>

@@ -193,6 +193,24 @@ TEST_CASE("The engine refuses a quantum or guidance objective made for another s
   CHECK(std::isfinite(guidance_fits.forward(guidance_initial_states(three_evaders, rng, 2))));
 }
 
+TEST_CASE("The engine refuses a squared-distance target that is not finite when it is built",
+          "[bptt][engine]") {
+  // Before, a NaN target trained until the first batch stopped on a non-finite loss.
+  const auto sim = oscillator();
+  auto network = small_network<double>(2, 1, 6);
+  using Loss = SquaredDistanceLoss<Eigen::Vector2d>;
+  for (const double bad : {std::numeric_limits<double>::quiet_NaN(),
+                           -std::numeric_limits<double>::infinity()}) {
+    const Objective<Loss> objective{Loss{Eigen::Vector2d(0.0, bad)}};
+    REQUIRE_THROWS_AS((Engine(sim, network, objective, 4)), InvalidArgument);
+    REQUIRE_THROWS_WITH((Engine(sim, network, objective, 4)),
+                        Catch::Contains("SquaredDistanceLoss: the target's entry 1 is ") &&
+                            Catch::Contains("; expected finite numbers"));
+  }
+  const Objective<Loss> finite{Loss{Eigen::Vector2d(0.0, 1.0)}};
+  CHECK_NOTHROW(Engine(sim, network, finite, 4));
+}
+
 TEST_CASE("check_gradient reports a NaN loss gradient as NaN", "[bptt][gradient_check]") {
   const CartPole<double, 1> sim;
   auto network = small_network<double>(4, 1, 1);

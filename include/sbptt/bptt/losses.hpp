@@ -1,6 +1,7 @@
 #pragma once
 /// \file Generic state losses (task losses live beside their simulators).
 #include "sbptt/core/error.hpp"
+#include "sbptt/core/non_finite.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt {
@@ -10,11 +11,15 @@ template <class State>
 struct SquaredDistanceLoss {
   State target;
 
-  /// Throws `InvalidArgument` unless the target has `state_dim` entries; the engine calls it
-  /// when it is built (a dynamic-size target can have any size).
+  /// Throws `InvalidArgument` unless the target has `state_dim` entries, all finite; the
+  /// engine calls it when it is built (a dynamic-size target can have any size, and a NaN in it
+  /// would only show as a non-finite loss in the first batch).
   void check_state_dim(Index state_dim) const {
     detail::require(target.size() == state_dim, "SquaredDistanceLoss: the target has ",
                     target.size(), " entries; expected the simulator's state_dim = ", state_dim);
+    const auto bad = first_non_finite(target);
+    detail::require(!bad, "SquaredDistanceLoss: the target's entry ", bad ? bad->row : 0, " is ",
+                    bad ? target(bad->row) : 0, "; expected finite numbers");
   }
 
   typename State::Scalar operator()(const State& x, State* grad) const {

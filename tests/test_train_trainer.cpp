@@ -293,6 +293,31 @@ TEST_CASE("trainer: a skipped batch leaves no trace in the parameters or in Adam
   CHECK(std::isfinite(record.test_loss.value()));
 }
 
+TEST_CASE("trainer: a non-finite value in an update names the train set's column, shuffled or not",
+          "[train]") {
+  // The loss of the sample at column 4 (1e200) overflows. Before, an update reported the
+  // sample's place in its mini-batch (0 or 1 here), which after a shuffle names no column a
+  // user can find; an evaluation reports the set's column, and so does an update now.
+  const Sim sim = Sim::scalar(1.0, 1.0);
+  for (const bool shuffle : {false, true}) {
+    Policy policy({1});
+    TrainerOptions options;
+    options.method = Method::Regular;
+    options.batch = 2;
+    options.shuffle = shuffle;
+    Trainer trainer(sim, policy, to_origin(LossTiming::Final), 3,
+                    Adam<double>(AdamOptions<double>{0.01}), options);
+    trainer.train_epoch(samples({1.0, 0.5, -0.5, 0.25, 1e200, 2.0}), samples({1.0}));
+    INFO("shuffle " << shuffle);
+    REQUIRE(trainer.last_non_finite());
+    const NonFiniteEvent& event = *trainer.last_non_finite();
+    CHECK(event.phase == Phase::Update);
+    CHECK(event.where.quantity == Quantity::Loss);
+    CHECK(event.where.sample == 4);
+    if (!shuffle) CHECK(event.batch == 2);
+  }
+}
+
 TEST_CASE("trainer: a non-finite evaluation stops training and rolls the epoch back",
           "[train]") {
   // The test set overflows from 1e306 in its evaluation; the training batches stay finite.

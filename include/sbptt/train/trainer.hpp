@@ -75,7 +75,9 @@ enum class Phase { Update, TrainEvaluation, TestEvaluation };
 struct NonFiniteEvent {
   long epoch = 0;
   Index batch = 0;  ///< index of the mini-batch within the epoch; -1 in an evaluation
-  NonFinite where;  ///< quantity, step and sample (for a gradient or a parameter: its index)
+  /// Quantity, step and sample: the column of the set it came from (the train set's in an
+  /// update, whatever the shuffle); for a gradient or a parameter, its index.
+  NonFinite where;
   Phase phase = Phase::Update;
 };
 
@@ -178,7 +180,7 @@ public:
       gather(train, k, batch_states_);
       const std::optional<NonFinite> bad = update(batch_states_);
       if (bad) {
-        note(NonFiniteEvent{record.epoch, k, *bad, Phase::Update});
+        note(NonFiniteEvent{record.epoch, k, in_train_set(*bad, k), Phase::Update});
         if (options_.on_non_finite == NonFinitePolicy::Stop) break;
         continue;
       }
@@ -323,6 +325,16 @@ private:
       optimizer() = saved_optimizer_;
     }
     return bad;
+  }
+
+  /// `where` with its sample made the train set's column, as an evaluation's is: the engine
+  /// numbers the columns of batch `batch`, which after a shuffle name no column a user can find.
+  [[nodiscard]] NonFinite in_train_set(NonFinite where, Index batch) const {
+    const bool per_sample =
+        where.quantity != Quantity::Gradient && where.quantity != Quantity::Parameter;
+    if (per_sample && where.sample >= 0)
+      where.sample = order_[static_cast<std::size_t>(batch * options_.batch + where.sample)];
+    return where;
   }
 
   Ctrl& controller_;

@@ -45,7 +45,7 @@ void step_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>&
                   Matrix<Scalar>& x_next, ForEachSample&& for_each_sample) {
   if constexpr (BatchSimulator<Sim>) {
     sim.step_batch(x, u, x_next);
-    check_batch_output("step_batch wrote x_next", x_next, "state_dim() × B", x.rows(), x.cols());
+    check_output_shape("step_batch", "x_next", x_next, "state_dim() × B", x.rows(), x.cols());
   } else {
     for_each_sample([&](Index b, auto& t) {
       t.x = x.col(b);
@@ -98,14 +98,14 @@ void vjp_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& 
                  const Sweeps& sweeps, bool physics, bool seeded, Seed&& seed,
                  ForEachSample&& for_each_sample, PairedColumns<Scalar>& paired) {
   if constexpr (BatchSimulator<Sim>) {
-    const auto check_outputs = [&] {
-      for (auto* s : sweeps) {
-        check_batch_output("vjp_batch wrote lambda_u (Bᵀλ)", s->mu, "control_dim() × B",
-                           u.rows(), x.cols());
-        if (physics)
-          check_batch_output("vjp_batch wrote lambda_x (Aᵀλ)", s->propagated, "state_dim() × B",
-                             x.rows(), x.cols());
-      }
+    // B columns per sweep; 2B in the one call that `paired` feeds, checked before its split.
+    const auto check_outputs = [&](const char* call, const auto& lambda_u, const auto& lambda_x,
+                                   Index cols) {
+      check_output_shape(call, "lambda_u (Bᵀλ)", lambda_u, "control_dim() × columns", u.rows(),
+                         cols);
+      if (physics)
+        check_output_shape(call, "lambda_x (Aᵀλ)", lambda_x, "state_dim() × columns", x.rows(),
+                           cols);
     };
     if (seeded) for_each_sample(seed);
     if (sweeps.size() == 2) {
@@ -115,22 +115,24 @@ void vjp_columns(const Sim& sim, const Matrix<Scalar>& x, const Matrix<Scalar>& 
         sim.vjp_batch_pair(x, u, first->lambda, second->lambda,
                            physics ? &first->propagated : nullptr,
                            physics ? &second->propagated : nullptr, &first->mu, &second->mu);
+        for (auto* s : sweeps) check_outputs("vjp_batch_pair", s->mu, s->propagated, x.cols());
       } else {
         PairedColumns<Scalar>::place(x, x, paired.x);
         PairedColumns<Scalar>::place(u, u, paired.u);
         PairedColumns<Scalar>::place(first->lambda, second->lambda, paired.lambda);
         sim.vjp_batch(paired.x, paired.u, paired.lambda, physics ? &paired.lambda_x : nullptr,
                       &paired.lambda_u);
+        check_outputs("vjp_batch", paired.lambda_u, paired.lambda_x, 2 * x.cols());
         PairedColumns<Scalar>::split(paired.lambda_u, first->mu, second->mu);
         if (physics)
           PairedColumns<Scalar>::split(paired.lambda_x, first->propagated, second->propagated);
       }
-      check_outputs();
       return;
     }
-    for (auto* s : sweeps)
+    for (auto* s : sweeps) {
       sim.vjp_batch(x, u, s->lambda, physics ? &s->propagated : nullptr, &s->mu);
-    check_outputs();
+      check_outputs("vjp_batch", s->mu, s->propagated, x.cols());
+    }
   } else {
     for_each_sample([&](Index b, auto& t) {
       if (seeded) seed(b, t);

@@ -145,9 +145,7 @@ template <Simulator Sim>
     typename Sim::StateJacobian a;
     typename Sim::ControlJacobian b;
     sim.jacobians(x, u, a, b);
-    detail::check_batch_output("jacobians wrote A", a, "state_dim() × state_dim()", n, n);
-    detail::check_batch_output("jacobians wrote B", b, "state_dim() × control_dim()", n,
-                               sim.control_dim());
+    detail::check_jacobians_output(a, b, n, sim.control_dim());
     result.has_jacobians = true;
     result.state_jacobian_error = relative_error<Scalar>(Matrix<Scalar>(a), fd_a);
     result.control_jacobian_error = relative_error<Scalar>(Matrix<Scalar>(b), fd_b);
@@ -171,6 +169,7 @@ template <SimulatorWithJacobians Sim>
   typename Sim::StateJacobian a;
   typename Sim::ControlJacobian b;
   sim.jacobians(x, u, a, b);
+  detail::check_jacobians_output(a, b, sim.state_dim(), sim.control_dim());
   Matrix<Scalar> at, bt;
   detail::vjp_transposes(sim, x, u, at, bt);
   return worst_error({relative_error<Scalar>(at, Matrix<Scalar>(a).transpose()),

@@ -33,14 +33,23 @@ void check_vjp_output(const State* lambda_x, const Control* lambda_u, Index stat
                         control_dim);
 }
 
-/// A batch product (`what`, e.g. "step_batch wrote x_next") is `rows` × `cols`, the sizes
-/// `expected_name` (e.g. "state_dim() × B") names.
+/// The matrix `product` that the simulator's `call` wrote ("step_batch", "x_next"; "jacobians",
+/// "A") is `rows` × `cols`, the sizes `expected_name` (e.g. "state_dim() × B") names.
 template <class Product>
-void check_batch_output(const char* what, const Product& product, const char* expected_name,
-                        Index rows, Index cols) {
-  require(product.rows() == rows && product.cols() == cols, "the simulator's ", what, " of ",
-          product.rows(), " × ", product.cols(), "; expected ", expected_name, " = ", rows,
-          " × ", cols);
+void check_output_shape(const char* call, const char* product, const Product& written,
+                        const char* expected_name, Index rows, Index cols) {
+  require(written.rows() == rows && written.cols() == cols, "the simulator's ", call, " wrote ",
+          product, " of ", written.rows(), " × ", written.cols(), "; expected ", expected_name,
+          " = ", rows, " × ", cols);
+}
+
+/// `sim.jacobians`' A is `state_dim` × `state_dim` and B `state_dim` × `control_dim`.
+template <class StateJacobian, class ControlJacobian>
+void check_jacobians_output(const StateJacobian& a, const ControlJacobian& b, Index state_dim,
+                            Index control_dim) {
+  check_output_shape("jacobians", "A", a, "state_dim() × state_dim()", state_dim, state_dim);
+  check_output_shape("jacobians", "B", b, "state_dim() × control_dim()", state_dim,
+                     control_dim);
 }
 
 }  // namespace sbptt::detail

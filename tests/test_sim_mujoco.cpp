@@ -177,7 +177,7 @@ TEST_CASE("mujoco: A and B are the derivatives of the step with every integrator
   // their forces depend on ctrl, qpos and qvel). Two truths that need only the step: sbptt's
   // own central differences of it (check_jacobians), and the Taylor remainder
   // |P(x + h v, u + h w) − P(x, u) − h (A v + B w)|, which must fall 4-fold when h halves.
-  // MuJoCo 2.2's mjd_transitionFD gave B off by up to 8e6 (relative) with RK4: it reuses
+  // MuJoCo 2.2's mjd_transitionFD gave B off by up to 5.2e6 (relative) with RK4: it reuses
   // the unperturbed state's position and velocity stages in RK4's later stages.
   const std::string arm =
       "<mujoco><option timestep='0.005' integrator='INTEGRATOR'><flag contact='disable'/>"

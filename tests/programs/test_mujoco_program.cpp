@@ -127,6 +127,12 @@ TEST_CASE("mujoco refuses a model or target it cannot use, naming it", "[program
   const fs::path broken = scratch("broken.xml"), passive = scratch("passive.xml"),
                  ball = scratch("ball.xml");
   std::ofstream(broken) << "<mujoco><worldbody><body>";
+  // Read, but not a model: exit 2 as a bad --model (docs/programs.md), MuJoCo's reason quoted.
+  const fs::path empty = scratch("empty.xml"), text = scratch("text.xml"),
+                 includes_nothing = scratch("includes_nothing.xml");
+  std::ofstream(empty) << "";
+  std::ofstream(text) << "not xml at all\n";
+  std::ofstream(includes_nothing) << "<mujoco><include file='no_such_part.xml'/></mujoco>";
   std::ofstream(passive) << "<mujoco><worldbody><body><joint type='hinge'/><geom size='0.1'/>"
                             "</body></worldbody></mujoco>";
   std::ofstream(ball) << "<mujoco><worldbody><body><joint name='j' type='ball'/><geom "
@@ -148,6 +154,9 @@ TEST_CASE("mujoco refuses a model or target it cannot use, naming it", "[program
   const std::string acrobot = "--model " + model_file("examples/models/acrobot.xml");
   for (const Case& c :
        {Case{"--model " + broken.string() + " --target 0", "XML_ERROR_MISMATCHED_ELEMENT"},
+        Case{"--model " + empty.string() + " --target 0", "XML_ERROR_EMPTY_DOCUMENT"},
+        Case{"--model " + text.string() + " --target 0", "XML_ERROR_PARSING_TEXT"},
+        Case{"--model " + includes_nothing.string() + " --target 0", "no_such_part.xml"},
         Case{"--model " + passive.string() + " --target 0", "no actuator (nu = 0)"},
         Case{"--model " + ball.string() + " --target 0,0,0,0", "quaternion"},
         Case{"--model " + jointless.string() + " --target 0",

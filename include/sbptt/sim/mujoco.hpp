@@ -66,8 +66,8 @@ namespace sbptt {
 
 /// Settings of `MujocoSimulator`.
 struct MujocoOptions {
-  /// ε of the centered differences of `mjd_transitionFD` (absolute, in state and control
-  /// units; in (0, 1]). MuJoCo's own suggestion is 1e-6.
+  /// ε of the centered differences of A and B (absolute, in state and control units; in (0,
+  /// 1]). MuJoCo's own suggestion is 1e-6.
   double fd_step = 1e-6;
 };
 
@@ -266,24 +266,16 @@ public:
       return;
     }
     mj_step(model_.get(), &d);
-    // MuJoCo checks a state only when it steps from it; the last state of a rollout never is.
-    const auto refused = [](const mjtNum* values, Index count) {
-      return std::any_of(values, values + count, [](mjtNum v) { return mju_isBad(v) != 0; });
-    };
-    if (detail::mujoco_step_failed(d) || refused(d.qpos, nv_) || refused(d.qvel, nv_) ||
-        refused(d.act, na_)) {
+    if (!stepped(d)) {
       x_next.setConstant(nan());
       return;
     }
-    for (Index i = 0; i < nv_; ++i) {
-      x_next(i) = static_cast<Scalar>(d.qpos[i]);
-      x_next(nv_ + i) = static_cast<Scalar>(d.qvel[i]);
-    }
-    for (Index i = 0; i < na_; ++i) x_next(2 * nv_ + i) = static_cast<Scalar>(d.act[i]);
+    read_state(d, x_next);
   }
 
   /// A = ∂x_next/∂x (state_dim × state_dim), B = ∂x_next/∂u (state_dim × control_dim), by
-  /// centered finite differences of mj_step (mjd_transitionFD, step `options().fd_step`).
+  /// centered finite differences of mj_step (`mjd_transitionFD`, or whole steps for RK4; step
+  /// `options().fd_step`).
   void jacobians(const State& x, const Control& u, StateJacobian& a, ControlJacobian& b) const {
     check_sizes(x, u);
     auto slot = pool_->lease();
@@ -329,16 +321,46 @@ private:
       if (mju_isBad(static_cast<mjtNum>(x(i)))) return false;
     for (Index i = 0; i < u.size(); ++i)
       if (mju_isBad(static_cast<mjtNum>(u(i)))) return false;
+    write_input(x, u, d);
+    return true;
+  }
+
+  /// Writes state `x` (qpos, qvel, act: anything indexed by [i]) and control `u` into `d`, time
+  /// and warm start zeroed, warnings armed: the whole input of a step, so that its result does
+  /// not depend on what `d` computed before.
+  template <class StateValues, class ControlValues>
+  void write_input(const StateValues& x, const ControlValues& u, mjData& d) const {
     for (Index i = 0; i < nv_; ++i) {
-      d.qpos[i] = static_cast<mjtNum>(x(i));
-      d.qvel[i] = static_cast<mjtNum>(x(nv_ + i));
+      d.qpos[i] = static_cast<mjtNum>(x[i]);
+      d.qvel[i] = static_cast<mjtNum>(x[nv_ + i]);
       d.qacc_warmstart[i] = 0;
     }
-    for (Index i = 0; i < na_; ++i) d.act[i] = static_cast<mjtNum>(x(2 * nv_ + i));
-    for (Index i = 0; i < nu_; ++i) d.ctrl[i] = static_cast<mjtNum>(u(i));
+    for (Index i = 0; i < na_; ++i) d.act[i] = static_cast<mjtNum>(x[2 * nv_ + i]);
+    for (Index i = 0; i < nu_; ++i) d.ctrl[i] = static_cast<mjtNum>(u[i]);
     d.time = 0;
     detail::arm_mujoco_warnings(d);
-    return true;
+  }
+
+  /// Whether the step just taken in `d` stands: MuJoCo raised no failure, and its result holds
+  /// no value MuJoCo would refuse (it checks a state only when it steps from it; the last state
+  /// of a rollout never is).
+  [[nodiscard]] bool stepped(const mjData& d) const {
+    const auto refused = [](const mjtNum* values, Index count) {
+      return std::any_of(values, values + count, [](mjtNum v) { return mju_isBad(v) != 0; });
+    };
+    return !detail::mujoco_step_failed(d) && !refused(d.qpos, nv_) && !refused(d.qvel, nv_) &&
+           !refused(d.act, na_);
+  }
+
+  /// The state of `d` (qpos, qvel, act) into `out` (anything indexed by [i]).
+  template <class StateValues>
+  void read_state(const mjData& d, StateValues& out) const {
+    using Value = std::remove_cvref_t<decltype(out[0])>;
+    for (Index i = 0; i < nv_; ++i) {
+      out[i] = static_cast<Value>(d.qpos[i]);
+      out[nv_ + i] = static_cast<Value>(d.qvel[i]);
+    }
+    for (Index i = 0; i < na_; ++i) out[2 * nv_ + i] = static_cast<Value>(d.act[i]);
   }
 
   /// Fills the slot's row-major A and B (NaN if MuJoCo rejected any probe) and maps them.
@@ -366,30 +388,20 @@ private:
   /// The slot's A and B by centered differences of whole `mj_step`s from the state loaded in
   /// its mjData, each probe loaded afresh; false if MuJoCo refused any probe. For RK4 only:
   /// MuJoCo 2.2's `mjd_transitionFD` reuses the unperturbed state's position and velocity
-  /// stages in RK4's three later stages, which gave B off by up to 5e6 (relative) on a cart
-  /// with a double pendulum (tests/test_sim_mujoco.cpp). A whole step costs more than the
-  /// stages it skips, as many steps as `mjd_transitionFD` takes.
+  /// stages in RK4's three later stages, which gave B off by up to 5.2e6 (relative) on a cart
+  /// with a double pendulum (tests/test_sim_mujoco.cpp). Whole steps redo the stages that
+  /// `mjd_transitionFD` skips, in as many steps.
   bool whole_step_differences(detail::MujocoSlot& slot) const {
     mjData& d = *slot.data;
     const Index n = state_dim();
-    std::copy(d.qpos, d.qpos + nv_, slot.probe.begin());
-    std::copy(d.qvel, d.qvel + nv_, slot.probe.begin() + nv_);
-    std::copy(d.act, d.act + na_, slot.probe.begin() + 2 * nv_);
+    read_state(d, slot.probe);
     std::copy(d.ctrl, d.ctrl + nu_, slot.probe.begin() + n);
     bool refused = false;
     const auto step_from_probe = [&](std::vector<mjtNum>& next) {
-      std::copy(slot.probe.begin(), slot.probe.begin() + nv_, d.qpos);
-      std::copy(slot.probe.begin() + nv_, slot.probe.begin() + 2 * nv_, d.qvel);
-      std::copy(slot.probe.begin() + 2 * nv_, slot.probe.begin() + n, d.act);
-      std::copy(slot.probe.begin() + n, slot.probe.end(), d.ctrl);
-      std::fill(d.qacc_warmstart, d.qacc_warmstart + nv_, mjtNum{0});
-      d.time = 0;
-      detail::arm_mujoco_warnings(d);
+      write_input(slot.probe, slot.probe.data() + n, d);
       mj_step(model_.get(), &d);
-      refused = refused || detail::mujoco_step_failed(d);
-      std::copy(d.qpos, d.qpos + nv_, next.begin());
-      std::copy(d.qvel, d.qvel + nv_, next.begin() + nv_);
-      std::copy(d.act, d.act + na_, next.begin() + 2 * nv_);
+      refused = refused || !stepped(d);
+      read_state(d, next);
     };
     const mjtNum eps = options_.fd_step;
     for (Index j = 0; j < n + nu_; ++j) {

@@ -19,7 +19,7 @@
 /// rounding error of one step. The VJP forms A and B and returns Aᵀλ, Bᵀλ: the same cost.
 /// With the RK4 integrator the same differences are taken of whole `mj_step`s instead (2 (2 nv
 /// + na + nu) of them): MuJoCo 2.2's `mjd_transitionFD` skips stages that RK4's later stages
-/// need recomputed, and its B was off by a factor of up to 5e6.
+/// need recomputed, and its B had relative errors of up to 5.2e6 (docs/mujoco.md).
 ///
 /// Refused: models whose qpos and qvel differ in size (free and ball joints hold a quaternion
 /// in qpos and an angular velocity in qvel). `mjd_transitionFD` differentiates in the tangent

@@ -1,9 +1,10 @@
 // A simulator of the user's whose step, VJP or Jacobians (or, for a batch simulator, whose
 // step_batch or vjp_batch) write another size than its state_dim() or control_dim() is refused
 // with InvalidArgument, naming the product, the size it had and the size expected: by the
-// engine's forward pass, its sweeps and its evaluation, and by check_jacobians. Before, a step of 3 entries for 2 trained with the third dropped,
-// and a λ_x of 1 entry for 2 was read past its end (AddressSanitizer: heap-buffer-overflow in
-// detail::vjp_columns), both with no error in a Release build.
+// engine's forward pass, its sweeps and its evaluation, and by check_jacobians. Before, a step
+// of 3 entries for 2 trained with the third dropped, and a λ_x of 1 entry for 2 was read past
+// its end (AddressSanitizer: heap-buffer-overflow in detail::vjp_columns), both with no error
+// in a Release build.
 #include <string>
 
 #include <catch2/catch.hpp>
@@ -21,12 +22,19 @@ namespace {
 
 using Base = LinearSystem<double>;  // run-time sizes: nothing stops a wrong size at compile time
 
-Base oscillator() {
-  Matrix<double> a(2, 2), b(2, 1);
+Matrix<double> oscillator_a() {
+  Matrix<double> a(2, 2);
   a << 1.0, 0.1, -0.1, 0.98;
-  b << 0.005, 0.1;
-  return Base(a, b);
+  return a;
 }
+
+Matrix<double> oscillator_b() {
+  Matrix<double> b(2, 1);
+  b << 0.005, 0.1;
+  return b;
+}
+
+Base oscillator() { return Base(oscillator_a(), oscillator_b()); }
 
 /// The oscillator with one of its products written at `wrong_size`.
 struct WrongSize : Base {
@@ -124,11 +132,8 @@ namespace {
 /// vjp_batch writes Bᵀλ with a column too few.
 struct WrongBatch : Base {
   bool wrong_step;
-  Matrix<double> a, b;
-  explicit WrongBatch(bool step) : Base(oscillator()), wrong_step(step), a(2, 2), b(2, 1) {
-    a << 1.0, 0.1, -0.1, 0.98;  // oscillator()'s
-    b << 0.005, 0.1;
-  }
+  Matrix<double> a = oscillator_a(), b = oscillator_b();
+  explicit WrongBatch(bool step) : Base(oscillator()), wrong_step(step) {}
   void step_batch(const Matrix<double>& x, const Matrix<double>& u, Matrix<double>& x_next) const {
     x_next = a * x + b * u;
     if (wrong_step) x_next = Matrix<double>::Ones(x.rows() + 1, x.cols());

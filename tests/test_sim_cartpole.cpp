@@ -17,9 +17,11 @@
 #include "sbptt/core/finite_difference.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/sim/cartpole.hpp"
+#include "support/taylor_remainder.hpp"
 
 using sbptt::CartPole;
 using sbptt::Index;
+using sbptt::testing::taylor_remainder;
 
 namespace {
 
@@ -64,22 +66,6 @@ double rollout_objective(const Sim& sim, const sbptt::Objective<Loss>& objective
   }
   return state_part + objective.control_weight * control_sq /
                           static_cast<double>(steps * sim.control_dim());
-}
-
-/// ‖P(x+hδ, u+hη) − P(x,u) − h(Aδ + Bη)‖ for one h.
-template <class Sim>
-double taylor_remainder(const Sim& sim, const typename Sim::State& x,
-                        const typename Sim::Control& u, const typename Sim::State& dx,
-                        const typename Sim::Control& du, double h) {
-  typename Sim::StateJacobian a;
-  typename Sim::ControlJacobian b;
-  sim.jacobians(x, u, a, b);
-  typename Sim::State base, moved;
-  sim.step(x, u, base);
-  const typename Sim::State xh = x + h * dx;
-  const typename Sim::Control uh = u + h * du;
-  sim.step(xh, uh, moved);
-  return (moved - base - h * (a * dx + b * du)).norm();
 }
 
 template <class Sim>

@@ -26,6 +26,7 @@
 #include "sbptt/sim/mujoco.hpp"
 
 #include "mujoco_cartpole_layout.hpp"
+#include "support/taylor_remainder.hpp"
 
 using namespace sbptt;
 using sbptt::examples::to_mujoco_layout;
@@ -200,15 +201,9 @@ TEST_CASE("mujoco: A and B are the derivatives of the step with every integrator
       for (auto* vector : {&x, &u, &v, &w})
         for (Index i = 0; i < vector->size(); ++i) (*vector)(i) = rng.uniform(-1.0, 1.0);
       const auto check = check_jacobians(sim, x, u);
-      Matrix<double> a, b;
-      sim.jacobians(x, u, a, b);
-      Vector<double> base(6), moved(6);
-      sim.step(x, u, base);
       std::vector<double> remainders;
-      for (const double h : {4e-2, 2e-2, 1e-2}) {
-        sim.step(Vector<double>(x + h * v), Vector<double>(u + h * w), moved);
-        remainders.push_back((moved - base - h * (a * v + b * w)).norm());
-      }
+      for (const double h : {4e-2, 2e-2, 1e-2})
+        remainders.push_back(testing::taylor_remainder(sim, x, u, v, w, h));
       INFO(integrator << ", trial " << trial << ": A " << check.state_jacobian_error << ", B "
                       << check.control_jacobian_error << ", VJP " << check.vjp_error
                       << "; remainders " << remainders[0] << ", " << remainders[1] << ", "

@@ -17,9 +17,9 @@ struct SquaredDistanceLoss {
   void check_state_dim(Index state_dim) const {
     detail::require(target.size() == state_dim, "SquaredDistanceLoss: the target has ",
                     target.size(), " entries; expected the simulator's state_dim = ", state_dim);
-    const auto bad = first_non_finite(target);
-    detail::require(!bad, "SquaredDistanceLoss: the target's entry ", bad ? bad->row : 0, " is ",
-                    bad ? target(bad->row) : 0, "; expected finite numbers");
+    if (const auto bad = first_non_finite(target))
+      throw InvalidArgument(detail::concat("SquaredDistanceLoss: the target's entry ", bad->row,
+                                           " is ", target(bad->row), "; expected finite numbers"));
   }
 
   typename State::Scalar operator()(const State& x, State* grad) const {

@@ -301,6 +301,8 @@ public:
 
 private:
   using RowMajorMap = Eigen::Map<const RowMajorMatrix<mjtNum>>;
+  using WritableRowMajorMap = Eigen::Map<RowMajorMatrix<mjtNum>>;
+  using ColumnMap = Eigen::Map<const Vector<mjtNum>>;
   struct TransitionJacobians {
     RowMajorMap a, b;
   };
@@ -411,16 +413,12 @@ private:
       slot.probe[static_cast<std::size_t>(j)] = centre - eps;
       step_from_probe(slot.minus);
       slot.probe[static_cast<std::size_t>(j)] = centre;
-      for (Index i = 0; i < n; ++i) {
-        const auto row = static_cast<std::size_t>(i);
-        const mjtNum slope = (slot.plus[row] - slot.minus[row]) / (2 * eps);
-        if (j < n) {
-          slot.state_jacobian[row * static_cast<std::size_t>(n) + static_cast<std::size_t>(j)] =
-              slope;
-        } else {
-          slot.control_jacobian[row * static_cast<std::size_t>(nu_) +
-                                static_cast<std::size_t>(j - n)] = slope;
-        }
+      const auto slope = (ColumnMap(slot.plus.data(), n) - ColumnMap(slot.minus.data(), n)) /
+                         (2 * eps);
+      if (j < n) {
+        WritableRowMajorMap(slot.state_jacobian.data(), n, n).col(j) = slope;
+      } else {
+        WritableRowMajorMap(slot.control_jacobian.data(), n, nu_).col(j - n) = slope;
       }
     }
     return !refused;

@@ -78,10 +78,15 @@ set(S "${WORK_DIR}/stale")
 file(MAKE_DIRECTORY "${S}/runs")
 file(WRITE "${S}/runs/cartpole_p4_C_norm_s42.run" "task=cartpole\nepochs=999\n")
 file(WRITE "${S}/runs/cartpole_p4_C_norm_s42.checkpoint" "5 6\n")
+file(WRITE "${S}/runs/cartpole_p4_C_norm_s42.partial.csv" "epoch\n")
 execute_process(COMMAND "${REPRODUCE}" ${grid} --seeds 1 --methods C --out "${S}"
-                RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
+                RESULT_VARIABLE rc OUTPUT_VARIABLE stale_out ERROR_QUIET)
 check("a sweep over a stale checkpoint exits 0" rc EQUAL 0)
 check("the stale checkpoint was not resumed" NOT EXISTS "${S}/fake_resumes")
+# It said "2 from their checkpoint" of runs whose checkpoints it was about to drop.
+check("the sweep says the run restarts, not that it resumes (${stale_out})"
+      stale_out MATCHES "discarded 1 unfinished run" AND
+      stale_out MATCHES "they are redone, 0 from their checkpoint")
 
 # --- 4. a checkpoint whose log is gone: the program refuses it, the run is redone from epoch 1 --
 set(G "${WORK_DIR}/gone")

@@ -96,7 +96,8 @@ public:
   }
 
   /// Reads argv. Returns false after printing the help on stdout (the program exits 0);
-  /// throws InvalidArgument for an unknown flag, a missing value or a bad value.
+  /// throws InvalidArgument for an unknown flag, a missing value or a bad value, with --help
+  /// too.
   bool parse(int argc, const char* const* argv) {
     for (int i = 1; i < argc; ++i) {
       const std::string token = argv[i];
@@ -111,6 +112,8 @@ public:
     try {
       app_.parse(argc, argv);
     } catch (const CLI::CallForHelp&) {
+      // CLI11 calls for help before it reports the extras; a typo beside --help is still one.
+      refuse_extras();
       std::fputs(app_.help().c_str(), stdout);
       return false;
     } catch (const CLI::ArgumentMismatch& e) {
@@ -123,15 +126,7 @@ public:
     } catch (const CLI::ParseError& e) {
       throw InvalidArgument(e.what());
     }
-    const std::vector<std::string> extras = app_.remaining();
-    if (!extras.empty()) {
-      const std::string& first = extras.front();
-      if (first.rfind('-', 0) != 0)
-        throw InvalidArgument(detail::concat("unexpected argument '", first,
-                                             "'; expected a flag starting with --"));
-      throw InvalidArgument(detail::concat("unknown flag '", first.substr(0, first.find('=')),
-                                           "'; accepted flags: ", accepted(), " (--help explains each)"));
-    }
+    refuse_extras();
     return true;
   }
 
@@ -149,6 +144,19 @@ public:
   }
 
 private:
+  /// Throws for the first word of argv that is no flag of this program.
+  void refuse_extras() const {
+    const std::vector<std::string> extras = app_.remaining();
+    if (extras.empty()) return;
+    const std::string& first = extras.front();
+    if (first.rfind('-', 0) != 0)
+      throw InvalidArgument(detail::concat("unexpected argument '", first,
+                                           "'; expected a flag starting with --"));
+    throw InvalidArgument(detail::concat("unknown flag '", first.substr(0, first.find('=')),
+                                         "'; accepted flags: ", accepted(),
+                                         " (--help explains each)"));
+  }
+
   CLI::App app_;
   std::vector<std::pair<std::string, std::string>> refused_;
   std::vector<std::string> switches_;

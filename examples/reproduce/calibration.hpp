@@ -13,11 +13,14 @@
 
 #include <algorithm>
 #include <array>
+#include <cerrno>
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "grid.hpp"
@@ -49,6 +52,28 @@ struct MeasuredCosts {
   }
 };
 
+/// The scratch folder of `measure_costs` in the temporary directory is this and its pid.
+inline constexpr std::string_view probe_folder_prefix = "sbptt-reproduce-probe-";
+
+/// Removes the scratch folders that measurements killed by SIGKILL (which runs no handler)
+/// left in `temp`: those named after a process that no longer exists.
+inline void remove_killed_probes(const fs::path& temp) {
+  std::error_code error;
+  for (fs::directory_iterator it(temp, error), end; !error && it != end; it.increment(error)) {
+    const std::string name = it->path().filename().string();
+    if (!name.starts_with(probe_folder_prefix)) continue;
+    const std::string pid = name.substr(probe_folder_prefix.size());
+    if (pid.empty() || pid.size() > 9 || pid.find_first_not_of("0123456789") != std::string::npos)
+      continue;
+    if (::kill(static_cast<pid_t>(std::stol(pid)), 0) == 0 || errno != ESRCH) continue;
+    std::error_code not_removed;
+    fs::remove_all(it->path(), not_removed);
+    if (!not_removed)
+      std::printf("reproduce: removed '%s', left by a --dry-run that was killed\n",
+                  it->path().c_str());
+  }
+}
+
 /// Wall seconds of `probe` run for `epochs` epochs (stdout and stderr discarded; its training
 /// log goes to `scratch`/runs/), or nothing when a signal interrupted it.
 inline std::optional<double> time_probe(Run probe, long epochs, const fs::path& bin_dir,
@@ -72,8 +97,9 @@ inline std::optional<double> time_probe(Run probe, long epochs, const fs::path& 
 inline std::optional<MeasuredCosts> measure_costs(const std::vector<Run>& plan,
                                                   const fs::path& bin_dir, long threads) {
   MeasuredCosts costs;
-  const fs::path scratch =
-      fs::temp_directory_path() / concat("sbptt-reproduce-probe-", ::getpid());
+  const fs::path temp = fs::temp_directory_path();
+  remove_killed_probes(temp);
+  const fs::path scratch = temp / concat(probe_folder_prefix, ::getpid());
   fs::create_directories(scratch / "runs");
   struct Cleanup {
     fs::path path;

@@ -144,12 +144,25 @@ private:
       for (const auto& file : files)
         if (!resumable || file != kept) fs::remove(file);
       ++discarded;
-      if (resumable) ++resumed;
+      if (resumable && resumes_as_planned(name)) ++resumed;
     }
     if (discarded > 0)
       std::printf("reproduce: discarded %zu unfinished run(s) of an interrupted sweep (their "
                   "partial files); they are redone, %zu from their checkpoint\n",
                   discarded, resumed);
+  }
+
+  /// Whether the checkpoint of run `name` was written for the planned run's settings (`start`
+  /// removes one of other settings, and the run starts over).
+  [[nodiscard]] bool resumes_as_planned(const std::string& name) const {
+    for (const Run& run : plan_)
+      if (run.name() == name) return described_as(run);
+    return false;
+  }
+
+  /// Whether the run folder's description of `run`'s name is `run`'s.
+  [[nodiscard]] bool described_as(const Run& run) const {
+    return read_text(run_file(runs_, run, ".run")) == run.description();
   }
 
   /// Finished runs whose files do not hold together (finished_run.hpp): named, removed, and,
@@ -198,7 +211,7 @@ private:
     // A checkpoint resumes only the run it was written for (--epochs aside, the programs
     // refuse others): one left by a run of other settings under this name goes. Without a
     // checkpoint the run starts over, and so does its training log.
-    if (read_text(run_file(runs_, run, ".run")) != run.description()) remove_checkpoint(run);
+    if (!described_as(run)) remove_checkpoint(run);
     if (!fs::exists(run_file(runs_, run, ".checkpoint")))
       fs::remove(run_file(runs_, run, ".partial.csv"));
     sbptt::write_file_atomically(run_file(runs_, run, ".run").string(), run.description());

@@ -248,6 +248,12 @@ TEST_CASE("numbers beyond the type's range, numbers not in decimals, contradicti
         Case{"cartpole", "--help=0", "--help=0: --help is a switch and takes no value; expected "
                                      "--help alone"},
         Case{"reproduce", "--help=no", "--help=no: --help is a switch"},
+        // An unknown flag or a stray word beside --help printed the help and exited 0, while a
+        // bad value beside it was refused.
+        Case{"cartpole", "--bogus --help", "unknown flag '--bogus'; accepted flags: "},
+        Case{"reproduce", "--help stray", "unexpected argument 'stray'; expected a flag"},
+        // A list item's error named the flag twice ("--complexities: --complexities nan").
+        Case{"reproduce", "--complexities 1,nan", "reproduce: --complexities nan is out of range"},
         // The --model callback ran after --physical's whatever the order given and reset it:
         // both ran the model of --model, --physical silently dropped.
         Case{"cartpole", "--physical --model reference --epochs 1",

@@ -112,6 +112,26 @@ TEST_CASE("checkpoint: an error names the line that is wrong, whichever it is", 
                     Catch::Contains("line " + std::to_string(lines.size()) + ": the line has no end"));
 }
 
+TEST_CASE("checkpoint: a setting given twice is refused, naming both lines", "[train]") {
+  // A second line of a setting was read, and the last one won: a hand-edited --samples=64
+  // after the run's --samples=32 was compared, before it was not. The program never writes
+  // a setting twice.
+  Checkpoint<double> c;
+  c.settings = {{"method", "C"}, {"--samples", "32"}};
+  c.shuffle_state = Rng(1).state();
+  c.epoch = 1;
+  const std::string text = checkpoint_text(c);
+  REQUIRE_NOTHROW(parse_checkpoint<double>(text, "test.checkpoint"));
+  for (const char* second : {"setting --samples=64\n", "setting --samples=32\n"}) {
+    std::string doubled = text;
+    doubled.insert(doubled.find("setting --samples"), second);
+    INFO(doubled.substr(0, 120));
+    CHECK_THROWS_WITH(parse_checkpoint<double>(doubled, "test.checkpoint"),
+                      Catch::Contains("checkpoint 'test.checkpoint', line 4: setting --samples "
+                                      "again (line 3 gave it); expected each setting once"));
+  }
+}
+
 TEST_CASE("checkpoint: best parameters exactly when an epoch was best, or refused", "[train]") {
   // A run keeps θ of its best epoch from the first evaluation on, and none before it; resumed
   // with best_epoch > 0 and no best_params, restore_best emptied the controller.

@@ -530,6 +530,11 @@ TEST_CASE("a checkpoint of other settings is refused, naming the setting", "[pro
   CHECK(r.status == 2);
   CHECK(contains(r.output, "was made with --lr = 0.01; this run has --lr = 0.02"));
   CHECK_FALSE(contains(r.output, "epoch 1"));
+  // The file holds 17 digits; the message showed them ("--lr = 0.0050000000000000001").
+  const Outcome digits = launch("toy", checkpoint + " --lr 0.005");
+  INFO(digits.output);
+  CHECK(digits.status == 2);
+  CHECK(contains(digits.output, "; this run has --lr = 0.005; expected the same settings"));
   const Outcome seed = launch("toy", checkpoint + " --seed 7");
   INFO(seed.output);
   CHECK(seed.status == 2);

@@ -133,4 +133,20 @@ void append_number(std::string& out, Scalar value) {
   append_formatted(out, value, std::chars_format::general, round_trip_digits<Scalar>);
 }
 
+/// `text` in the shortest form that reads back to the same double, where `text` is that
+/// double's round-trip form as `append_number` writes it ("0.0050000000000000001" is "0.005"
+/// for a reader); any other text as it is.
+[[nodiscard]] inline std::string shortest_if_round_trip(const std::string& text) {
+  double value = 0;
+  const char* end = text.data() + text.size();
+  const auto parsed = std::from_chars(text.data(), end, value);
+  if (parsed.ec != std::errc() || parsed.ptr != end || !std::isfinite(value)) return text;
+  std::string round_trip;
+  append_number(round_trip, value);
+  if (round_trip != text) return text;
+  char buffer[32];
+  const auto result = std::to_chars(buffer, buffer + sizeof buffer, value);
+  return std::string(buffer, result.ptr);
+}
+
 }  // namespace sbptt::detail

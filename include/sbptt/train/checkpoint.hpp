@@ -235,8 +235,13 @@ template <class Scalar>
     const std::size_t equals = setting.find('=');
     detail::require<ParseError>(equals != std::string_view::npos, in.where(),
                                 ": expected 'setting name=value'");
-    c.settings.push_back(
-        {std::string(setting.substr(0, equals)), std::string(setting.substr(equals + 1))});
+    std::string name(setting.substr(0, equals));
+    // A run writes each setting once; of two, either could be the one compared.
+    for (std::size_t i = 0; i < c.settings.size(); ++i)
+      detail::require<ParseError>(c.settings[i].name != name, in.where(), ": setting ", name,
+                                  " again (line ", i + 2,  // the settings follow line 1
+                                  " gave it); expected each setting once");
+    c.settings.push_back({std::move(name), std::string(setting.substr(equals + 1))});
   }
   // The settings are whole only where the epoch line follows them: a file cut among them is
   // incomplete (value throws), not a checkpoint of other settings.
@@ -337,9 +342,19 @@ inline void require_same_settings(const std::vector<RunSetting>& expected,
     detail::require(have != nullptr, "checkpoint '", path, "' has no setting ", name,
                     " (this run has ", name, " = ", want.value,
                     "); expected a checkpoint of this run (remove it to start over)");
-    detail::require(have->value == want.value, "checkpoint '", path, "' was made with ", name,
-                    " = ", have->value, "; this run has ", name, " = ", want.value,
-                    "; expected the same settings (remove it to start over)");
+    if (have->value == want.value) continue;
+    // The file's 17 digits of a number are noise to a reader; two numbers a run wrote differ
+    // in their shortest forms too.
+    std::string made = detail::shortest_if_round_trip(have->value);
+    std::string now = detail::shortest_if_round_trip(want.value);
+    if (made == now) {
+      made = have->value;
+      now = want.value;
+    }
+    throw InvalidArgument(detail::concat("checkpoint '", path, "' was made with ", name, " = ",
+                                         made, "; this run has ", name, " = ", now,
+                                         "; expected the same settings (remove it to start "
+                                         "over)"));
   }
   for (const RunSetting& f : found) {
     bool known = false;

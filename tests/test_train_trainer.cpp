@@ -215,6 +215,34 @@ TEST_CASE("trainer: a loss that overflows from finite states is reported as the 
   CHECK(policy.params()(0) == 0.0);
 }
 
+TEST_CASE("trainer: a running loss that overflows is reported at the step it overflowed",
+          "[train]") {
+  // x' = 2x with c = 0 from 1e300: every state is finite, but ½ x_1² overflows at step 1 of 6.
+  // Every loss event was reported at the last step, where the sum ends.
+  const Sim doubling = Sim::scalar(2.0, 1.0);
+  const Matrix<double> finite = samples({1.0, 0.5}), overflowing = samples({1.0, 1e300});
+  for (const auto timing : {LossTiming::Continuous, LossTiming::Final}) {
+    const Index expected_step = timing == LossTiming::Continuous ? 1 : 6;
+    INFO("continuous " << (timing == LossTiming::Continuous));
+    for (const bool in_update : {true, false}) {
+      Policy policy({1});
+      TrainerOptions options;
+      options.method = Method::Regular;
+      options.batch = 2;
+      Trainer trainer(doubling, policy, to_origin(timing), 6,
+                      Adam<double>(AdamOptions<double>{0.01}), options);
+      trainer.train_epoch(in_update ? overflowing : finite, in_update ? finite : overflowing);
+      INFO("in an update " << in_update);
+      REQUIRE(trainer.last_non_finite());
+      const NonFiniteEvent& event = *trainer.last_non_finite();
+      CHECK(event.phase == (in_update ? Phase::Update : Phase::TestEvaluation));
+      CHECK(event.where.quantity == Quantity::Loss);
+      CHECK(event.where.step == expected_step);
+      CHECK(event.where.sample == 1);
+    }
+  }
+}
+
 namespace {
 
 /// Fault injection: the parameter gradient of θ2 is NaN while states and adjoints stay finite.

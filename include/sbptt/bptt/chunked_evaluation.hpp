@@ -6,6 +6,7 @@
 /// own, in parallel with threads. Memory is O(B · (state_dim + network widths)) whatever the
 /// horizon: each chunk keeps its buffers from call to call. Implementation detail of `Engine`.
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <optional>
 #include <vector>
@@ -33,10 +34,12 @@ struct EvaluationChunk {
 
   /// Rolls out `x0` (state_dim × b, samples first … first + b − 1 of the set) for `steps`
   /// steps with `controller` (packed) through `sim`, and sets `losses` (b) to each sample's
-  /// loss under `objective`.
-  template <class Sim, class Controller, class Loss, class Initial, class Losses>
+  /// loss under `objective`, `loss_steps` (b) to where each went non-finite (LossSteps).
+  template <class Sim, class Controller, class Loss, class Initial, class Losses,
+            class Steps>
   void roll_out(const Sim& sim, const Controller& controller, const Objective<Loss>& objective,
-                Index steps, const Initial& x0, Index first, Losses&& losses) {
+                Index steps, const Initial& x0, Index first, Losses&& losses,
+                Steps&& loss_steps) {
     using State = typename Sim::State;
     const Index batch = x0.cols();
     const auto w = static_cast<Scalar>(objective.step_weight);
@@ -49,6 +52,7 @@ struct EvaluationChunk {
     non_finite.note(Quantity::State, 0, state, first);
     next.resize(sim.state_dim(), batch);
     losses.setZero();
+    loss_steps.setConstant(steps);
     for (Index n = 0; n < steps; ++n) {
       controller.forward(state, control, workspace);
       non_finite.note(Quantity::Control, n, control, first);
@@ -61,6 +65,7 @@ struct EvaluationChunk {
           losses(b) += control_scale * control.col(b).squaredNorm();
         if (objective.timing == LossTiming::Continuous || n + 1 == steps)
           losses(b) += w * objective.state_loss(t.x_next, static_cast<State*>(nullptr));
+        if (loss_steps(b) == steps && !std::isfinite(losses(b))) loss_steps(b) = n + 1;
       }
       state.swap(next);
       non_finite.note(Quantity::State, n + 1, state, first);
@@ -84,12 +89,14 @@ public:
     const Index count = (batch + evaluation_chunk_samples - 1) / evaluation_chunk_samples;
     if (static_cast<Index>(chunks_.size()) < count) chunks_.resize(static_cast<std::size_t>(count));
     losses_.resize(batch);
+    loss_steps_.resize(batch);
     auto task = [&](Index k, Index) {
       const Index first = k * evaluation_chunk_samples;
       const Index size = std::min(evaluation_chunk_samples, batch - first);
       chunks_[static_cast<std::size_t>(k)].roll_out(sim, controller, objective, steps,
                                                     initial_states.middleCols(first, size), first,
-                                                    losses_.segment(first, size));
+                                                    losses_.segment(first, size),
+                                                    loss_steps_.segment(first, size));
     };
     if (pool != nullptr) {
       pool->run(count, task);
@@ -98,12 +105,13 @@ public:
     }
     non_finite = first_in_rollout_order(
         count, [&](Index k) -> auto& { return chunks_[static_cast<std::size_t>(k)].non_finite; });
-    return mean_of_samples(losses_, steps, non_finite);
+    return mean_of_samples(losses_, loss_steps_, non_finite);
   }
 
 private:
   std::vector<EvaluationChunk<Scalar, Workspace, Scratch>> chunks_;
   Vector<Scalar> losses_;
+  LossSteps loss_steps_;
 };
 
 }  // namespace sbptt::detail

@@ -390,11 +390,13 @@ private:
     const Scalar w = static_cast<Scalar>(objective_.step_weight);
     const Index first = objective_.timing == LossTiming::Final ? steps_ : 1;
     sample_losses_.setZero(batch);
+    loss_steps_.setConstant(batch, steps_);
     fork_[2].for_samples(pool_.get(), batch, forward_scratch_, batch_threading_.threaded(),
                          [&](Index b, Scratch& t) {
       for (Index n = first; n <= steps_; ++n) {
         t.x = trajectory_.states[static_cast<std::size_t>(n)].col(b);
         sample_losses_(b) += w * objective_.state_loss(t.x, static_cast<State*>(nullptr));
+        if (loss_steps_(b) == steps_ && !std::isfinite(sample_losses_(b))) loss_steps_(b) = n;
       }
       if (objective_.control_weight > 0) {
         Scalar squares = 0;
@@ -404,7 +406,7 @@ private:
                              squares;
       }
     });
-    return detail::mean_of_samples(sample_losses_, steps_, forward_non_finite_);
+    return detail::mean_of_samples(sample_losses_, loss_steps_, forward_non_finite_);
   }
 
   void note_non_finite(Quantity quantity, Index n, const Matrix<Scalar>& values) {
@@ -436,6 +438,7 @@ private:
   detail::PairedColumns<Scalar> paired_columns_;
   Evaluation evaluation_;
   Vector<Scalar> sample_losses_;  ///< `batch_loss`'s
+  detail::LossSteps loss_steps_;  ///< and where each went non-finite
   // Last, so that it is destroyed first: its workers stop before the buffers they work on go.
   std::unique_ptr<detail::ThreadPool> pool_;
 };

@@ -100,15 +100,19 @@ struct SweepBuffers {
   }
 };
 
+/// Per sample, the step at which its running loss first was not finite (the last step where
+/// it stayed finite, or where the sum ends).
+using LossSteps = Eigen::Matrix<Index, Eigen::Dynamic, 1>;
+
 /// Mean of per-sample losses, summed in sample order (thread-count independent); notes the
-/// first non-finite one in `slot` (at step `steps`) unless `slot` already holds a value.
+/// first non-finite one in `slot` (at its step in `steps`) unless `slot` already holds a value.
 template <class Scalar>
-[[nodiscard]] Scalar mean_of_samples(const Vector<Scalar>& losses, Index steps,
+[[nodiscard]] Scalar mean_of_samples(const Vector<Scalar>& losses, const LossSteps& steps,
                                      std::optional<NonFinite>& slot) {
   Scalar total = 0;
   for (Index b = 0; b < losses.size(); ++b) {
     if (!slot && !std::isfinite(losses(b)))
-      slot = NonFinite{Quantity::Loss, steps, b, static_cast<double>(losses(b))};
+      slot = NonFinite{Quantity::Loss, steps(b), b, static_cast<double>(losses(b))};
     total += losses(b);
   }
   return total / static_cast<Scalar>(losses.size());

@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include <sbptt/sim/mujoco.hpp>
@@ -99,29 +100,57 @@ Matrix<Scalar> initial_states(const MujocoSimulator<Scalar>& sim, double spread,
 }
 
 /// --check-derivatives: check_jacobians (mjd_transitionFD and the VJP against sbptt's own
-/// central differences of mj_step) at five initial states with
-/// controls U[−1, 1).
+/// central differences of mj_step) at five initial states with controls U[−1, 1), and a verdict
+/// against the tolerance a smooth model meets.
 template <class Scalar>
 int check_derivatives(const MujocoSimulator<Scalar>& sim, const TaskOptions& o, Rng& rng) {
   const Matrix<Scalar> states = initial_states(sim, o.spread, rng, 5);
-  Scalar worst_a(0), worst_b(0), worst_vjp(0);
+  JacobianCheck<Scalar> worst;  // each error the worst over the states
+  JacobianCheck<Scalar> worst_state;  // the state of the worst error
+  Index worst_at = 0;
   for (Index j = 0; j < states.cols(); ++j) {
     Vector<Scalar> u(sim.control_dim());
     for (Index k = 0; k < u.size(); ++k) u(k) = static_cast<Scalar>(rng.uniform(-1.0, 1.0));
     const auto check = check_jacobians(sim, Vector<Scalar>(states.col(j)), u);
-    worst_a = worst_error({worst_a, check.state_jacobian_error});
-    worst_b = worst_error({worst_b, check.control_jacobian_error});
-    worst_vjp = worst_error({worst_vjp, check.vjp_error});
+    worst.state_jacobian_error =
+        worst_error({worst.state_jacobian_error, check.state_jacobian_error});
+    worst.control_jacobian_error =
+        worst_error({worst.control_jacobian_error, check.control_jacobian_error});
+    worst.vjp_error = worst_error({worst.vjp_error, check.vjp_error});
+    if (j == 0 || (!std::isnan(worst_state.worst()) && !(check.worst() <= worst_state.worst()))) {
+      worst_state = check;
+      worst_at = j + 1;
+    }
   }
+  const auto a = static_cast<double>(worst.state_jacobian_error);
+  const auto b = static_cast<double>(worst.control_jacobian_error);
+  const auto vjp = static_cast<double>(worst.vjp_error);
   std::printf("mujoco: %s: worst relative error at 5 states: A %.3g, B %.3g, VJP %.3g\n",
-              o.model.c_str(), static_cast<double>(worst_a), static_cast<double>(worst_b),
-              static_cast<double>(worst_vjp));
+              o.model.c_str(), a, b, vjp);
   // An error that is not finite checked nothing: the step or its derivatives were NaN, or too
   // large to compare, at one of the states, which a printed line with exit 0 would hide.
-  if (std::isfinite(worst_error({worst_a, worst_b, worst_vjp}))) return 0;
-  std::fprintf(stderr, "mujoco: %s: an error is not finite: the step or its derivatives are "
-               "NaN or too large to compare at one of the 5 states; expected finite errors "
-               "(check the model's values)\n", o.model.c_str());
+  if (!std::isfinite(worst.worst())) {
+    std::fprintf(stderr, "mujoco: %s: an error is not finite: the step or its derivatives are "
+                 "NaN or too large to compare at one of the 5 states; expected finite errors "
+                 "(check the model's values)\n", o.model.c_str());
+    return 3;
+  }
+  const auto tolerance = static_cast<double>(JacobianCheck<Scalar>::smooth_tolerance());
+  const char* scalar = std::is_same_v<Scalar, float> ? "float" : "double";
+  if (worst.worst() < JacobianCheck<Scalar>::smooth_tolerance()) {
+    std::printf("mujoco: %s: below the tolerance %g of a smooth model in %s: the derivatives "
+                "agree\n", o.model.c_str(), tolerance, scalar);
+    return 0;
+  }
+  // Two differences of the same step disagree where it is not smooth at the scale of their
+  // steps; a gradient through it would be noise (docs/mujoco.md).
+  std::fprintf(stderr, "mujoco: %s: above the tolerance %g of a smooth model in %s (A %.3g, B "
+               "%.3g, VJP %.3g): the derivatives disagree; expected errors below %g (a contact, "
+               "limit or friction that switches within the differences, or a stiff model, makes "
+               "them disagree: docs/mujoco.md). The worst, at state %ld of 5: %s (state order "
+               "qpos, qvel, act)\n",
+               o.model.c_str(), tolerance, scalar, a, b, vjp, tolerance,
+               static_cast<long>(worst_at), describe(worst_state).c_str());
   return 3;
 }
 

@@ -43,6 +43,47 @@ struct PlantedError : Linear {
 
 }  // namespace
 
+TEST_CASE("check_jacobians points at the entry of its worst error, with both values",
+          "[core][finite_difference]") {
+  // The three numbers said which product was wrong, not where: a user with a 12 × 12 A had to
+  // difference it again to find the entry.
+  using Where = PlantedError::Where;
+  const Linear::State x(0.3, -0.7, 0.1);
+  const Linear::Control u = Linear::Control::Constant(0.4);
+  struct Case {
+    Where where;
+    char matrix;
+    bool from_vjp;
+    Index row, col;
+    double value;  // the correct one
+    const char* words;
+  };
+  for (const Case& c :
+       {Case{Where::StateJacobian, 'A', false, 1, 0, -0.1,
+             "at A(1, 0): -0.099 by jacobians, -0.1 by finite differences"},
+        Case{Where::ControlJacobian, 'B', false, 0, 0, 0.5,
+             "at B(0, 0): 0.501 by jacobians, 0.5 by finite differences"},
+        Case{Where::Vjp, 'A', true, 1, 0, -0.1,
+             "at A(1, 0): -0.099 by the vjp, -0.1 by finite differences"},
+        Case{Where::ControlVjp, 'B', true, 0, 0, 0.5,
+             "at B(0, 0): 0.501 by the vjp, 0.5 by finite differences"}}) {
+    const auto check = check_jacobians(PlantedError(c.where, 1e-3), x, u);
+    const WorstEntry<double>& w = check.worst_entry;
+    INFO(describe(check));
+    CHECK(w.matrix == c.matrix);
+    CHECK(w.from_vjp == c.from_vjp);
+    CHECK(w.row == c.row);
+    CHECK(w.col == c.col);
+    CHECK(w.analytic == Approx(c.value + 1e-3).epsilon(1e-12));
+    CHECK(w.finite_difference == Approx(c.value).epsilon(1e-8));
+    CHECK(w.error == check.worst());
+    CHECK_THAT(describe(check), Catch::Contains(c.words));
+  }
+  const auto clean = check_jacobians(PlantedError(Where::Nowhere, 0), x, u);
+  CHECK(clean.worst_entry.error == clean.worst());
+  CHECK(clean.worst() < 1e-9);
+}
+
 TEST_CASE("check_jacobians passes a correct simulator and names each planted error",
           "[core][finite_difference]") {
   using Where = PlantedError::Where;

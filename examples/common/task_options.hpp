@@ -208,7 +208,7 @@ inline void require_float_range(const char* flag, double value) {
       task == Task::Mujoco ? "the MuJoCo scene of --model (docs/mujoco.md)" : "the paper's task",
       " with the chosen gradient (docs/programs.md). Exit codes: 0 success, 1 error, 2 bad "
       "flag, 3 a non-finite value stopped training",
-      task == Task::Mujoco ? " or --check-derivatives found an error that is not finite" : "",
+      task == Task::Mujoco ? " or --check-derivatives found derivatives that disagree" : "",
       ", 130 and 143 after SIGINT and SIGTERM stopped training (after the epoch they came in, "
       "its outputs written)."));
   cli.value("--method", "R|M|C|S|N",
@@ -322,10 +322,17 @@ inline void require_float_range(const char* flag, double value) {
               "as angles); required",
               "none", [&](const std::string& text) {
                 o.positions.clear();
-                for (std::size_t start = 0;;) {
+                for (std::size_t start = 0, item = 1;; ++item) {
                   const std::size_t comma = text.find(',', start);
-                  o.positions.push_back(
-                      parse_number("--target", text.substr(start, comma - start), -1e6, 1e6));
+                  const std::string part = text.substr(start, comma - start);
+                  try {
+                    o.positions.push_back(parse_number("--target", part, -1e6, 1e6));
+                  } catch (const InvalidArgument&) {
+                    throw InvalidArgument(detail::concat(
+                        "--target '", text, "': item ", item, ", '", part, "', is not a number "
+                        "in [-1000000, 1000000]; expected comma-separated numbers, one per "
+                        "position coordinate"));
+                  }
                   if (comma == std::string::npos) break;
                   start = comma + 1;
                 }
@@ -333,8 +340,9 @@ inline void require_float_range(const char* flag, double value) {
     cli.number("--spread", o.spread, 0, 1e3,
                "initial states: qpos = qpos0 + U[-X, X) per coordinate, qvel = 0");
     cli.flag("--check-derivatives",
-             "no training: print the worst error of check_jacobians at 5 initial states; "
-             "refuses the flags of training, --target and the data flags",
+             "no training: print the worst error of check_jacobians at 5 initial states and "
+             "whether it is below a smooth model's tolerance (else exit 3); refuses the flags "
+             "of training, --target and the data flags",
              [&] { o.check_derivatives = true; });
   }
   if (task == Task::Quantum) {

@@ -121,6 +121,32 @@ TEST_CASE("mujoco --check-derivatives prints mjd_transitionFD's agreement with s
   CHECK(a < 1e-6);
   CHECK(b < 1e-6);
   CHECK(vjp < 1e-6);  // against central differences of the step, like A and B
+  CHECK(r.output.find("below the tolerance 1e-06 of a smooth model in double: the derivatives "
+                      "agree") != std::string::npos);
+}
+
+TEST_CASE("mujoco --check-derivatives fails where the derivatives disagree, naming the worst",
+          "[programs][mujoco]") {
+  // A ball at rest on the floor exactly where contact begins (--spread 0): each difference in
+  // its height straddles the contact's onset, so MuJoCo's differences and sbptt's (another
+  // step) give different slopes of the same kink. A verdict of 0 would send a user on to train
+  // on noise.
+  const fs::path touching = scratch("touching_ball.xml");
+  std::ofstream(touching) << R"(<mujoco><option timestep="0.01"/><worldbody>
+    <geom type="plane" size="1 1 0.1"/>
+    <body pos="0 0 0.1"><joint name="lift" type="slide" axis="0 0 1"/><geom type="sphere" size="0.1" mass="1"/>
+    </body></worldbody><actuator><motor joint="lift" gear="1"/></actuator></mujoco>)";
+  const Result r = run("mujoco", "--model " + touching.string() + " --check-derivatives --spread 0");
+  INFO(r.output);
+  CHECK(r.status == 3);
+  CHECK(r.output.find("above the tolerance 1e-06 of a smooth model in double (A ") !=
+        std::string::npos);
+  CHECK(r.output.find("expected errors below 1e-06") != std::string::npos);
+  // The entry: the height's column of A, whose kink MuJoCo's differences and sbptt's straddle.
+  CHECK(r.output.find("The worst, at state ") != std::string::npos);
+  CHECK(r.output.find(" at A(") != std::string::npos);
+  CHECK(r.output.find(", 0): ") != std::string::npos);
+  CHECK(r.output.find(" by jacobians, ") != std::string::npos);
 }
 
 TEST_CASE("mujoco refuses a model or target it cannot use, naming it", "[programs][mujoco]") {
@@ -168,7 +194,10 @@ TEST_CASE("mujoco refuses a model or target it cannot use, naming it", "[program
              "--target '1,2,3' has 3 value(s); expected nq = 2, one per position coordinate"},
         Case{acrobot + " --target 1,2,3", "shoulder (hinge), elbow (hinge)"},
         Case{acrobot, "--target is required: 2 comma-separated positions"},
-        Case{acrobot + " --target 1,x", "--target 'x' is not a number"},
+        // The message quoted the item alone ("--target '' is not a number"), not the value.
+        Case{acrobot + " --target 1,x", "--target '1,x': item 2, 'x', is not a number in "
+                                        "[-1000000, 1000000]; expected comma-separated numbers"},
+        Case{acrobot + " --target 1,,2", "--target '1,,2': item 2, '', is not a number"},
         Case{acrobot + " --target 1,2 --spread -1", "--spread -1 is out of range"},
         Case{"--target 1", "--model is required"},
         Case{acrobot + " --target 1,2 --poles 2", "unknown flag '--poles'"}}) {

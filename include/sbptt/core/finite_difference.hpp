@@ -8,8 +8,10 @@
 /// √ε so that an all-zero derivative is compared absolutely).
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <initializer_list>
 #include <limits>
+#include <string>
 
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/simulator_output.hpp"
@@ -95,6 +97,17 @@ void vjp_transposes(const Sim& sim, const typename Sim::State& x, const typename
 
 }  // namespace detail
 
+/// Where the worst error of a `check_jacobians` lies: an entry of A or B, as the simulator's
+/// `jacobians` gave it or as its `vjp` did (Aᵀλ and Bᵀλ for λ = e_col), and the two values.
+template <class Scalar>
+struct WorstEntry {
+  char matrix = 0;        ///< 'A' or 'B'; 0 before any comparison
+  bool from_vjp = false;  ///< the value is the VJP's, not `jacobians`'s
+  Index row = -1, col = -1;  ///< −1 where the simulator wrote a product of the wrong shape
+  Scalar analytic = 0, finite_difference = 0;
+  Scalar error = 0;  ///< its relative error, the check's worst
+};
+
 /// Result of `check_jacobians`: worst relative errors of each analytic derivative.
 ///
 /// Tolerances that hold for a correct, smooth simulator at the default step (the library's
@@ -106,10 +119,53 @@ struct JacobianCheck {
   Scalar control_jacobian_error = 0;  ///< B against finite differences in u (0 without B)
   Scalar vjp_error = 0;  ///< vjp against the finite-difference Aᵀ and Bᵀ, column by column
   bool has_jacobians = false;  ///< the simulator forms A and B (`SimulatorWithJacobians`)
+  WorstEntry<Scalar> worst_entry;  ///< where `worst()` lies (`describe` puts it in words)
   [[nodiscard]] Scalar worst() const {
     return worst_error({state_jacobian_error, control_jacobian_error, vjp_error});
   }
+  /// The tolerance above for `Scalar`: 2e-2 for float, 1e-6 for double.
+  [[nodiscard]] static Scalar smooth_tolerance() {
+    return std::numeric_limits<Scalar>::epsilon() > Scalar(1e-10) ? Scalar(2e-2) : Scalar(1e-6);
+  }
 };
+
+namespace detail {
+
+/// Compares `analytic` with `reference` (`relative_error`) and, when that is the worst error so
+/// far (a NaN is worse than any number; on a tie the earlier stays), moves `worst` to its
+/// largest difference (its first NaN). `from_vjp`: the matrices are Aᵀ or Bᵀ, whose entry
+/// (r, c) is named (c, r).
+template <class Scalar>
+[[nodiscard]] Scalar compare_noting_worst(const Matrix<Scalar>& analytic,
+                                          const Matrix<Scalar>& reference, char matrix,
+                                          bool from_vjp, WorstEntry<Scalar>& worst) {
+  const Scalar error = relative_error(analytic, reference);
+  const bool worse = worst.matrix == 0 ||
+                     (std::isnan(error) ? !std::isnan(worst.error) : error > worst.error);
+  if (!worse) return error;
+  worst = WorstEntry<Scalar>{matrix, from_vjp, -1, -1, 0, 0, error};
+  if (analytic.rows() != reference.rows() || analytic.cols() != reference.cols() ||
+      analytic.size() == 0)
+    return error;
+  Index r = 0, c = 0;
+  const Matrix<Scalar> difference = (analytic - reference).cwiseAbs();
+  if (std::isnan(error)) {
+    for (Index k = difference.size() - 1; k >= 0; --k)  // column-major: the first NaN last
+      if (std::isnan(difference(k))) {
+        r = k % difference.rows();
+        c = k / difference.rows();
+      }
+  } else {
+    difference.maxCoeff(&r, &c);
+  }
+  worst.row = from_vjp ? c : r;
+  worst.col = from_vjp ? r : c;
+  worst.analytic = analytic(r, c);
+  worst.finite_difference = reference(r, c);
+  return error;
+}
+
+}  // namespace detail
 
 /// Checks `sim.vjp` (for every unit adjoint) and, when the simulator has them, `sim.jacobians`
 /// against central finite differences of `sim.step` at (x, u). Each derivative is measured
@@ -147,15 +203,40 @@ template <Simulator Sim>
     sim.jacobians(x, u, a, b);
     detail::check_jacobians_output(a, b, n, sim.control_dim());
     result.has_jacobians = true;
-    result.state_jacobian_error = relative_error<Scalar>(Matrix<Scalar>(a), fd_a);
-    result.control_jacobian_error = relative_error<Scalar>(Matrix<Scalar>(b), fd_b);
+    result.state_jacobian_error = detail::compare_noting_worst<Scalar>(
+        Matrix<Scalar>(a), fd_a, 'A', false, result.worst_entry);
+    result.control_jacobian_error = detail::compare_noting_worst<Scalar>(
+        Matrix<Scalar>(b), fd_b, 'B', false, result.worst_entry);
   }
 
   Matrix<Scalar> at, bt;
   detail::vjp_transposes(sim, x, u, at, bt);
-  result.vjp_error = worst_error({relative_error<Scalar>(at, fd_a.transpose()),
-                                  relative_error<Scalar>(bt, fd_b.transpose())});
+  result.vjp_error = worst_error(
+      {detail::compare_noting_worst<Scalar>(at, fd_a.transpose(), 'A', true, result.worst_entry),
+       detail::compare_noting_worst<Scalar>(bt, fd_b.transpose(), 'B', true,
+                                            result.worst_entry)});
   return result;
+}
+
+/// The worst error of `check` in words: "relative error 9.09e-04 at A(1, 0): -0.099 by
+/// jacobians, -0.1 by finite differences".
+template <class Scalar>
+[[nodiscard]] std::string describe(const JacobianCheck<Scalar>& check) {
+  const WorstEntry<Scalar>& w = check.worst_entry;
+  if (w.matrix == 0) return "nothing compared";
+  char text[256];
+  const auto error = static_cast<double>(w.error);
+  if (w.row < 0) {  // an empty or misshapen product: no entry to name
+    std::snprintf(text, sizeof text, "relative error %.3g in %c by %s", error, w.matrix,
+                  w.from_vjp ? "the vjp" : "jacobians");
+  } else {
+    std::snprintf(text, sizeof text,
+                  "relative error %.3g at %c(%ld, %ld): %.6g by %s, %.6g by finite differences",
+                  error, w.matrix, static_cast<long>(w.row), static_cast<long>(w.col),
+                  static_cast<double>(w.analytic), w.from_vjp ? "the vjp" : "jacobians",
+                  static_cast<double>(w.finite_difference));
+  }
+  return text;
 }
 
 /// Worst relative disagreement between `sim.vjp` and the transposes of the simulator's own

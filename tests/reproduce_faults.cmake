@@ -477,9 +477,11 @@ check("interrupted while plotting: the figure is kept" interrupted MATCHES "\na.
 check("interrupted while plotting: no temporary figure is left" NOT interrupted MATCHES "\\.tmp\\.")
 
 # An interrupt while --dry-run measures the task programs: the runner died of the signal and
-# left its scratch folder (TMPDIR/sbptt-reproduce-probe-<pid>) behind, saying nothing.
+# left its scratch folder (TMPDIR/sbptt-reproduce-probe-<pid>) behind, saying nothing. SIGKILL
+# runs no handler, so its folder stays; it stayed for good, one more with every kill, and now
+# the next --dry-run removes it.
 file(WRITE "${WORK_DIR}/interrupt_dry_run.sh" [=[
-runner=$1; tmp=$2; shift 2
+runner=$1; tmp=$2; signal=$3; shift 3
 mkdir -p "$tmp"
 TMPDIR="$tmp" "$runner" "$@" --dry-run > "$tmp.log" 2>&1 &
 pid=$!
@@ -488,45 +490,29 @@ until ls "$tmp"/sbptt-reproduce-probe-*/runs/* > /dev/null 2>&1; do
   i=$((i + 1)); [ $i -gt 1000 ] && { echo "never measured"; break; }
   sleep 0.01
 done
-kill -TERM $pid
+kill -"$signal" $pid
 wait $pid
 echo "dry run: exit code $?"
 cat "$tmp.log"
 echo "left in TMPDIR: [$(ls -A "$tmp")]"
+[ "$signal" = KILL ] || exit 0
+TMPDIR="$tmp" "$runner" "$@" --dry-run > "$tmp.log" 2>&1
+echo "next dry run: exit code $?"
+cat "$tmp.log"
+echo "left after it: [$(ls -A "$tmp")]"
 ]=])
-execute_process(COMMAND sh "${WORK_DIR}/interrupt_dry_run.sh" "${REPRODUCE}" "${WORK_DIR}/tmp"
+execute_process(COMMAND sh "${WORK_DIR}/interrupt_dry_run.sh" "${REPRODUCE}" "${WORK_DIR}/tmp" TERM
                 ${grid} --out "${WORK_DIR}/dry" OUTPUT_VARIABLE dry ERROR_VARIABLE dry_err)
 check("interrupted while --dry-run measures: exit 130, saying so, no scratch folder left\n${dry}${dry_err}"
       dry MATCHES "dry run: exit code 130\n" AND dry MATCHES "interrupted while measuring"
       AND dry MATCHES "left in TMPDIR: \\[\\]")
-
-# SIGKILL while --dry-run measures leaves the scratch folder (no handler runs); it stayed in
-# TMPDIR for good, one more with every kill. The next --dry-run removes it.
-file(WRITE "${WORK_DIR}/kill_dry_run.sh" [=[
-runner=$1; tmp=$2; shift 2
-mkdir -p "$tmp"
-TMPDIR="$tmp" "$runner" "$@" --dry-run > "$tmp.log" 2>&1 &
-pid=$!
-i=0
-until ls "$tmp"/sbptt-reproduce-probe-*/runs/* > /dev/null 2>&1; do
-  i=$((i + 1)); [ $i -gt 1000 ] && { echo "never measured"; break; }
-  sleep 0.01
-done
-kill -KILL $pid
-wait $pid
-echo "killed, left in TMPDIR: [$(ls -A "$tmp")]"
-TMPDIR="$tmp" "$runner" "$@" --dry-run > "$tmp.log" 2>&1
-echo "next dry run: exit code $?"
-cat "$tmp.log"
-echo "left in TMPDIR: [$(ls -A "$tmp")]"
-]=])
-execute_process(COMMAND sh "${WORK_DIR}/kill_dry_run.sh" "${REPRODUCE}" "${WORK_DIR}/tmp_killed"
-                ${grid} --out "${WORK_DIR}/dry" OUTPUT_VARIABLE dry ERROR_VARIABLE dry_err)
+execute_process(COMMAND sh "${WORK_DIR}/interrupt_dry_run.sh" "${REPRODUCE}" "${WORK_DIR}/tmp_killed"
+                KILL ${grid} --out "${WORK_DIR}/dry" OUTPUT_VARIABLE dry ERROR_VARIABLE dry_err)
 check("killed while --dry-run measures: the next --dry-run removes the folder it left\n${dry}${dry_err}"
-      dry MATCHES "killed, left in TMPDIR: \\[sbptt-reproduce-probe-[0-9]+\\]"
+      dry MATCHES "left in TMPDIR: \\[sbptt-reproduce-probe-[0-9]+\\]"
       AND dry MATCHES "next dry run: exit code 0\n"
       AND dry MATCHES "removed '[^']*sbptt-reproduce-probe-[0-9]+', left by a --dry-run that was killed"
-      AND dry MATCHES "left in TMPDIR: \\[\\]")
+      AND dry MATCHES "left after it: \\[\\]")
 
 # An interrupt after the last measurement, while the plan is printed: the runner printed the
 # whole plan and exited 0. Its stdout is a pipe that is not read until the signal has been

@@ -252,6 +252,34 @@ TEST_CASE("run: a checkpoint of other settings is refused, naming the setting", 
                     Catch::Contains("train set"));
 }
 
+TEST_CASE("run: a caller's setting that the checkpoint could not read back is refused before "
+          "any file", "[train]") {
+  // A caller's "batch" beside the run's own was written twice, and every resume then refused
+  // the checkpoint as damaged; a name with '=' or a value with a line break would not parse.
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  for (const auto& [identity, expected] :
+       {std::pair{std::vector<RunSetting>{{"--poles", "2"}, {"batch", "8"}},
+                  "run_training: setting 'batch' is in RunSettings::identity and among "
+                  "run_training's own settings; expected each name once"},
+        std::pair{std::vector<RunSetting>{{"--poles", "2"}, {"--poles", "3"}},
+                  "setting '--poles' is in RunSettings::identity twice"},
+        std::pair{std::vector<RunSetting>{{"a=b", "1"}},
+                  "has setting 'a=b' = '1'; expected a name without '=' or a line break"},
+        std::pair{std::vector<RunSetting>{{"note", "two\nlines"}},
+                  "; expected a name without '=' or a line break, and a value of one line"}}) {
+    RunSettings settings = fresh_checkpoint_run("identity.checkpoint", 2);
+    settings.log_csv = scratch("identity.csv").string();
+    fs::remove(settings.log_csv);
+    settings.identity = identity;
+    Setup<double> setup(Method::Regular, 3);
+    CHECK_THROWS_WITH(run_training(setup.trainer, train, test, settings),
+                      Catch::Contains(expected));
+    CHECK_FALSE(fs::exists(settings.checkpoint));
+    CHECK_FALSE(fs::exists(settings.checkpoint + ".lock"));
+    CHECK_FALSE(fs::exists(settings.log_csv));
+  }
+}
+
 TEST_CASE("run: the skipped batches of an epoch that ends the run are not counted",
           "[train]") {
   // With skip-batch an epoch whose evaluation is non-finite after a skipped batch ends the

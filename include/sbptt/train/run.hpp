@@ -136,24 +136,6 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
     detail::require(settings.checkpoint.empty(), "run_training: checkpoints need an optimizer "
                                                  "whose state can be saved (Adam)");
   }
-  for (const auto& [what, path] : {std::pair{"training log", &settings.log_csv},
-                                   std::pair{"checkpoint", &settings.checkpoint},
-                                   std::pair{"parameters file", &settings.save_params}}) {
-    if (!path->empty()) check_output_path(*path, what);
-  }
-  require_distinct_files({{"training log", settings.log_csv, true},
-                          {"checkpoint", settings.checkpoint, true},
-                          {"parameters file", settings.save_params, true}});
-  const detail::FileLock checkpoint_lock =
-      detail::naming_checkpoint(settings, [&] { return lock_checkpoint(settings.checkpoint); });
-
-  // Before the log or a checkpoint is touched: it refuses a controller whose copy would share
-  // the parameters.
-  std::optional<EvaluationBeside<TrainerT>> beside;
-  if constexpr (std::copy_constructible<Ctrl>) {
-    if (settings.evaluate_beside) beside.emplace(trainer);
-  }
-
   auto& params = trainer.controller().params();
   const TrainerOptions& o = trainer.options();
   std::vector<RunSetting> identity = settings.identity;
@@ -180,6 +162,37 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
     identity.push_back({"beta1", detail::exact(adam.beta1)});
     identity.push_back({"beta2", detail::exact(adam.beta2)});
     identity.push_back({"epsilon", detail::exact(adam.epsilon)});
+  }
+  // The checkpoint holds a line "setting name=value" each, read back as one setting per name.
+  for (std::size_t i = 0; i < identity.size(); ++i) {
+    const RunSetting& s = identity[i];
+    const bool own = i < settings.identity.size();
+    detail::require(!s.name.empty() && s.name.find_first_of("=\n") == std::string::npos &&
+                        s.value.find('\n') == std::string::npos,
+                    "run_training: RunSettings::identity has setting '", s.name, "' = '", s.value,
+                    "'; expected a name without '=' or a line break, and a value of one line");
+    for (std::size_t j = 0; j < i; ++j)
+      detail::require(identity[j].name != s.name, "run_training: setting '", s.name, "' is in ",
+                      own ? "RunSettings::identity twice"
+                          : "RunSettings::identity and among run_training's own settings",
+                      "; expected each name once");
+  }
+  for (const auto& [what, path] : {std::pair{"training log", &settings.log_csv},
+                                   std::pair{"checkpoint", &settings.checkpoint},
+                                   std::pair{"parameters file", &settings.save_params}}) {
+    if (!path->empty()) check_output_path(*path, what);
+  }
+  require_distinct_files({{"training log", settings.log_csv, true},
+                          {"checkpoint", settings.checkpoint, true},
+                          {"parameters file", settings.save_params, true}});
+  const detail::FileLock checkpoint_lock =
+      detail::naming_checkpoint(settings, [&] { return lock_checkpoint(settings.checkpoint); });
+
+  // Before the log or a checkpoint is touched: it refuses a controller whose copy would share
+  // the parameters.
+  std::optional<EvaluationBeside<TrainerT>> beside;
+  if constexpr (std::copy_constructible<Ctrl>) {
+    if (settings.evaluate_beside) beside.emplace(trainer);
   }
 
   RunResult<Scalar> result;

@@ -63,9 +63,11 @@ struct EvaluationChunk {
         t.x_next = next.col(b);
         if (objective.control_weight > 0)
           losses(b) += control_scale * control.col(b).squaredNorm();
-        if (objective.timing == LossTiming::Continuous || n + 1 == steps)
-          losses(b) += w * objective.state_loss(t.x_next, static_cast<State*>(nullptr));
-        if (loss_steps(b) == steps && !std::isfinite(losses(b))) loss_steps(b) = n + 1;
+        if (objective.timing == LossTiming::Continuous || n + 1 == steps) {
+          const Scalar term = w * objective.state_loss(t.x_next, static_cast<State*>(nullptr));
+          losses(b) += term;
+          if (loss_steps(b) == steps && !std::isfinite(term)) loss_steps(b) = n + 1;
+        }
       }
       state.swap(next);
       non_finite.note(Quantity::State, n + 1, state, first);

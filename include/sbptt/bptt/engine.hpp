@@ -395,8 +395,9 @@ private:
                          [&](Index b, Scratch& t) {
       for (Index n = first; n <= steps_; ++n) {
         t.x = trajectory_.states[static_cast<std::size_t>(n)].col(b);
-        sample_losses_(b) += w * objective_.state_loss(t.x, static_cast<State*>(nullptr));
-        if (loss_steps_(b) == steps_ && !std::isfinite(sample_losses_(b))) loss_steps_(b) = n;
+        const Scalar term = w * objective_.state_loss(t.x, static_cast<State*>(nullptr));
+        sample_losses_(b) += term;
+        if (loss_steps_(b) == steps_ && !std::isfinite(term)) loss_steps_(b) = n;
       }
       if (objective_.control_weight > 0) {
         Scalar squares = 0;

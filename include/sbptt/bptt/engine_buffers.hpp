@@ -100,8 +100,8 @@ struct SweepBuffers {
   }
 };
 
-/// Per sample, the step at which its running loss first was not finite (the last step where
-/// it stayed finite, or where the sum ends).
+/// Per sample, the step n of the first state loss ℓ(x_n) that is not finite; the last step
+/// where every term is finite (a sum or a control term that overflowed, or no overflow).
 using LossSteps = Eigen::Matrix<Index, Eigen::Dynamic, 1>;
 
 /// Mean of per-sample losses, summed in sample order (thread-count independent); notes the

@@ -127,12 +127,15 @@ int check_derivatives(const MujocoSimulator<Scalar>& sim, const TaskOptions& o, 
   const auto vjp = static_cast<double>(worst.vjp_error);
   std::printf("mujoco: %s: worst relative error at 5 states: A %.3g, B %.3g, VJP %.3g\n",
               o.model.c_str(), a, b, vjp);
+  const std::string where = detail::concat(
+      "The worst, at state ", worst_at, " of 5: ", describe(worst_state),
+      " (rows and columns from 0; the state is qpos, qvel, act)");
   // An error that is not finite checked nothing: the step or its derivatives were NaN, or too
   // large to compare, at one of the states, which a printed line with exit 0 would hide.
   if (!std::isfinite(worst.worst())) {
     std::fprintf(stderr, "mujoco: %s: an error is not finite: the step or its derivatives are "
                  "NaN or too large to compare at one of the 5 states; expected finite errors "
-                 "(check the model's values)\n", o.model.c_str());
+                 "(check the model's values). %s\n", o.model.c_str(), where.c_str());
     return 3;
   }
   const auto tolerance = static_cast<double>(JacobianCheck<Scalar>::smooth_tolerance());
@@ -147,10 +150,8 @@ int check_derivatives(const MujocoSimulator<Scalar>& sim, const TaskOptions& o, 
   std::fprintf(stderr, "mujoco: %s: above the tolerance %g of a smooth model in %s (A %.3g, B "
                "%.3g, VJP %.3g): the derivatives disagree; expected errors below %g (a contact, "
                "limit or friction that switches within the differences, or a stiff model, makes "
-               "them disagree: docs/mujoco.md). The worst, at state %ld of 5: %s (state order "
-               "qpos, qvel, act)\n",
-               o.model.c_str(), tolerance, scalar, a, b, vjp, tolerance,
-               static_cast<long>(worst_at), describe(worst_state).c_str());
+               "them disagree: docs/mujoco.md). %s\n",
+               o.model.c_str(), tolerance, scalar, a, b, vjp, tolerance, where.c_str());
   return 3;
 }
 

@@ -31,13 +31,13 @@ struct PlantedError : Linear {
   void jacobians(const State& x, const Control& u, StateJacobian& a, ControlJacobian& b) const {
     Linear::jacobians(x, u, a, b);
     if (where == Where::StateJacobian) a(1, 0) += size;
-    if (where == Where::ControlJacobian) b(0, 0) += size;
+    if (where == Where::ControlJacobian) b(2, 0) += size;
   }
   void vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
            Control* lambda_u) const {
     Linear::vjp(x, u, lambda, lambda_x, lambda_u);
     if (where == Where::Vjp && lambda_x) (*lambda_x)(0) += size * lambda(1);
-    if (where == Where::ControlVjp && lambda_u) (*lambda_u)(0) += size * lambda(0);
+    if (where == Where::ControlVjp && lambda_u) (*lambda_u)(0) += size * lambda(2);  // B(2, 0)
   }
 };
 
@@ -61,12 +61,12 @@ TEST_CASE("check_jacobians points at the entry of its worst error, with both val
   for (const Case& c :
        {Case{Where::StateJacobian, 'A', false, 1, 0, -0.1,
              "at A(1, 0): -0.099 by jacobians, -0.1 by finite differences"},
-        Case{Where::ControlJacobian, 'B', false, 0, 0, 0.5,
-             "at B(0, 0): 0.501 by jacobians, 0.5 by finite differences"},
+        Case{Where::ControlJacobian, 'B', false, 2, 0, -1.0,
+             "at B(2, 0): -0.999 by jacobians, -1 by finite differences"},
         Case{Where::Vjp, 'A', true, 1, 0, -0.1,
              "at A(1, 0): -0.099 by the vjp, -0.1 by finite differences"},
-        Case{Where::ControlVjp, 'B', true, 0, 0, 0.5,
-             "at B(0, 0): 0.501 by the vjp, 0.5 by finite differences"}}) {
+        Case{Where::ControlVjp, 'B', true, 2, 0, -1.0,
+             "at B(2, 0): -0.999 by the vjp, -1 by finite differences"}}) {
     const auto check = check_jacobians(PlantedError(c.where, 1e-3), x, u);
     const WorstEntry<double>& w = check.worst_entry;
     INFO(describe(check));
@@ -144,6 +144,11 @@ TEST_CASE("check_jacobians' worst() is NaN when any derivative is NaN", "[core][
   CHECK(check.state_jacobian_error < 1e-9);
   CHECK(std::isnan(check.vjp_error));
   CHECK(std::isnan(check.worst()));
+  CHECK(check.worst_entry.matrix == 'A');  // the first NaN, λ = e_0's λ_x(0)
+  CHECK(check.worst_entry.from_vjp);
+  CHECK(check.worst_entry.row == 0);
+  CHECK(check.worst_entry.col == 0);
+  CHECK(std::isnan(check.worst_entry.analytic));
   // NaN in the VJP's control product only: the second of the two errors vjp_error joins.
   const PlantedError control(PlantedError::Where::ControlVjp,
                              std::numeric_limits<double>::quiet_NaN());

@@ -134,9 +134,11 @@ TEST_CASE("mujoco --check-derivatives fails where the derivatives disagree, nami
   const fs::path touching = scratch("touching_ball.xml");
   std::ofstream(touching) << R"(<mujoco><option timestep="0.01"/><worldbody>
     <geom type="plane" size="1 1 0.1"/>
-    <body pos="0 0 0.1"><joint name="lift" type="slide" axis="0 0 1"/><geom type="sphere" size="0.1" mass="1"/>
-    </body></worldbody><actuator><motor joint="lift" gear="1"/></actuator></mujoco>)";
-  const Result r = run("mujoco", "--model " + touching.string() + " --check-derivatives --spread 0");
+    <body pos="0 0 0.1"><joint name="lift" type="slide" axis="0 0 1"/>
+      <geom type="sphere" size="0.1" mass="1"/></body>
+    </worldbody><actuator><motor joint="lift" gear="1"/></actuator></mujoco>)";
+  const Result r =
+      run("mujoco", "--model " + touching.string() + " --check-derivatives --spread 0");
   INFO(r.output);
   CHECK(r.status == 3);
   CHECK(r.output.find("above the tolerance 1e-06 of a smooth model in double (A ") !=
@@ -299,6 +301,7 @@ TEST_CASE("mujoco --check-derivatives fails on derivatives that are not finite",
   INFO(r.output);
   CHECK(r.status == 3);
   CHECK(r.output.find("an error is not finite: the step or its derivatives are NaN or too large") != std::string::npos);
+  CHECK(r.output.find("The worst, at state ") != std::string::npos);
 }
 
 TEST_CASE("mujoco: a checkpoint of another --target, --spread or model file is refused, "

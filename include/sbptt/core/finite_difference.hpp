@@ -103,7 +103,7 @@ template <class Scalar>
 struct WorstEntry {
   char matrix = 0;        ///< 'A' or 'B'; 0 before any comparison
   bool from_vjp = false;  ///< the value is the VJP's, not `jacobians`'s
-  Index row = -1, col = -1;  ///< −1 where the simulator wrote a product of the wrong shape
+  Index row = -1, col = -1;  ///< −1 for an empty product (no entry to name)
   Scalar analytic = 0, finite_difference = 0;
   Scalar error = 0;  ///< its relative error, the check's worst
 };
@@ -147,17 +147,14 @@ template <class Scalar>
   if (analytic.rows() != reference.rows() || analytic.cols() != reference.cols() ||
       analytic.size() == 0)
     return error;
-  Index r = 0, c = 0;
+  Index r = -1, c = -1;
   const Matrix<Scalar> difference = (analytic - reference).cwiseAbs();
-  if (std::isnan(error)) {
-    for (Index k = difference.size() - 1; k >= 0; --k)  // column-major: the first NaN last
-      if (std::isnan(difference(k))) {
-        r = k % difference.rows();
-        c = k / difference.rows();
-      }
-  } else {
-    difference.maxCoeff(&r, &c);
-  }
+  for (Index k = difference.size() - 1; k >= 0; --k)  // column-major: the first NaN last
+    if (std::isnan(difference(k))) {
+      r = k % difference.rows();
+      c = k / difference.rows();
+    }
+  if (r < 0) difference.maxCoeff(&r, &c);  // a NaN error may be ∞/∞, with no NaN entry
   worst.row = from_vjp ? c : r;
   worst.col = from_vjp ? r : c;
   worst.analytic = analytic(r, c);
@@ -218,15 +215,15 @@ template <Simulator Sim>
   return result;
 }
 
-/// The worst error of `check` in words: "relative error 9.09e-04 at A(1, 0): -0.099 by
-/// jacobians, -0.1 by finite differences".
+/// The worst error of `check` in words: "relative error 0.000909 at A(1, 0): -0.099 by
+/// jacobians, -0.1 by finite differences" (rows and columns from 0).
 template <class Scalar>
 [[nodiscard]] std::string describe(const JacobianCheck<Scalar>& check) {
   const WorstEntry<Scalar>& w = check.worst_entry;
   if (w.matrix == 0) return "nothing compared";
   char text[256];
   const auto error = static_cast<double>(w.error);
-  if (w.row < 0) {  // an empty or misshapen product: no entry to name
+  if (w.row < 0) {
     std::snprintf(text, sizeof text, "relative error %.3g in %c by %s", error, w.matrix,
                   w.from_vjp ? "the vjp" : "jacobians");
   } else {

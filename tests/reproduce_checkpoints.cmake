@@ -83,7 +83,7 @@ execute_process(COMMAND "${REPRODUCE}" ${grid} --seeds 1 --methods C --out "${S}
                 RESULT_VARIABLE rc OUTPUT_VARIABLE stale_out ERROR_QUIET)
 check("a sweep over a stale checkpoint exits 0" rc EQUAL 0)
 check("the stale checkpoint was not resumed" NOT EXISTS "${S}/fake_resumes")
-# It said "2 from their checkpoint" of runs whose checkpoints it was about to drop.
+# It said "1 from their checkpoint" of a run whose checkpoint it was about to drop.
 check("the sweep says the run restarts, not that it resumes (${stale_out})"
       stale_out MATCHES "discarded 1 unfinished run" AND
       stale_out MATCHES "they are redone, 0 from their checkpoint")

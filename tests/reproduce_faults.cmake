@@ -506,12 +506,13 @@ execute_process(COMMAND sh "${WORK_DIR}/interrupt_dry_run.sh" "${REPRODUCE}" "${
 check("interrupted while --dry-run measures: exit 130, saying so, no scratch folder left\n${dry}${dry_err}"
       dry MATCHES "dry run: exit code 130\n" AND dry MATCHES "interrupted while measuring"
       AND dry MATCHES "left in TMPDIR: \\[\\]")
-execute_process(COMMAND sh "${WORK_DIR}/interrupt_dry_run.sh" "${REPRODUCE}" "${WORK_DIR}/tmp_killed"
-                KILL ${grid} --out "${WORK_DIR}/dry" OUTPUT_VARIABLE dry ERROR_VARIABLE dry_err)
-check("killed while --dry-run measures: the next --dry-run removes the folder it left\n${dry}${dry_err}"
+execute_process(COMMAND sh "${WORK_DIR}/interrupt_dry_run.sh" "${REPRODUCE}"
+                "${WORK_DIR}/tmp_killed" KILL ${grid} --out "${WORK_DIR}/dry"
+                OUTPUT_VARIABLE dry ERROR_VARIABLE dry_err)
+set(removed "removed '[^']*sbptt-reproduce-probe-[0-9]+', left by a --dry-run that was killed")
+check("killed while --dry-run measures: the next --dry-run removes its folder\n${dry}${dry_err}"
       dry MATCHES "left in TMPDIR: \\[sbptt-reproduce-probe-[0-9]+\\]"
-      AND dry MATCHES "next dry run: exit code 0\n"
-      AND dry MATCHES "removed '[^']*sbptt-reproduce-probe-[0-9]+', left by a --dry-run that was killed"
+      AND dry MATCHES "next dry run: exit code 0\n" AND dry MATCHES "${removed}"
       AND dry MATCHES "left after it: \\[\\]")
 
 # An interrupt after the last measurement, while the plan is printed: the runner printed the

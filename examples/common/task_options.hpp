@@ -54,6 +54,9 @@ struct Horizon {
 /// output, (nx − 3) / 2 + 1, must still hold one kernel of 3.
 inline constexpr long min_quantum_nx = 7;
 
+/// mujoco --target: each position in [−bound, bound].
+inline constexpr double target_bound = 1e6;
+
 /// Every setting of a task program, after parsing (the horizon resolved).
 struct TaskOptions {
   Task task = Task::CartPole;
@@ -326,12 +329,13 @@ inline void require_float_range(const char* flag, double value) {
                   const std::size_t comma = text.find(',', start);
                   const std::string part = text.substr(start, comma - start);
                   try {
-                    o.positions.push_back(parse_number("--target", part, -1e6, 1e6));
+                    o.positions.push_back(
+                        parse_number("--target", part, -target_bound, target_bound));
                   } catch (const InvalidArgument&) {
                     throw InvalidArgument(detail::concat(
                         "--target '", text, "': item ", item, ", '", part, "', is not a number "
-                        "in [-1000000, 1000000]; expected comma-separated numbers, one per "
-                        "position coordinate"));
+                        "in ", range_text(-target_bound, target_bound), "; expected "
+                        "comma-separated numbers, one per position coordinate"));
                   }
                   if (comma == std::string::npos) break;
                   start = comma + 1;

@@ -144,7 +144,7 @@ private:
       for (const auto& file : files)
         if (!resumable || file != kept) fs::remove(file);
       ++discarded;
-      if (resumable && resumes_as_planned(name)) ++resumed;
+      if (resumable && fs::exists(kept) && resumes_as_planned(name)) ++resumed;
     }
     if (discarded > 0)
       std::printf("reproduce: discarded %zu unfinished run(s) of an interrupted sweep (their "

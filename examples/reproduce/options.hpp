@@ -54,7 +54,7 @@ auto parse_items(const std::string& flag, const std::string& text, Parse parse) 
     try {
       list.push_back(parse(item));
     } catch (const InvalidArgument& e) {
-      if (std::string_view(e.what()).starts_with(flag)) throw;
+      if (std::string_view(e.what()).starts_with(flag + " ")) throw;
       throw InvalidArgument(concat(flag, ": ", e.what()));
     }
   }

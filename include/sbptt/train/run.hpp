@@ -49,6 +49,7 @@
 #include "sbptt/train/checkpoint.hpp"
 #include "sbptt/train/evaluation_beside.hpp"
 #include "sbptt/train/fingerprint.hpp"
+#include "sbptt/train/run_identity.hpp"
 #include "sbptt/train/run_settings.hpp"
 #include "sbptt/train/trainer.hpp"
 #include "sbptt/train/trainer_state.hpp"
@@ -57,15 +58,6 @@
 namespace sbptt {
 
 namespace detail {
-
-template <class O>
-concept AdamLike = requires(O o, Vector<typename O::Scalar> v) {
-  o.first_moment();
-  o.second_moment();
-  o.iterations();
-  o.options().learning_rate;
-  o.restore(v, v, Index{});
-};
 
 /// The log that `settings.checkpoint` was written beside, checked for resuming after epoch
 /// `rows` (its first `size` bytes) and not yet cut (`TrainingLogFile::open_for_resume`).
@@ -138,45 +130,8 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   }
   auto& params = trainer.controller().params();
   const TrainerOptions& o = trainer.options();
-  std::vector<RunSetting> identity = settings.identity;
-  for (RunSetting s : std::vector<RunSetting>{
-           {"method", std::string(label(o.method))},
-           {"clip", to_string(o.clip)},
-           {"clip_threshold", detail::exact(o.clip_threshold)},
-           {"batch", std::to_string(o.batch)},
-           {"shuffle", o.shuffle ? "yes" : "no"},
-           {"shuffle_seed", std::to_string(o.shuffle_seed)},
-           {"truncation", std::to_string(o.truncation)},
-           {"on_non_finite", o.on_non_finite == NonFinitePolicy::Stop ? "stop" : "skip-batch"},
-           {"scalar", sizeof(Scalar) == sizeof(float) ? "float" : "double"},
-           {"evaluate_every", std::to_string(settings.evaluate_every)},
-           {"best_by", best_by == BestBy::TestLoss ? "test loss" : "train loss"},
-           {"patience", std::to_string(settings.patience)},
-           {"train set", detail::fingerprint(train)},
-           {"test set", detail::fingerprint(test)},
-           {"initial parameters", detail::fingerprint(params)}})
-    identity.push_back(std::move(s));
-  if constexpr (detail::AdamLike<Optimizer>) {
-    const auto& adam = trainer.optimizer().options();
-    identity.push_back({"learning_rate", detail::exact(adam.learning_rate)});
-    identity.push_back({"beta1", detail::exact(adam.beta1)});
-    identity.push_back({"beta2", detail::exact(adam.beta2)});
-    identity.push_back({"epsilon", detail::exact(adam.epsilon)});
-  }
-  // The checkpoint holds a line "setting name=value" each, read back as one setting per name.
-  for (std::size_t i = 0; i < identity.size(); ++i) {
-    const RunSetting& s = identity[i];
-    const bool own = i < settings.identity.size();
-    detail::require(!s.name.empty() && s.name.find_first_of("=\n") == std::string::npos &&
-                        s.value.find('\n') == std::string::npos,
-                    "run_training: RunSettings::identity has setting '", s.name, "' = '", s.value,
-                    "'; expected a name without '=' or a line break, and a value of one line");
-    for (std::size_t j = 0; j < i; ++j)
-      detail::require(identity[j].name != s.name, "run_training: setting '", s.name, "' is in ",
-                      own ? "RunSettings::identity twice"
-                          : "RunSettings::identity and among run_training's own settings",
-                      "; expected each name once");
-  }
+  const std::vector<RunSetting> identity =
+      detail::run_identity(trainer, train, test, settings, best_by);
   for (const auto& [what, path] : {std::pair{"training log", &settings.log_csv},
                                    std::pair{"checkpoint", &settings.checkpoint},
                                    std::pair{"parameters file", &settings.save_params}}) {

@@ -6,6 +6,9 @@
 
 #include <cmath>
 #include <limits>
+#include <memory>
+#include <string>
+#include <utility>
 
 #include "sbptt/bptt/losses.hpp"
 #include "sbptt/bptt/sweep_threading.hpp"
@@ -364,6 +367,87 @@ TEST_CASE("trainer: a non-finite evaluation stops training and rolls the epoch b
     CHECK(policy.params()(0) == 0.01);
     CHECK(trainer.optimizer().iterations() == 0);
   }
+}
+
+namespace {
+
+/// What `Refusing` refused: how many steps, and the first state it refused to step from.
+struct Refusals {
+  long count = 0;
+  double first_x = 0;
+};
+
+std::string describe(const Refusals& r) {
+  return r.count == 0 ? std::string()
+                      : detail::concat("refused ", r.count, " steps, the first from x = ",
+                                       detail::shortest(r.first_x));
+}
+
+/// `unstable`, refusing (with NaN) to step from |x| > 1e300, as MuJoCo refuses values beyond
+/// its bound, and keeping a record of it as `MujocoSimulator` does.
+struct Refusing {
+  using Scalar = double;
+  using State = Sim::State;
+  using Control = Sim::Control;
+  std::shared_ptr<Refusals> record = std::make_shared<Refusals>();
+
+  [[nodiscard]] Index state_dim() const { return 1; }
+  [[nodiscard]] Index control_dim() const { return 1; }
+  void step(const State& x, const Control& u, State& x_next) const {
+    if (std::abs(x(0)) > 1e300) {
+      if (record->count++ == 0) record->first_x = x(0);
+      x_next.setConstant(std::numeric_limits<double>::quiet_NaN());
+      return;
+    }
+    unstable.step(x, u, x_next);
+  }
+  void vjp(const State& x, const Control& u, const State& lambda, State* lambda_x,
+           Control* lambda_u) const {
+    unstable.vjp(x, u, lambda, lambda_x, lambda_u);
+  }
+  [[nodiscard]] Refusals take_refusals() const { return std::exchange(*record, Refusals{}); }
+};
+static_assert(ExplainsRefusals<Refusing>);
+static_assert(!ExplainsRefusals<Sim>);
+
+}  // namespace
+
+TEST_CASE("trainer: a simulator's account of its refusals goes with the non-finite event",
+          "[train]") {
+  // From 1e300 the first step gives 3e300, which the second refuses, in the update or in the
+  // test set's evaluation.
+  const Refusing sim;
+  TrainerOptions options;
+  options.method = Method::Regular;
+  options.batch = 1;
+  for (const Phase phase : {Phase::Update, Phase::TestEvaluation}) {
+    Policy policy({1});
+    policy.params()(0) = 0.01;
+    Trainer trainer(sim, policy, to_origin(LossTiming::Final), 10,
+                    Adam<double>(AdamOptions<double>{0.01}), options);
+    const Matrix<double> overflowing = samples({1.0, 1e300}), finite = samples({0.5});
+    if (phase == Phase::Update) {
+      trainer.train_epoch(overflowing, finite);
+    } else {
+      trainer.train_epoch(finite, overflowing);
+    }
+    REQUIRE(trainer.last_non_finite());
+    const NonFiniteEvent& event = *trainer.last_non_finite();
+    CHECK(event.phase == phase);
+    CHECK(event.where.step == 2);
+    CHECK(event.cause == "refused 1 steps, the first from x = 3e+300");
+    CHECK_THAT(describe(event),
+               Catch::EndsWith(", step 2, sample 1; refused 1 steps, the first from x = 3e+300"));
+    CHECK(sim.record->count == 0);  // taken
+  }
+  // A simulator without an account: no cause, and the words end with the place.
+  Policy policy({1});
+  policy.params()(0) = 0.01;
+  auto trainer = unstable_trainer(policy, NonFinitePolicy::Stop);
+  trainer.train_epoch(samples({1e306}), samples({0.5}));
+  REQUIRE(trainer.last_non_finite());
+  CHECK(trainer.last_non_finite()->cause.empty());
+  CHECK_THAT(describe(*trainer.last_non_finite()), Catch::EndsWith("sample 0"));
 }
 
 TEST_CASE("trainer: Stop mid-epoch returns to the parameters the last epoch evaluated",

@@ -5,6 +5,7 @@
 /// of its own, and `static_assert_simulator<T>()` / `static_assert_controller<T>()` report the
 /// first missing member in plain words. The engine calls them on its template arguments.
 #include <concepts>
+#include <string>
 
 #include "sbptt/core/types.hpp"
 
@@ -105,6 +106,30 @@ concept HasControllerBackward = HasControllerTypes<C> &&
 template <class S>
 concept Simulator = detail::HasSimulatorSizes<S> && detail::HasSimulatorStep<S> &&
                     detail::HasSimulatorVjp<S>;
+
+/// A `Simulator` that says why it answered calls with NaN: `take_refusals()` returns its
+/// record of the calls it refused since the last such call (and forgets them), and
+/// `describe(record)`, found by argument-dependent lookup, puts the record in words ("" when
+/// it holds none). The trainer adds those words to its non-finite events. `MujocoSimulator`
+/// is one ("MuJoCo refused a step: Pre-allocated contact buffer is full. ...").
+template <class S>
+concept ExplainsRefusals = requires(const S& sim) {
+  { describe(sim.take_refusals()) } -> std::convertible_to<std::string>;
+};
+
+namespace detail {
+
+/// The words of `sim`'s refusals since the last call, or "" from a simulator that gives none.
+template <class S>
+[[nodiscard]] std::string take_refusal_note(const S& sim) {
+  if constexpr (ExplainsRefusals<S>) {
+    return describe(sim.take_refusals());
+  } else {
+    return {};
+  }
+}
+
+}  // namespace detail
 
 /// A `Simulator` that also forms its dense Jacobians:
 /// - `using StateJacobian, ControlJacobian` (Eigen matrices);

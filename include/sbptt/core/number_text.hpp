@@ -133,6 +133,13 @@ void append_number(std::string& out, Scalar value) {
   append_formatted(out, value, std::chars_format::general, round_trip_digits<Scalar>);
 }
 
+/// The shortest text that reads back to `value` ("2e+10", "0.005", "nan", "-inf").
+[[nodiscard]] inline std::string shortest(double value) {
+  char buffer[32];
+  const auto result = std::to_chars(buffer, buffer + sizeof buffer, value);
+  return std::string(buffer, result.ptr);
+}
+
 /// `text` in the shortest form that reads back to the same double, where `text` is that
 /// double's round-trip form as `append_number` writes it ("0.0050000000000000001" is "0.005"
 /// for a reader); any other text as it is.
@@ -143,10 +150,7 @@ void append_number(std::string& out, Scalar value) {
   if (parsed.ec != std::errc() || parsed.ptr != end || !std::isfinite(value)) return text;
   std::string round_trip;
   append_number(round_trip, value);
-  if (round_trip != text) return text;
-  char buffer[32];
-  const auto result = std::to_chars(buffer, buffer + sizeof buffer, value);
-  return std::string(buffer, result.ptr);
+  return round_trip == text ? shortest(value) : text;
 }
 
 }  // namespace sbptt::detail

@@ -42,13 +42,15 @@
 /// value (the last step of a rollout too, though MuJoCo would refuse it only when stepping from
 /// it); the Jacobians there stay MuJoCo's differences, which no sweep asks for once the
 /// forward pass has stopped on the NaN state. The adapter keeps MuJoCo from printing these
-/// warnings or writing MUJOCO_LOG.TXT (see `arm_mujoco_warnings`).
+/// warnings or writing MUJOCO_LOG.TXT (see `arm_mujoco_warnings`), and records them instead:
+/// `take_refusals()` says how many calls MuJoCo refused and why the first was, in MuJoCo's
+/// words ("Pre-allocated contact buffer is full. Increase nconmax above 100"), and the
+/// trainer adds that to its non-finite events.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -59,7 +61,9 @@
 #include <mujoco/mjxmacro.h>
 
 #include "sbptt/core/error.hpp"
+#include "sbptt/core/number_text.hpp"
 #include "sbptt/core/types.hpp"
+#include "sbptt/sim/mujoco_data_pool.hpp"
 #include "sbptt/sim/mujoco_model.hpp"
 
 namespace sbptt {
@@ -72,30 +76,6 @@ struct MujocoOptions {
 };
 
 namespace detail {
-
-/// The warnings after which MuJoCo has reset or truncated the step it was asked to take.
-constexpr int mujoco_failures[] = {mjWARN_CONTACTFULL, mjWARN_CNSTRFULL, mjWARN_BADQPOS,
-                                   mjWARN_BADQVEL, mjWARN_BADQACC, mjWARN_BADCTRL};
-
-/// Marks every warning as raised once already, with no info. MuJoCo's `mj_warning` prints
-/// (and appends to MUJOCO_LOG.TXT in the working directory) only a warning's first
-/// occurrence in an mjData, so this keeps a library call silent; any warning then changes
-/// `lastinfo`, and `mj_resetData` zeroes the record, so `mujoco_step_failed` still sees it.
-inline void arm_mujoco_warnings(mjData& data) {
-  for (auto& warning : data.warning) {
-    warning.number = 1;
-    warning.lastinfo = -1;
-  }
-}
-
-/// Whether MuJoCo raised one of `mujoco_failures` since `arm_mujoco_warnings`.
-inline bool mujoco_step_failed(const mjData& data) {
-  for (const int kind : mujoco_failures) {
-    const mjWarningStat& warning = data.warning[kind];
-    if (warning.number != 1 || warning.lastinfo != -1) return true;
-  }
-  return false;
-}
 
 /// "name[i] is nan" for the first non-finite real number of the model (its options, then its
 /// arrays, in MuJoCo's own list of them, mjxmacro.h), or empty. MuJoCo loads a NaN with only a
@@ -121,74 +101,6 @@ inline std::string first_non_finite_field(const mjModel& model) {
 #undef X
   return found;
 }
-
-/// One `mjData` with the row-major Jacobian buffers of `mjd_transitionFD`, and the probes of
-/// the whole-step differences that replace it for RK4.
-struct MujocoSlot {
-  struct DataDeleter {
-    void operator()(mjData* released) const { mj_deleteData(released); }
-  };
-  std::unique_ptr<mjData, DataDeleter> data;
-  std::vector<mjtNum> state_jacobian, control_jacobian;  ///< n × n and n × nu, row-major
-  std::vector<mjtNum> probe;                            ///< (x, u) moved: n + nu
-  std::vector<mjtNum> plus, minus;                      ///< the probes' next states: n
-};
-
-/// A pool of `MujocoSlot`s: `lease()` hands out a slot no other caller holds, and takes it
-/// back when the lease ends. Grows to the largest number of concurrent callers.
-class MujocoDataPool {
-public:
-  explicit MujocoDataPool(std::shared_ptr<const mjModel> model) : model_(std::move(model)) {}
-
-  class Lease {
-  public:
-    Lease(MujocoDataPool& pool, std::unique_ptr<MujocoSlot> slot)
-        : pool_(&pool), slot_(std::move(slot)) {}
-    Lease(const Lease&) = delete;
-    Lease& operator=(const Lease&) = delete;
-    Lease(Lease&&) = delete;
-    Lease& operator=(Lease&&) = delete;
-    ~Lease() { pool_->give_back(std::move(slot_)); }
-    MujocoSlot& operator*() const { return *slot_; }
-    MujocoSlot* operator->() const { return slot_.get(); }
-
-  private:
-    MujocoDataPool* pool_;
-    std::unique_ptr<MujocoSlot> slot_;
-  };
-
-  [[nodiscard]] Lease lease() {
-    {
-      const std::lock_guard<std::mutex> lock(mutex_);
-      if (!free_.empty()) {
-        auto slot = std::move(free_.back());
-        free_.pop_back();
-        return {*this, std::move(slot)};
-      }
-    }
-    auto slot = std::make_unique<MujocoSlot>();
-    slot->data.reset(mj_makeData(model_.get()));
-    require(slot->data != nullptr, "MujocoSimulator: mj_makeData could not allocate an mjData");
-    const std::size_t n =
-        2 * static_cast<std::size_t>(model_->nv) + static_cast<std::size_t>(model_->na);
-    slot->state_jacobian.resize(n * n);
-    slot->control_jacobian.resize(n * static_cast<std::size_t>(model_->nu));
-    slot->probe.resize(n + static_cast<std::size_t>(model_->nu));
-    slot->plus.resize(n);
-    slot->minus.resize(n);
-    return {*this, std::move(slot)};
-  }
-
-private:
-  void give_back(std::unique_ptr<MujocoSlot> slot) {
-    const std::lock_guard<std::mutex> lock(mutex_);
-    free_.push_back(std::move(slot));
-  }
-
-  std::shared_ptr<const mjModel> model_;
-  std::mutex mutex_;
-  std::vector<std::unique_ptr<MujocoSlot>> free_;
-};
 
 }  // namespace detail
 
@@ -261,12 +173,14 @@ public:
     auto slot = pool_->lease();
     x_next.resize(state_dim());
     mjData& d = *slot->data;
-    if (!load(x, u, d)) {
-      x_next.setConstant(nan());
-      return;
+    Refusal refusal = refusal_of_input(x, u);
+    if (!refusal.refused) {
+      write_input(x, u, d);
+      mj_step(model_.get(), &d);
+      refusal = refusal_of_step(d);
     }
-    mj_step(model_.get(), &d);
-    if (!stepped(d)) {
+    if (refusal.refused) {
+      note(std::move(refusal));
       x_next.setConstant(nan());
       return;
     }
@@ -299,6 +213,12 @@ public:
     if (lambda_u != nullptr) *lambda_u = (b.transpose() * adjoint).template cast<Scalar>();
   }
 
+  /// The calls that MuJoCo refused (each answered with NaN) since the last `take_refusals`,
+  /// by this simulator and its copies on any thread, and why the first was refused; forgets
+  /// them. `describe` puts the record in words; the trainer adds them to its non-finite
+  /// events (`ExplainsRefusals`). With threads, which refusal came first may vary.
+  [[nodiscard]] MujocoRefusals take_refusals() const { return pool_->take_refusals(); }
+
 private:
   using RowMajorMap = Eigen::Map<const RowMajorMatrix<mjtNum>>;
   using WritableRowMajorMap = Eigen::Map<RowMajorMatrix<mjtNum>>;
@@ -316,15 +236,43 @@ private:
                     ", expected control_dim() = nu = ", control_dim());
   }
 
-  /// Writes the whole input of a step into `d`; false (and `d` untouched) if MuJoCo would
-  /// reject a value (NaN, ±Inf or beyond mjMAXVAL).
-  bool load(const State& x, const Control& u, mjData& d) const {
+  /// Whether MuJoCo refuses a call, and why; `why` is empty for a NaN or ±Inf in the input,
+  /// which came from elsewhere (see mujoco_data_pool.hpp).
+  struct Refusal {
+    bool refused = false;
+    std::string why;
+  };
+
+  void note(Refusal refusal) const {
+    if (!refusal.why.empty()) pool_->record_refusal(std::move(refusal.why));
+  }
+
+  /// "qpos[1]", "qvel[0]" or "act[2]": entry i of the state.
+  [[nodiscard]] std::string state_entry(Index i) const {
+    if (i < nv_) return detail::concat("qpos[", i, "]");
+    if (i < 2 * nv_) return detail::concat("qvel[", i - nv_, "]");
+    return detail::concat("act[", i - 2 * nv_, "]");
+  }
+
+  /// "<what> is 2e+10, beyond MuJoCo's bound of 1e+10", or "<what> is nan".
+  [[nodiscard]] static std::string refused_value(const std::string& what, mjtNum value) {
+    std::string text = what + " is " + detail::shortest(value);
+    if (std::isfinite(value)) text += ", beyond MuJoCo's bound of " + detail::shortest(mjMAXVAL);
+    return text;
+  }
+
+  /// MuJoCo refuses (without stepping) an input with a NaN, ±Inf or a value beyond mjMAXVAL.
+  [[nodiscard]] Refusal refusal_of_input(const State& x, const Control& u) const {
+    const auto refusal = [](const std::string& what, mjtNum value) {
+      return Refusal{true, std::isfinite(value) ? refused_value(what, value) : std::string()};
+    };
     for (Index i = 0; i < x.size(); ++i)
-      if (mju_isBad(static_cast<mjtNum>(x(i)))) return false;
+      if (mju_isBad(static_cast<mjtNum>(x(i))))
+        return refusal("the state's " + state_entry(i), static_cast<mjtNum>(x(i)));
     for (Index i = 0; i < u.size(); ++i)
-      if (mju_isBad(static_cast<mjtNum>(u(i)))) return false;
-    write_input(x, u, d);
-    return true;
+      if (mju_isBad(static_cast<mjtNum>(u(i))))
+        return refusal(detail::concat("the control's ctrl[", i, "]"), static_cast<mjtNum>(u(i)));
+    return {};
   }
 
   /// Writes state `x` (qpos, qvel, act: anything indexed by [i]) and control `u` into `d`, time
@@ -346,12 +294,14 @@ private:
   /// Whether the step just taken in `d` stands: MuJoCo raised no failure, and its result holds
   /// no value MuJoCo would refuse (it checks a state only when it steps from it; the last state
   /// of a rollout never is).
-  [[nodiscard]] bool stepped(const mjData& d) const {
-    const auto refused = [](const mjtNum* values, Index count) {
-      return std::any_of(values, values + count, [](mjtNum v) { return mju_isBad(v) != 0; });
-    };
-    return !detail::mujoco_step_failed(d) && !refused(d.qpos, nv_) && !refused(d.qvel, nv_) &&
-           !refused(d.act, na_);
+  [[nodiscard]] Refusal refusal_of_step(const mjData& d) const {
+    if (std::string warning = detail::mujoco_failure(d); !warning.empty())
+      return {true, std::move(warning)};
+    for (Index i = 0; i < state_dim(); ++i) {
+      const mjtNum value = i < nv_ ? d.qpos[i] : i < 2 * nv_ ? d.qvel[i - nv_] : d.act[i - 2 * nv_];
+      if (mju_isBad(value)) return {true, refused_value("the step's result " + state_entry(i), value)};
+    }
+    return {};
   }
 
   /// The state of `d` (qpos, qvel, act) into `out` (anything indexed by [i]).
@@ -371,15 +321,21 @@ private:
     const Index n = state_dim();
     TransitionJacobians out{RowMajorMap(slot.state_jacobian.data(), n, n),
                             RowMajorMap(slot.control_jacobian.data(), n, nu_)};
-    bool failed = !load(x, u, *slot.data);
-    if (!failed && model_->opt.integrator == mjINT_RK4) {
-      failed = !whole_step_differences(slot);
-    } else if (!failed) {
-      mjd_transitionFD(model_.get(), slot.data.get(), options_.fd_step, 1,
-                       slot.state_jacobian.data(), slot.control_jacobian.data(), nullptr, nullptr);
-      failed = detail::mujoco_step_failed(*slot.data);
+    Refusal refusal = refusal_of_input(x, u);
+    if (!refusal.refused) {
+      write_input(x, u, *slot.data);
+      if (model_->opt.integrator == mjINT_RK4) {
+        refusal = whole_step_differences(slot);
+      } else {
+        mjd_transitionFD(model_.get(), slot.data.get(), options_.fd_step, 1,
+                         slot.state_jacobian.data(), slot.control_jacobian.data(), nullptr,
+                         nullptr);
+        refusal.why = detail::mujoco_failure(*slot.data);
+        refusal.refused = !refusal.why.empty();
+      }
     }
-    if (failed) {
+    if (refusal.refused) {
+      note(std::move(refusal));
       constexpr mjtNum not_a_number = std::numeric_limits<mjtNum>::quiet_NaN();
       std::fill(slot.state_jacobian.begin(), slot.state_jacobian.end(), not_a_number);
       std::fill(slot.control_jacobian.begin(), slot.control_jacobian.end(), not_a_number);
@@ -388,21 +344,21 @@ private:
   }
 
   /// The slot's A and B by centered differences of whole `mj_step`s from the state loaded in
-  /// its mjData, each probe loaded afresh; false if MuJoCo refused any probe. For RK4 only:
+  /// its mjData, each probe loaded afresh; the first probe MuJoCo refused, if any. For RK4 only:
   /// MuJoCo 2.2's `mjd_transitionFD` reuses the unperturbed state's position and velocity
   /// stages in RK4's three later stages, which gave B off by up to 5.2e6 (relative) on a cart
   /// with a double pendulum (tests/test_sim_mujoco.cpp). Whole steps redo the stages that
   /// `mjd_transitionFD` skips, in as many steps.
-  bool whole_step_differences(detail::MujocoSlot& slot) const {
+  Refusal whole_step_differences(detail::MujocoSlot& slot) const {
     mjData& d = *slot.data;
     const Index n = state_dim();
     read_state(d, slot.probe);
     std::copy(d.ctrl, d.ctrl + nu_, slot.probe.begin() + n);
-    bool refused = false;
+    Refusal refusal;
     const auto step_from_probe = [&](std::vector<mjtNum>& next) {
       write_input(slot.probe, slot.probe.data() + n, d);
       mj_step(model_.get(), &d);
-      refused = refused || !stepped(d);
+      if (!refusal.refused) refusal = refusal_of_step(d);
       read_state(d, next);
     };
     const mjtNum eps = options_.fd_step;
@@ -421,7 +377,7 @@ private:
         WritableRowMajorMap(slot.control_jacobian.data(), n, nu_).col(j - n) = slope;
       }
     }
-    return !refused;
+    return refusal;
   }
 
   std::shared_ptr<const mjModel> model_;

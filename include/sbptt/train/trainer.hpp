@@ -79,6 +79,9 @@ struct NonFiniteEvent {
   /// update, whatever the shuffle); for a gradient or a parameter, its index.
   NonFinite where;
   Phase phase = Phase::Update;
+  /// The simulator's words for the calls it refused up to this event, when it gives them
+  /// (`ExplainsRefusals`, e.g. MuJoCo's "contact buffer is full"); else empty.
+  std::string cause;
 };
 
 /// ", step 9, sample 0", or ", parameter 3" for a gradient or a parameter.
@@ -88,7 +91,8 @@ struct NonFiniteEvent {
              : detail::concat(", step ", where.step, ", sample ", where.sample);
 }
 
-/// "non-finite state (inf) in epoch 2, batch 1, step 9, sample 0": the event in words.
+/// "non-finite state (inf) in epoch 2, batch 1, step 9, sample 0": the event in words, and
+/// the simulator's cause after "; " when it gave one.
 [[nodiscard]] inline std::string describe(const NonFiniteEvent& event) {
   const NonFinite& where = event.where;
   std::string text =
@@ -96,10 +100,19 @@ struct NonFiniteEvent {
   text += event.phase == Phase::Update
               ? detail::concat("epoch ", event.epoch, ", batch ", event.batch)
               : detail::concat("the ", to_string(event.phase), " of epoch ", event.epoch);
-  return text + describe_where(where);
+  text += describe_where(where);
+  if (!event.cause.empty()) text += "; " + event.cause;
+  return text;
 }
 
 namespace detail {
+
+/// The event at `where`, with the cause that `sim` gives (see `ExplainsRefusals`).
+template <class Sim>
+[[nodiscard]] NonFiniteEvent non_finite_event(const Sim& sim, long epoch, Index batch,
+                                              const NonFinite& where, Phase phase) {
+  return {epoch, batch, where, phase, take_refusal_note(sim)};
+}
 
 /// The evaluation of an epoch: the mean loss of `train`, and of `test` unless it is empty,
 /// into `record`; each non-finite rollout goes to `note` as an event of `record.epoch`.
@@ -109,7 +122,8 @@ void evaluate_sets(EngineT& engine, const Matrix<Scalar>& train, const Matrix<Sc
   auto loss_of = [&](const Matrix<Scalar>& set, Phase phase) {
     const auto loss = static_cast<double>(engine.evaluate(set));
     if (engine.forward_non_finite())
-      note(NonFiniteEvent{record.epoch, -1, *engine.forward_non_finite(), phase});
+      note(non_finite_event(engine.simulator(), record.epoch, -1, *engine.forward_non_finite(),
+                            phase));
     return loss;
   };
   record.train_loss = loss_of(train, Phase::TrainEvaluation);
@@ -180,7 +194,8 @@ public:
       gather(train, k, batch_states_);
       const std::optional<NonFinite> bad = update(batch_states_);
       if (bad) {
-        note(NonFiniteEvent{record.epoch, k, in_train_set(*bad, k), Phase::Update});
+        note(detail::non_finite_event(engine_.simulator(), record.epoch, k, in_train_set(*bad, k),
+                                      Phase::Update));
         if (options_.on_non_finite == NonFinitePolicy::Stop) break;
         continue;
       }

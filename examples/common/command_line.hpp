@@ -6,6 +6,7 @@
 // CLI11 reads the tokens; the values are converted by parse_integer / parse_number
 // (flag_values.hpp), so that "--epochs ten" and "--poles 9" are refused in the same words by
 // every program, and unknown flags and missing values are reported in those words too.
+#include <algorithm>
 #include <cstdio>
 #include <functional>
 #include <string>
@@ -46,8 +47,9 @@ public:
         throw InvalidArgument(detail::concat(flag, ": ", e.what()));
       }
     };
-    CLI::Option* option = app_.add_option_function<std::string>(flag, std::move(named), meaning);
+    CLI::Option* option = app_.add_option_function<std::string>(flag, named, meaning);
     option->type_name(type_name);
+    values_.push_back({flag, option, std::move(named)});
     if (!default_shown.empty()) option->default_str(default_shown);
     return option;
   }
@@ -101,6 +103,11 @@ public:
   bool parse(int argc, const char* const* argv) {
     for (int i = 1; i < argc; ++i) {
       const std::string token = argv[i];
+      // CLI11 takes the word after a flag as its value even when it is another flag.
+      if (i + 1 < argc && takes_value(token) && std::string_view(argv[i + 1]).starts_with("--"))
+        throw InvalidArgument(detail::concat(token, " needs a value; the next word, '",
+                                             argv[i + 1], "', is a flag (a value that starts "
+                                             "with -- is written ", token, "=VALUE)"));
       for (const auto& [flag, reason] : refused_)
         if (token == flag || token.rfind(flag + "=", 0) == 0)
           throw InvalidArgument(detail::concat(flag, ": ", reason));
@@ -117,7 +124,8 @@ public:
       std::fputs(app_.help().c_str(), stdout);
       return false;
     } catch (const CLI::ArgumentMismatch& e) {
-      // "--rc: 1 required X missing": the flag came last, or another flag followed it.
+      // "--rc: 1 required X missing": the flag came last (one followed by a flag is refused
+      // above).
       const std::string what = e.what();
       if (what.find(" required ") != std::string::npos && what.find(" missing") != std::string::npos)
         throw InvalidArgument(detail::concat(what.substr(0, what.find(':')),
@@ -127,7 +135,18 @@ public:
       throw InvalidArgument(e.what());
     }
     refuse_extras();
+    // A flag given twice takes its last value, which CLI11 alone reads: the earlier ones are
+    // read too, in order, so that a bad one is refused as it would be alone.
+    for (const ValueFlag& value : values_)
+      if (value.option->count() > 1)
+        for (const std::string& text : value.option->results()) value.set(text);
     return true;
+  }
+
+  /// Whether `token` is exactly the name of a flag that takes a value.
+  [[nodiscard]] bool takes_value(const std::string& token) const {
+    return std::any_of(values_.begin(), values_.end(),
+                       [&](const ValueFlag& value) { return value.flag == token; });
   }
 
   /// Whether `flag` was given on the command line (after parse).
@@ -160,6 +179,12 @@ private:
   CLI::App app_;
   std::vector<std::pair<std::string, std::string>> refused_;
   std::vector<std::string> switches_;
+  struct ValueFlag {
+    std::string flag;
+    CLI::Option* option;
+    std::function<void(const std::string&)> set;  ///< converts and stores one value
+  };
+  std::vector<ValueFlag> values_;
 };
 
 }  // namespace sbptt::examples

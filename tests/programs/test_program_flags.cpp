@@ -259,7 +259,18 @@ TEST_CASE("numbers beyond the type's range, numbers not in decimals, contradicti
         Case{"cartpole", "--physical --model reference --epochs 1",
              "--model reference and --physical both given"},
         Case{"cartpole", "--model chain --physical --poles 2 --epochs 1",
-             "--model chain and --physical both given"}}) {
+             "--model chain and --physical both given"},
+        // A flag without its value took the next flag as the value: a log named '--float'
+        // and a run in double; reproduce ran a whole sweep into './--dry-run'.
+        Case{"cartpole", "--csv --float --epochs 1",
+             "--csv needs a value; the next word, '--float', is a flag (a value that starts "
+             "with -- is written --csv=VALUE)"},
+        Case{"reproduce", "--out --dry-run", "--out needs a value; the next word, '--dry-run'"},
+        Case{"toy", "--lr --epochs 1", "--lr needs a value; the next word, '--epochs'"},
+        // A flag given twice takes its last value, but an earlier bad one was never read.
+        Case{"toy", "--epochs abc --epochs 1", "--epochs 'abc' is not an integer"},
+        Case{"cartpole", "--method X --method C --epochs 1", "--method: method 'X' is unknown"},
+        Case{"reproduce", "--seeds 0 --seeds 1 --dry-run", "--seeds 0 is out of range"}}) {
     const Result r = run(c.program, c.arguments);
     INFO(c.program << " " << c.arguments << "\n" << r.output);
     CHECK(r.status == 2);

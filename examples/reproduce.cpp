@@ -62,7 +62,10 @@ int run_reproduce(int argc, char** argv) {
     if (options.emit == "slurm") require_slurm_folder(options);
     plan = make_plan(options);
     if (plan.empty())
-      throw InvalidArgument(concat("the selection leaves no run of profile ", options.profile));
+      throw InvalidArgument(concat(
+          "--profile ", options.profile, " has no run of the --tasks, --methods, --clips and "
+          "--complexities given; expected a selection the profile has (--dry-run without them "
+          "lists its runs; the cart chain is in --profile reviewers alone)"));
     // --merge accounts for the whole plan; everything else works on this process's share.
     if (!options.merge) plan = select_share(options, plan);
     // Every mode but --merge runs the task programs or hands out their commands.
@@ -78,8 +81,9 @@ int run_reproduce(int argc, char** argv) {
   try {
     const fs::path runs = fs::path(options.out) / "runs";
     if (const auto mismatched = runs_of_other_settings(runs, plan); !mismatched.empty()) {
-      std::cerr << "reproduce: " << mismatched.size() << " finished run(s) in " << runs
-                << " were made with other settings than planned now (e.g. " << mismatched[0]
+      std::cerr << "reproduce: " << count_of(mismatched.size(), "finished run") << " in " << runs
+                << (mismatched.size() == 1 ? " was" : " were")
+                << " made with other settings than planned now (e.g. " << mismatched[0]
                 << ": see its .run file); rerun with the old settings, choose another --out, "
                    "or remove runs/<name>.* to redo them\n";
       return 1;

@@ -79,7 +79,7 @@ public:
                     const std::string& default_shown = "none") {
     return value(flag, "FILE", meaning, default_shown, [&target, flag](const std::string& text) {
       if (text.empty())
-        throw InvalidArgument(detail::concat(flag, " '' is an empty path; expected a file path "
+        throw InvalidArgument(detail::concat(flag, " '' is an empty path; expected a path "
                                                    "(an unset shell variable?)"));
       target = text;
     });

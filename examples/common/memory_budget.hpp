@@ -120,11 +120,17 @@ void require_memory_for_run(const TaskOptions& o, Index state_dim,
   const double bytes = (sets + trajectory) * scalar_bytes;
   const MemoryBound usable = usable_memory();
   if (bytes <= usable.bytes) return;
-  const auto gib = [](double b) {
+  // As many decimals as it takes for the need to read larger than the bound ("0.8 GiB, more
+  // than the 0.8 GiB" said nothing).
+  int decimals = 1;
+  const auto shown_with = [](double b, int places) {
     char text[32];
-    std::snprintf(text, sizeof text, "%.1f GiB", b / (1024.0 * 1024.0 * 1024.0));
+    std::snprintf(text, sizeof text, "%.*f GiB", places, b / (1024.0 * 1024.0 * 1024.0));
     return std::string(text);
   };
+  while (decimals < 6 && shown_with(bytes, decimals) == shown_with(usable.bytes, decimals))
+    ++decimals;
+  const auto gib = [&](double b) { return shown_with(b, decimals); };
   const std::string batch_flag = dump ? "" : detail::concat(", --batch ", o.batch);
   throw InvalidArgument(detail::concat(
       "--samples ", o.samples, " (and as many test samples)", state_size_flags(o), batch_flag,

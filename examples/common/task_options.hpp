@@ -374,7 +374,8 @@ inline void require_float_range(const char* flag, double value) {
   if (task != Task::Mujoco) o.time = detail_task::resolve(paper, steps, dt, horizon);
   if (o.use_float) {
     detail_task::require_float_range("--lr", o.lr);
-    if (o.clip != ClipMode::None) detail_task::require_float_range("--clip-threshold", o.clip_threshold);
+    // Checked with --clip none too, as its double range is: a checkpoint records it.
+    detail_task::require_float_range("--clip-threshold", o.clip_threshold);
   }
   // A flag a mode does not use is refused, not ignored: the user meant it to matter.
   const auto refuse = [&](const char* mode, const char* does, std::vector<const char*> flags) {

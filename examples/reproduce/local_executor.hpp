@@ -57,9 +57,10 @@ public:
       if (!is_finished(finished_, run)) todo.push_back(&run);
     double estimate = 0;
     for (const Run* run : todo) estimate += finished_.expected_seconds(*run);
-    std::printf("reproduce: profile %s, %zu runs planned (%zu finished, %zu to do), --jobs %ld, "
+    std::printf("reproduce: profile %s, %s planned (%zu finished, %zu to do), --jobs %ld, "
                 "--threads %ld, estimated %s of compute, about %s wall time\n",
-                options_.profile.c_str(), plan_.size(), plan_.size() - todo.size(), todo.size(),
+                options_.profile.c_str(), count_of(plan_.size(), "run").c_str(),
+                plan_.size() - todo.size(), todo.size(),
                 options_.jobs, options_.threads, format_duration(estimate).c_str(),
                 format_duration(estimate / static_cast<double>(std::min<std::size_t>(
                                                static_cast<std::size_t>(options_.jobs),
@@ -84,8 +85,10 @@ public:
     write_summary();
     if (code == 130) {
       finish_progress();
-      std::cerr << "reproduce: interrupted; " << finished_.summaries.size()
-                << " runs are finished and kept; run the same command again to continue\n";
+      const std::size_t kept = finished_.summaries.size();
+      std::cerr << "reproduce: interrupted; " << count_of(kept, "run")
+                << (kept == 1 ? " is" : " are")
+                << " finished and kept; run the same command again to continue\n";
       return code;
     }
     finish_progress();
@@ -94,12 +97,13 @@ public:
     print_table(rows);
     std::printf("\nsummary: %s\n", (out_ / "summary.csv").c_str());
     if (!elsewhere_.empty())
-      std::printf("reproduce: %zu run(s) were finished by another executor in the same folder "
-                  "(e.g. %s)\n",
-                  elsewhere_.size(), elsewhere_.front().c_str());
+      std::printf("reproduce: %s finished by another executor in the same folder (e.g. %s)\n",
+                  (count_of(elsewhere_.size(), "run") + (elsewhere_.size() == 1 ? " was" : " were"))
+                      .c_str(),
+                  elsewhere_.front().c_str());
     if (!failures_.empty()) {
-      std::cerr << "reproduce: " << failures_.size() << " run(s) failed and will be redone by the "
-                << "next sweep:\n";
+      std::cerr << "reproduce: " << count_of(failures_.size(), "run")
+                << " failed and will be redone by the next sweep:\n";
       for (const auto& f : failures_) std::cerr << f;
     }
     return failures_.empty() ? 0 : 1;
@@ -147,9 +151,9 @@ private:
       if (resumable && fs::exists(kept) && resumes_as_planned(name)) ++resumed;
     }
     if (discarded > 0)
-      std::printf("reproduce: discarded %zu unfinished run(s) of an interrupted sweep (their "
-                  "partial files); they are redone, %zu from their checkpoint\n",
-                  discarded, resumed);
+      std::printf("reproduce: discarded %s of an interrupted sweep (their partial files); they "
+                  "are redone, %zu from their checkpoint\n",
+                  count_of(discarded, "unfinished run").c_str(), resumed);
   }
 
   /// Whether the checkpoint of run `name` was written for the planned run's settings (`start`

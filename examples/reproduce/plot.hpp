@@ -63,8 +63,11 @@ inline int plot(const Options& o, const fs::path& own_dir) {
   for (const auto& entry : fs::directory_iterator(plots, error))
     if (entry.path().filename().string().starts_with(".tmp.")) fs::remove(entry.path(), error);
   if (interrupted) {
-    std::cerr << "reproduce: interrupted while plotting; the figures drawn so far are in "
-              << plots.string() << "\n";
+    std::cerr << "reproduce: interrupted while plotting; "
+              << (fs::is_directory(plots, error)
+                      ? "the figures drawn so far are in " + plots.string()
+                      : std::string("no figure was drawn"))
+              << "\n";
     return 130;
   }
   if (code != 0) {
@@ -128,9 +131,9 @@ inline int print_plan(const Options& o, const std::vector<Run>& plan, const fs::
   }
   if (stopped_printing()) return 130;
   print_instruction_sets();
-  std::printf("%zu runs planned (profile %s, %zu finished, %zu to do), measured estimate %s of "
+  std::printf("%s planned (profile %s, %zu finished, %zu to do), measured estimate %s of "
               "compute, about %s wall time with --jobs %ld\n",
-              plan.size(), o.profile.c_str(), plan.size() - todo, todo,
+              count_of(plan.size(), "run").c_str(), o.profile.c_str(), plan.size() - todo, todo,
               format_duration(estimate).c_str(),
               format_duration(estimate / static_cast<double>(std::min<std::size_t>(
                                              static_cast<std::size_t>(o.jobs),

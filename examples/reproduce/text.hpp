@@ -29,6 +29,11 @@ using sbptt::detail::concat;
 using sbptt::examples::parse_integer;
 using sbptt::examples::parse_number;
 
+/// "1 run", "2 runs": a count and its noun.
+inline std::string count_of(std::size_t count, const std::string& noun) {
+  return concat(count, " ", noun, count == 1 ? "" : "s");
+}
+
 inline std::string format_number(double value) {
   char text[64];
   std::snprintf(text, sizeof text, "%g", value);

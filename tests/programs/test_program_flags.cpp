@@ -227,6 +227,9 @@ TEST_CASE("numbers beyond the type's range, numbers not in decimals, contradicti
         Case{"cartpole", "--float --lr 1e300", "--lr 1e+300 does not fit --float"},
         Case{"cartpole", "--float --clip norm --clip-threshold 1e-60",
              "--clip-threshold 1e-60 does not fit --float"},
+        // With --clip none it was taken, though its double range is checked there too.
+        Case{"cartpole", "--float --clip-threshold 1e39 --epochs 1",
+             "--clip-threshold 1e+39 does not fit --float"},
         Case{"rotation", "--k", "--k needs a value"},
         Case{"bench", "--repeats 0", "--repeats 0 is out of range; expected an integer in [1, 100]"},
         Case{"bench", "--sweep-threading on",
@@ -270,7 +273,11 @@ TEST_CASE("numbers beyond the type's range, numbers not in decimals, contradicti
         // A flag given twice takes its last value, but an earlier bad one was never read.
         Case{"toy", "--epochs abc --epochs 1", "--epochs 'abc' is not an integer"},
         Case{"cartpole", "--method X --method C --epochs 1", "--method: method 'X' is unknown"},
-        Case{"reproduce", "--seeds 0 --seeds 1 --dry-run", "--seeds 0 is out of range"}}) {
+        Case{"reproduce", "--seeds 0 --seeds 1 --dry-run", "--seeds 0 is out of range"},
+        // "the selection leaves no run of profile quick" named no flag.
+        Case{"reproduce", "--tasks chain --dry-run",
+             "--profile quick has no run of the --tasks, --methods, --clips and --complexities "
+             "given"}}) {
     const Result r = run(c.program, c.arguments);
     INFO(c.program << " " << c.arguments << "\n" << r.output);
     CHECK(r.status == 2);

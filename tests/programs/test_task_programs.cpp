@@ -335,6 +335,13 @@ TEST_CASE("sizes that cannot fit in memory are refused before any work", "[progr
   CHECK(r.output.find("more than the 1.9 GiB this process may use (ulimit -v)") !=
         std::string::npos);
   CHECK_FALSE(fs::exists(log));
+  // A need and a bound within 0.05 GiB were both "0.8 GiB": "need at least 0.8 GiB …, more
+  // than the 0.8 GiB this process may use". 800,000 KiB is 0.763 GiB; the need, 0.77 GiB.
+  r = run("quantum", "--samples 8 --nx 1024 --epochs 1", "ulimit -v 800000; ");
+  INFO(r.output);
+  CHECK(r.status == 2);
+  CHECK(r.output.find("need at least 0.77 GiB") != std::string::npos);
+  CHECK(r.output.find("more than the 0.76 GiB this process may use") != std::string::npos);
   // The trajectory alone: 256 samples a batch need 24.4 GiB.
   r = run("quantum", "--samples 256 --batch 256 --nx 1024 --epochs 1", "ulimit -v 2000000; ");
   INFO(r.output);

@@ -133,7 +133,7 @@ int check_derivatives(const MujocoSimulator<Scalar>& sim, const TaskOptions& o, 
   // An error that is not finite checked nothing: the step or its derivatives were NaN, or too
   // large to compare, at one of the states, which a printed line with exit 0 would hide.
   if (!std::isfinite(worst.worst())) {
-    const std::string cause = describe(sim.take_refusals());
+    const std::string cause = detail::take_refusal_note(sim);
     std::fprintf(stderr, "mujoco: %s: an error is not finite: the step or its derivatives are "
                  "NaN or too large to compare at one of the 5 states%s%s; expected finite "
                  "errors (check the model's values). %s\n", o.model.c_str(),

@@ -426,6 +426,9 @@ TEST_CASE("trainer: a simulator's account of its refusals goes with the non-fini
     Trainer trainer(sim, policy, to_origin(LossTiming::Final), 10,
                     Adam<double>(AdamOptions<double>{0.01}), options);
     const Matrix<double> overflowing = samples({1.0, 1e300}), finite = samples({0.5});
+    // A refusal the caller met before the epoch is not the cause of the epoch's event.
+    Sim::State refused;
+    sim.step(Sim::State::Constant(2e300), Sim::Control::Zero(), refused);
     if (phase == Phase::Update) {
       trainer.train_epoch(overflowing, finite);
     } else {

@@ -394,27 +394,29 @@ TEST_CASE("mujoco says why MuJoCo refused a step, in MuJoCo's words", "[programs
          "<body pos='0 0 0.05'><joint name='a' type='slide' axis='0 0 1'/><geom size='0.1'/>"
          "</body><body pos='1 0 0.05'><joint name='b' type='slide' axis='0 0 1'/><geom "
          "size='0.1'/></body></worldbody><actuator><motor joint='a'/></actuator></mujoco>";
-  const std::string why = "Pre-allocated contact buffer is full. Increase nconmax above 1";
+  const std::string why = "its contact buffer is full (increase nconmax above 1)";
   const std::string scene =
       "--model " + file.string() + " --target 0,0 --spread 0 --steps 5 --samples 4 ";
   const Result trained = run("mujoco", scene + "--epochs 2 --batch 2");
   INFO(trained.output);
   CHECK(trained.status == 3);
-  CHECK(trained.output.find("in the test set, step 1, sample 0; MuJoCo refused 4 steps; the "
-                            "first: " + why) !=
-        std::string::npos);
+  CHECK(trained.output.find("in the test set, step 1, sample 0; MuJoCo refused 4 calls (steps "
+                            "or their derivatives); the first: " + why) != std::string::npos);
   // C's batch of 2: each sample's first step, and its derivatives in each of the two sweeps.
-  CHECK(trained.output.find("in epoch 1, batch 0, step 1, sample 0; MuJoCo refused 6 steps; "
-                            "the first: " + why + "\n") != std::string::npos);
+  CHECK(trained.output.find("in epoch 1, batch 0, step 1, sample 0; MuJoCo refused 6 calls "
+                            "(steps or their derivatives); the first: " + why + "\n") !=
+        std::string::npos);
   const Result dumped = run("mujoco", scene + "--dump-gradients " + scratch("g.csv").string());
   INFO(dumped.output);
   CHECK(dumped.status == 3);
-  CHECK(dumped.output.find("in the forward pass, step 1, sample 0; MuJoCo refused 4 steps; the "
-                           "first: " + why + "; no gradients written") != std::string::npos);
+  CHECK(dumped.output.find("in the forward pass, step 1, sample 0; MuJoCo refused 4 calls (steps "
+                           "or their derivatives); the first: " + why +
+                           "; no gradients written") != std::string::npos);
   const Result checked =
       run("mujoco", "--model " + file.string() + " --spread 0 --check-derivatives");
   INFO(checked.output);
   CHECK(checked.status == 3);
   CHECK(checked.output.find("at one of the 5 states: MuJoCo refused ") != std::string::npos);
-  CHECK(checked.output.find(" steps; the first: " + why) != std::string::npos);
+  CHECK(checked.output.find(" calls (steps or their derivatives); the first: " + why) !=
+        std::string::npos);
 }

@@ -111,9 +111,10 @@ concept Simulator = detail::HasSimulatorSizes<S> && detail::HasSimulatorStep<S> 
 /// record of the calls it refused since the last such call (and forgets them), and
 /// `describe(record)`, found by argument-dependent lookup, puts the record in words ("" when
 /// it holds none). The trainer adds those words to its non-finite events. `MujocoSimulator`
-/// is one ("MuJoCo refused a step: Pre-allocated contact buffer is full. ...").
+/// is one ("MuJoCo refused a call (a step or its derivatives): its contact buffer is full
+/// (increase nconmax above 100)").
 template <class S>
-concept ExplainsRefusals = requires(const S& sim) {
+concept ExplainsRefusals = Simulator<S> && requires(const S& sim) {
   { describe(sim.take_refusals()) } -> std::convertible_to<std::string>;
 };
 

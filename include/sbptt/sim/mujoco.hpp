@@ -2,9 +2,9 @@
 /// \file A `Simulator` over any smooth MuJoCo model (`mjModel`, MuJoCo 2.2): the physics is
 /// MuJoCo's, the derivatives are its finite differences.
 ///
-/// Opt-in: this is the only header that includes `<mujoco/mujoco.h>`; `sbptt/sbptt.hpp` does
-/// not include it, and a consumer links the CMake target `sbptt::mujoco` (which brings
-/// `mujoco::mujoco`) to use it.
+/// Opt-in: this header and the two it includes (mujoco_model.hpp, mujoco_data_pool.hpp) are
+/// the only ones that include `<mujoco/mujoco.h>`; `sbptt/sbptt.hpp` does not include it, and
+/// a consumer links the CMake target `sbptt::mujoco` (which brings `mujoco::mujoco`) to use it.
 ///
 /// State layout (size 2 nv + na): qpos (nq = nv entries), qvel (nv), act (na). Control: ctrl
 /// (nu). Step: one `mj_step` with the model's own integrator and `opt.timestep` (MuJoCo's
@@ -43,9 +43,10 @@
 /// it); the Jacobians there stay MuJoCo's differences, which no sweep asks for once the
 /// forward pass has stopped on the NaN state. The adapter keeps MuJoCo from printing these
 /// warnings or writing MUJOCO_LOG.TXT (see `arm_mujoco_warnings`), and records them instead:
-/// `take_refusals()` says how many calls MuJoCo refused and why the first was, in MuJoCo's
-/// words ("Pre-allocated contact buffer is full. Increase nconmax above 100"), and the
-/// trainer adds that to its non-finite events.
+/// `take_refusals()` says how many calls MuJoCo refused and why the first was ("its contact
+/// buffer is full (increase nconmax above 100)"), and the trainer adds that to its non-finite
+/// events. After a reset MuJoCo recomputes the rest state with its records zeroed, and prints
+/// a warning raised there (a full contact buffer at rest); no call can keep that one silent.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -291,15 +292,16 @@ private:
     detail::arm_mujoco_warnings(d);
   }
 
-  /// Whether the step just taken in `d` stands: MuJoCo raised no failure, and its result holds
-  /// no value MuJoCo would refuse (it checks a state only when it steps from it; the last state
-  /// of a rollout never is).
+  /// Why the step just taken in `d` does not stand, if it does not: MuJoCo raised a failure,
+  /// or its result holds a value MuJoCo would refuse (it checks a state only when it steps from
+  /// it; the last state of a rollout never is).
   [[nodiscard]] Refusal refusal_of_step(const mjData& d) const {
     if (std::string warning = detail::mujoco_failure(d); !warning.empty())
       return {true, std::move(warning)};
     for (Index i = 0; i < state_dim(); ++i) {
       const mjtNum value = i < nv_ ? d.qpos[i] : i < 2 * nv_ ? d.qvel[i - nv_] : d.act[i - 2 * nv_];
-      if (mju_isBad(value)) return {true, refused_value("the step's result " + state_entry(i), value)};
+      if (mju_isBad(value))
+        return {true, refused_value("the step's result " + state_entry(i), value)};
     }
     return {};
   }
@@ -344,11 +346,11 @@ private:
   }
 
   /// The slot's A and B by centered differences of whole `mj_step`s from the state loaded in
-  /// its mjData, each probe loaded afresh; the first probe MuJoCo refused, if any. For RK4 only:
-  /// MuJoCo 2.2's `mjd_transitionFD` reuses the unperturbed state's position and velocity
-  /// stages in RK4's three later stages, which gave B off by up to 5.2e6 (relative) on a cart
-  /// with a double pendulum (tests/test_sim_mujoco.cpp). Whole steps redo the stages that
-  /// `mjd_transitionFD` skips, in as many steps.
+  /// its mjData, each probe loaded afresh; why MuJoCo refused the first probe it refused, if
+  /// any. For RK4 only: MuJoCo 2.2's `mjd_transitionFD` reuses the unperturbed state's position
+  /// and velocity stages in RK4's three later stages, which gave B off by up to 5.2e6
+  /// (relative) on a cart with a double pendulum (tests/test_sim_mujoco.cpp). Whole steps redo
+  /// the stages that `mjd_transitionFD` skips, in as many steps.
   Refusal whole_step_differences(detail::MujocoSlot& slot) const {
     mjData& d = *slot.data;
     const Index n = state_dim();

@@ -1,14 +1,14 @@
 #pragma once
 /// \file The `mjData`s that `MujocoSimulator`'s calls lease, MuJoCo's warnings read off them,
-/// and the record of the steps MuJoCo refused (`MujocoRefusals`), shared by the copies of a
+/// and the record of the calls MuJoCo refused (`MujocoRefusals`), shared by the copies of a
 /// simulator.
 ///
 /// A refusal is a call (a step, or the differences of the Jacobians) that MuJoCo would not
 /// take from its input or did not finish as asked (see `mujoco_failures`), and that the
-/// simulator therefore answered with NaN. Its reason is MuJoCo's own warning text where MuJoCo
-/// raised one ("Pre-allocated contact buffer is full. Increase nconmax above 100"), else the
-/// value beyond MuJoCo's bound of 1e10. A NaN in the input is not recorded: it is no refusal
-/// of MuJoCo's but a NaN from elsewhere, which the engine's report names.
+/// simulator therefore answered with NaN. Its reason is the warning MuJoCo raised ("its
+/// contact buffer is full (increase nconmax above 100)"), else the value beyond MuJoCo's bound
+/// of 1e10. A NaN in the input is not recorded: it is no refusal of MuJoCo's but a NaN from
+/// elsewhere, which the engine's report names.
 #include <memory>
 #include <mutex>
 #include <string>
@@ -21,24 +21,29 @@
 
 namespace sbptt {
 
-/// The steps a `MujocoSimulator` refused since the last `take_refusals()`.
+/// The calls a `MujocoSimulator` refused since the last `take_refusals()`.
 struct MujocoRefusals {
   long count = 0;     ///< calls answered with NaN because MuJoCo refused them
   std::string first;  ///< why the first of them was refused; empty when count = 0
 };
 
-/// "MuJoCo refused 3 steps; the first: <why>", "MuJoCo refused a step: <why>", or "" for none.
+/// "MuJoCo refused 3 calls (steps or their derivatives); the first: <why>", "MuJoCo refused a
+/// call (a step or its derivatives): <why>", or "" for none.
 [[nodiscard]] inline std::string describe(const MujocoRefusals& refusals) {
   if (refusals.count == 0) return {};
-  if (refusals.count == 1) return "MuJoCo refused a step: " + refusals.first;
-  return detail::concat("MuJoCo refused ", refusals.count, " steps; the first: ", refusals.first);
+  if (refusals.count == 1)
+    return "MuJoCo refused a call (a step or its derivatives): " + refusals.first;
+  return detail::concat("MuJoCo refused ", refusals.count,
+                        " calls (steps or their derivatives); the first: ", refusals.first);
 }
 
 namespace detail {
 
-/// The warnings after which MuJoCo has reset or truncated the step it was asked to take.
-constexpr int mujoco_failures[] = {mjWARN_CONTACTFULL, mjWARN_CNSTRFULL, mjWARN_BADQPOS,
-                                   mjWARN_BADQVEL, mjWARN_BADQACC, mjWARN_BADCTRL};
+/// The warnings after which MuJoCo has reset or truncated the step it was asked to take, those
+/// after which it resets first: a reset zeroes every record and recomputes the model's rest
+/// state, so a full contact buffer there is raised after the warning that caused the reset.
+constexpr int mujoco_failures[] = {mjWARN_BADQPOS, mjWARN_BADQVEL,     mjWARN_BADQACC,
+                                   mjWARN_BADCTRL, mjWARN_CONTACTFULL, mjWARN_CNSTRFULL};
 
 /// Marks every warning as raised once already, with no info. MuJoCo's `mj_warning` prints
 /// (and appends to MUJOCO_LOG.TXT in the working directory) only a warning's first
@@ -51,11 +56,27 @@ inline void arm_mujoco_warnings(mjData& data) {
   }
 }
 
-/// MuJoCo's text of the first of `mujoco_failures` it raised since `arm_mujoco_warnings`,
-/// without its closing full stop, so that a message can go on after it ("Nan, Inf or huge
-/// value in QACC at DOF 0. The simulation is unstable"); or "". A record
-/// that `mj_resetData` zeroed was not raised: the warning that made MuJoCo reset is the one
-/// recorded after the reset.
+/// Why MuJoCo did not take a step as asked, after `warning` with its info (a DOF, an actuator
+/// or a buffer's size). In words of our own: `mju_warningText` writes one static buffer that
+/// MuJoCo's own warnings write too, from any thread.
+inline std::string failure_text(int warning, int info) {
+  const char* bad = "NaN, Inf or a value beyond 1e10 in ";
+  switch (warning) {
+    case mjWARN_BADQPOS: return concat(bad, "qpos at DOF ", info, ", so it reset the state");
+    case mjWARN_BADQVEL: return concat(bad, "qvel at DOF ", info, ", so it reset the state");
+    case mjWARN_BADQACC: return concat(bad, "qacc at DOF ", info, ", so it reset the state");
+    case mjWARN_BADCTRL: return concat(bad, "ctrl at actuator ", info);
+    case mjWARN_CONTACTFULL:
+      return concat("its contact buffer is full (increase nconmax above ", info, ")");
+    case mjWARN_CNSTRFULL:
+      return concat("its constraint buffer is full (increase njmax above ", info, ")");
+    default: return concat("MuJoCo warning ", warning, " (info ", info, ")");
+  }
+}
+
+/// Why MuJoCo did not take the step it was last asked for in `data` (the first of
+/// `mujoco_failures` raised since `arm_mujoco_warnings`), or "". A record that a reset zeroed
+/// (number 0) was not raised: the warning that caused the reset is recorded after it.
 inline std::string mujoco_failure(const mjData& data) {
   bool reset = false;
   for (const int kind : mujoco_failures) {
@@ -63,12 +84,7 @@ inline std::string mujoco_failure(const mjData& data) {
     if (warning.number == 0) {
       reset = true;
     } else if (warning.number != 1 || warning.lastinfo != -1) {
-      // mju_warningText writes MuJoCo's one static buffer.
-      static std::mutex text_buffer;
-      const std::lock_guard<std::mutex> lock(text_buffer);
-      std::string text = mju_warningText(kind, warning.lastinfo);
-      if (text.ends_with('.')) text.pop_back();
-      return text;
+      return failure_text(kind, warning.lastinfo);
     }
   }
   return reset ? "MuJoCo reset its data without a warning" : "";

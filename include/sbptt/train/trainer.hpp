@@ -180,6 +180,9 @@ public:
     record.epoch = ++epoch_;
     events_.clear();
     stopped_ = false;
+    // The simulator's refusals before the epoch (the caller's own evaluation, say) are no
+    // cause of its events.
+    (void)detail::take_refusal_note(engine_.simulator());
     epoch_params_ = controller_.params();
     epoch_optimizer_ = optimizer();
     order_.resize(static_cast<std::size_t>(train.cols()));

@@ -62,11 +62,15 @@ inline int plot(const Options& o, const fs::path& own_dir) {
   std::error_code error;
   for (const auto& entry : fs::directory_iterator(plots, error))
     if (entry.path().filename().string().starts_with(".tmp.")) fs::remove(entry.path(), error);
+  // Exit 0 is not yet a figure: a python that is not one (--python /bin/true) exits 0 too,
+  // and the figures of an earlier plot may still be there.
+  std::size_t figures = 0;
+  for (const auto& entry : fs::directory_iterator(plots, error))
+    if (entry.is_regular_file(error) && entry.last_write_time(error) >= started) ++figures;
   if (interrupted) {
     std::cerr << "reproduce: interrupted while plotting; "
-              << (fs::is_directory(plots, error)
-                      ? "the figures drawn so far are in " + plots.string()
-                      : std::string("no figure was drawn"))
+              << (figures > 0 ? count_of(figures, "figure file") + " drawn in " + plots.string()
+                              : std::string("no figure was drawn"))
               << "\n";
     return 130;
   }
@@ -75,11 +79,6 @@ inline int plot(const Options& o, const fs::path& own_dir) {
               << "); no plots\n";
     return 0;
   }
-  // Exit 0 is not yet a figure: a python that is not one (--python /bin/true) exits 0 too,
-  // and the figures of an earlier plot may still be there.
-  std::size_t figures = 0;
-  for (const auto& entry : fs::directory_iterator(plots, error))
-    if (entry.is_regular_file(error) && entry.last_write_time(error) >= started) ++figures;
   if (figures == 0)
     std::cerr << "reproduce: warning: " << script->string() << " exited 0 but drew no figure in "
               << plots.string() << "\n";

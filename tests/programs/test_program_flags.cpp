@@ -270,6 +270,9 @@ TEST_CASE("numbers beyond the type's range, numbers not in decimals, contradicti
              "with -- is written --csv=VALUE)"},
         Case{"reproduce", "--out --dry-run", "--out needs a value; the next word, '--dry-run'"},
         Case{"toy", "--lr --epochs 1", "--lr needs a value; the next word, '--epochs'"},
+        // A value that starts with one '-' is still a value, for its own check.
+        Case{"mujoco", "--model x.xml --target -1e7", "--target '-1e7': item 1, '-1e7', is not a "
+                                                      "number in [-1000000, 1000000]"},
         // A flag given twice takes its last value, but an earlier bad one was never read.
         Case{"toy", "--epochs abc --epochs 1", "--epochs 'abc' is not an integer"},
         Case{"cartpole", "--method X --method C --epochs 1", "--method: method 'X' is unknown"},

@@ -324,6 +324,22 @@ TEST_CASE("trainer: a skipped batch leaves no trace in the parameters or in Adam
   CHECK(std::isfinite(record.test_loss.value()));
 }
 
+TEST_CASE("trainer: an event's NaN reads nan whatever its sign bit", "[train]") {
+  // 0 * inf and inf - inf give a NaN with the sign bit set on x86, which the stream writes
+  // as "-nan": a sign that means nothing (the chain runs of docs/results showed it).
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  NonFiniteEvent event;
+  event.epoch = 2;
+  event.batch = 1;
+  event.where = {Quantity::State, 9, 0, -nan};
+  CHECK(describe(event) == "non-finite state (nan) in epoch 2, batch 1, step 9, sample 0");
+  event.where.value = nan;
+  CHECK(describe(event) == "non-finite state (nan) in epoch 2, batch 1, step 9, sample 0");
+  event.where.value = -inf;
+  CHECK(describe(event) == "non-finite state (-inf) in epoch 2, batch 1, step 9, sample 0");
+}
+
 TEST_CASE("trainer: a non-finite value in an update names the train set's column, shuffled or not",
           "[train]") {
   // The loss of the sample at column 4 (1e200) overflows. Before, an update reported the

@@ -130,6 +130,11 @@ template <class S>
   }
 }
 
+/// `note` after `separator` (`"; "` + "MuJoCo refused …"), or "" when there is no note.
+[[nodiscard]] inline std::string note_after(const char* separator, const std::string& note) {
+  return note.empty() ? std::string() : separator + note;
+}
+
 }  // namespace detail
 
 /// A `Simulator` that also forms its dense Jacobians:

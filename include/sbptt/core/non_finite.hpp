@@ -7,11 +7,13 @@
 #include <concepts>
 #include <cstdint>
 #include <optional>
+#include <string>
 #include <type_traits>
 #include <utility>
 
 #include <Eigen/Core>
 
+#include "sbptt/core/error.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt {
@@ -60,6 +62,12 @@ template <std::floating_point Scalar>
   } else {
     return std::isnan(x);
   }
+}
+
+/// `x` as a message shows it: a NaN reads "nan" whatever its sign bit, which means nothing
+/// and depends on the operation that made it (0 · ∞ sets it on x86, and a stream writes "-nan").
+[[nodiscard]] inline std::string value_text(double x) {
+  return nan_by_bits(x) ? std::string("nan") : concat(x);
 }
 
 }  // namespace detail

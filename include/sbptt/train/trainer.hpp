@@ -95,14 +95,13 @@ struct NonFiniteEvent {
 /// the simulator's cause after "; " when it gave one.
 [[nodiscard]] inline std::string describe(const NonFiniteEvent& event) {
   const NonFinite& where = event.where;
-  std::string text =
-      detail::concat("non-finite ", to_string(where.quantity), " (", where.value, ") in ");
+  std::string text = detail::concat("non-finite ", to_string(where.quantity), " (",
+                                    detail::value_text(where.value), ") in ");
   text += event.phase == Phase::Update
               ? detail::concat("epoch ", event.epoch, ", batch ", event.batch)
               : detail::concat("the ", to_string(event.phase), " of epoch ", event.epoch);
   text += describe_where(where);
-  if (!event.cause.empty()) text += "; " + event.cause;
-  return text;
+  return text + detail::note_after("; ", event.cause);
 }
 
 namespace detail {
@@ -267,7 +266,8 @@ public:
                       state_dim_);
       if (const std::optional<EntryIndex> at = first_non_finite(set)) {
         throw InvalidArgument(detail::concat(caller, ": the ", name, " set has ",
-                                             set(at->row, at->column), " in sample ", at->column,
+                                             detail::value_text(set(at->row, at->column)),
+                                             " in sample ", at->column,
                                              ", entry ", at->row,
                                              "; expected finite initial states"));
       }

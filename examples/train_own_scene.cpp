@@ -41,11 +41,19 @@ int run_in(const std::filesystem::path& dir) {
                          sbptt::Adam<double>({.learning_rate = 3e-3}),
                          {.method = sbptt::Method::Combined, .batch = 16, .shuffle = true});
   const sbptt::StopSignals stop("train_own_scene");
+  const auto digits = [](double value) {  // all 17, so that any change of a constant counts
+    char text[32];
+    std::snprintf(text, sizeof text, "%.17g", value);
+    return std::string(text);
+  };
   const auto result = sbptt::run_training(
       trainer, train, test,
       {.epochs = 200, .evaluate_every = 5, .patience = 10, .restore_best = true,
        .log_csv = (dir / "log.csv").string(), .checkpoint = (dir / "run.checkpoint").string(),
-       .save_params = (dir / "best.params").string()},
+       .save_params = (dir / "best.params").string(),
+       // What the checkpoint cannot read from the trainer: the scene's constants (the horizon
+       // and the objective it records itself), so that an edited scene starts over.
+       .identity = {{"dt", digits(sim.model().dt)}, {"friction", digits(sim.model().friction)}}},
       {.on_resume = [](long epoch) {
          std::printf("resumed from the checkpoint of epoch %ld\n", epoch);
        },

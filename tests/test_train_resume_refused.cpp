@@ -7,6 +7,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -348,4 +349,68 @@ TEST_CASE("run: the caller's name for the checkpoint leads every refusal of it",
   CHECK_THROWS_WITH(run_training(garbled.trainer, train, test, settings),
                     Catch::StartsWith("--checkpoint: '" + checkpoint.string() +
                                       "' is not an sbptt checkpoint"));
+}
+
+TEST_CASE("run: a checkpoint of another horizon, loss timing or loss weight is refused",
+          "[train]") {
+  // The checkpoint recorded none of them: a run of horizon 6 resumed with horizon 3 without a
+  // word, its log then mixing two problems.
+  using testing::LinearLoss;
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  const fs::path checkpoint = scratch("objective.checkpoint");
+  {
+    Setup<double> first(Method::Regular);
+    REQUIRE(run_training(first.trainer, train, test, checkpoint_run(checkpoint, 2)).end ==
+            RunEnd::Finished);
+  }
+  const auto resume = [&](Index steps, const Objective<LinearLoss<double>>& objective) {
+    Setup<double> s(Method::Regular);
+    Trainer trainer(s.sim, s.policy, objective, steps, Adam<double>(AdamOptions<double>{0.02}),
+                    Setup<double>::options(Method::Regular, 3, NonFinitePolicy::Stop));
+    RunSettings settings;
+    settings.epochs = 3;
+    settings.checkpoint = checkpoint.string();
+    const std::string before = file_text(checkpoint);
+    const auto result = run_training(trainer, train, test, settings);
+    // Only the run that matches goes on; restore the checkpoint for the next case.
+    std::ofstream(checkpoint) << before;
+    return result.epochs;
+  };
+  auto objective = testing::to_origin<double>();
+  CHECK_THROWS_WITH(resume(3, objective),
+                    Catch::Contains("was made with steps = 6; this run has steps = 3"));
+  objective.timing = LossTiming::Final;
+  CHECK_THROWS_WITH(resume(6, objective),
+                    Catch::Contains("was made with loss_timing = continuous; this run has "
+                                    "loss_timing = final"));
+  objective = testing::to_origin<double>();
+  objective.step_weight = 0.5;
+  CHECK_THROWS_WITH(resume(6, objective),
+                    Catch::Contains("was made with step_weight = 1; this run has step_weight = "
+                                    "0.5"));
+  objective = testing::to_origin<double>();
+  objective.control_weight = 0.25;
+  CHECK_THROWS_WITH(resume(6, objective),
+                    Catch::Contains("was made with control_weight = 0; this run has "
+                                    "control_weight = 0.25"));
+  CHECK(resume(6, testing::to_origin<double>()) == 3);
+}
+
+TEST_CASE("run: a controller with a non-finite parameter is refused before any work", "[train]") {
+  // It started, stopped on a non-finite control in epoch 1 and then ended as OutputFailed
+  // ("save_parameters: parameter 1 is nan"), the cause only in the stop event.
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  Setup<double> s(Method::Regular);
+  s.policy.params()(1) = -std::numeric_limits<double>::quiet_NaN();
+  RunSettings settings;
+  settings.epochs = 2;
+  settings.save_params = scratch("nan.params").string();
+  bool started = false;
+  RunCallbacks callbacks;
+  callbacks.on_start = [&](long) { started = true; };
+  CHECK_THROWS_WITH(run_training(s.trainer, train, test, settings, callbacks),
+                    "run_training: the controller's parameter 1 is nan; expected finite "
+                    "initial parameters");
+  CHECK_FALSE(started);
+  CHECK_FALSE(fs::exists(settings.save_params));
 }

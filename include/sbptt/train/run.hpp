@@ -105,6 +105,12 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   using Optimizer = std::remove_cvref_t<decltype(trainer.optimizer())>;
   using Ctrl = std::remove_cvref_t<decltype(trainer.controller())>;
   trainer.check_sets(train, test, "run_training");
+  // A NaN here stopped the first batch, and the save of such parameters then failed too.
+  if (const auto at = first_non_finite(trainer.controller().params()))
+    throw InvalidArgument(detail::concat(
+        "run_training: the controller's parameter ", at->row, " is ",
+        detail::value_text(static_cast<double>(trainer.controller().params()(at->row))),
+        "; expected finite initial parameters"));
   detail::require(settings.epochs >= 0, "run_training: epochs = ", settings.epochs,
                   "; expected >= 0");
   detail::require(settings.evaluate_every >= 1, "run_training: evaluate_every = ",

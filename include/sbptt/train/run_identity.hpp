@@ -2,7 +2,9 @@
 /// \file What a checkpoint of `run_training` records of its run, and must share with the run
 /// that resumes it (docs/training.md, "Settings must match"): the caller's
 /// `RunSettings::identity`, then the trainer's options, the scalar type, the evaluation
-/// schedule, fingerprints of the sets and the initial parameters, and Adam's constants.
+/// schedule, fingerprints of the sets and the initial parameters, the horizon, the objective's
+/// timing and weights, and Adam's constants. The state loss's own parameters (a target) and
+/// the simulator's are the caller's to add: no concept makes them readable.
 #include <cstddef>
 #include <string>
 #include <type_traits>
@@ -37,6 +39,7 @@ template <class TrainerT>
   using Scalar = typename TrainerT::Scalar;
   using Optimizer = std::remove_cvref_t<decltype(trainer.optimizer())>;
   const TrainerOptions& o = trainer.options();
+  const auto& objective = trainer.engine().objective();
   std::vector<RunSetting> identity = settings.identity;
   for (RunSetting s : std::vector<RunSetting>{
            {"method", std::string(label(o.method))},
@@ -53,7 +56,11 @@ template <class TrainerT>
            {"patience", std::to_string(settings.patience)},
            {"train set", fingerprint(train)},
            {"test set", fingerprint(test)},
-           {"initial parameters", fingerprint(trainer.controller().params())}})
+           {"initial parameters", fingerprint(trainer.controller().params())},
+           {"steps", std::to_string(trainer.engine().steps())},
+           {"loss_timing", objective.timing == LossTiming::Final ? "final" : "continuous"},
+           {"step_weight", exact(objective.step_weight)},
+           {"control_weight", exact(objective.control_weight)}})
     identity.push_back(std::move(s));
   if constexpr (AdamLike<Optimizer>) {
     const auto& adam = trainer.optimizer().options();

@@ -81,11 +81,7 @@ int run_reproduce(int argc, char** argv) {
   try {
     const fs::path runs = fs::path(options.out) / "runs";
     if (const auto mismatched = runs_of_other_settings(runs, plan); !mismatched.empty()) {
-      std::cerr << "reproduce: " << count_of(mismatched.size(), "finished run") << " in " << runs
-                << (mismatched.size() == 1 ? " was" : " were")
-                << " made with other settings than planned now (e.g. " << mismatched[0]
-                << ": see its .run file); rerun with the old settings, choose another --out, "
-                   "or remove runs/<name>.* to redo them\n";
+      report_other_settings(runs, mismatched, "");
       return 1;
     }
     if (const auto folder = folder_among_run_files(runs)) {

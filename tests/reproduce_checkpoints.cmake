@@ -85,8 +85,8 @@ check("a sweep over a stale checkpoint exits 0" rc EQUAL 0)
 check("the stale checkpoint was not resumed" NOT EXISTS "${S}/fake_resumes")
 # It said "1 from their checkpoint" of a run whose checkpoint it was about to drop.
 check("the sweep says the run restarts, not that it resumes (${stale_out})"
-      stale_out MATCHES "discarded 1 unfinished run" AND
-      stale_out MATCHES "they are redone, 0 from their checkpoint")
+      stale_out MATCHES "discarded the partial files of 1 unfinished run" AND
+      stale_out MATCHES "of those planned here: 0 resuming from a checkpoint, 1 starting over")
 
 # --- 4. a checkpoint whose log is gone: the program refuses it, the run is redone from epoch 1 --
 set(G "${WORK_DIR}/gone")

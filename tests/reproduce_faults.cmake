@@ -565,6 +565,44 @@ if(DEFINED FLOCK_FAILS AND NOT SANITIZED)  # a sanitizer's runtime must be the f
         rc EQUAL 1 AND out MATCHES "0 of 6 planned runs done, 0 running \\(lock held\\), 6 missing")
 endif()
 
+# A leftover that cannot be removed (chattr +i; root, or another user's file in a shared
+# folder): every executor in the folder stopped before any run with a bare "filesystem error:
+# cannot remove", unrelated runs too. Now its run fails alone, named with the file and why.
+set(I "${WORK_DIR}/immutable")
+set(stuck "${I}/runs/cartpole_p4_C_norm_s42.partial.log")
+file(MAKE_DIRECTORY "${I}/runs")
+file(WRITE "${stuck}" "the log of a killed run\n")
+execute_process(COMMAND chattr +i "${stuck}" RESULT_VARIABLE chattr_rc OUTPUT_QUIET ERROR_QUIET)
+if(chattr_rc EQUAL 0)
+  execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${I}" RESULT_VARIABLE rc
+                  OUTPUT_QUIET ERROR_VARIABLE err)
+  execute_process(COMMAND chattr -i "${stuck}")
+  count_lines("${I}/summary.csv" rows)
+  check("a leftover that cannot go fails its run alone, named (${err})"
+        rc EQUAL 1 AND rows EQUAL 6 AND err MATCHES "1 run failed"
+        AND err MATCHES "cannot remove \"[^\n]*C_norm_s42.partial.log\": Operation not permitted")
+else()
+  message(WARNING "chattr +i failed (not root, or no such attribute here): the case of a "
+                  "leftover that cannot be removed is skipped")
+endif()
+
+# A user's files in runs/ under names no run has: a sweep removed my_analysis.csv as a
+# damaged run ("its .run file is missing"), and a nested --out's summary.csv with it. Now
+# they are left alone, unnamed, by a sweep and by --merge.
+set(U "${WORK_DIR}/user_files")
+file(MAKE_DIRECTORY "${U}/runs")
+file(WRITE "${U}/runs/my_analysis.csv" "my,notes\n")
+file(WRITE "${U}/runs/summary.csv" "a nested sweep's summary\n")
+file(WRITE "${U}/runs/draft.partial.txt" "notes\n")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${U}" RESULT_VARIABLE rc OUTPUT_QUIET
+                ERROR_VARIABLE err)
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${U}" --merge RESULT_VARIABLE merge_rc
+                OUTPUT_QUIET ERROR_VARIABLE merge_err)
+check("a user's files in runs/ stay, unnamed (${err}${merge_err})"
+      rc EQUAL 0 AND merge_rc EQUAL 0 AND EXISTS "${U}/runs/my_analysis.csv"
+      AND EXISTS "${U}/runs/summary.csv" AND EXISTS "${U}/runs/draft.partial.txt"
+      AND NOT err MATCHES "my_analysis|summary \\(|draft" AND NOT merge_err MATCHES "my_analysis")
+
 # --- 5. fsync before a file counts ---------------------------------------------------------------
 # The runner is the first process in the trace; the fake programs' own renames are theirs.
 file(WRITE "${WORK_DIR}/fsync_order.awk" [=[

@@ -21,6 +21,7 @@
 #include "locks.hpp"
 #include "run_files.hpp"
 #include "summary.hpp"
+#include "text.hpp"
 
 namespace reproduce {
 
@@ -114,14 +115,15 @@ struct FinishedRuns {
   }
 };
 
-/// Checks every runs/<name>.csv (not the partial ones).
+/// Checks every runs/<name>.csv (not the partial ones, nor a file whose name is no run's).
 inline FinishedRuns scan_finished(const fs::path& runs) {
   FinishedRuns found;
   std::error_code error;
   for (const auto& entry : fs::directory_iterator(runs, error)) {
     const fs::path path = entry.path();
     const std::string name = path.stem().string();
-    if (path.extension() != ".csv" || name.ends_with(".partial")) continue;
+    if (path.extension() != ".csv" || name.ends_with(".partial") || !is_run_name(name))
+      continue;
     const auto run = parse_description(read_text(fs::path(path).replace_extension(".run")));
     FinishedRun finished = run && run->name() == name
                                ? check_finished(*run, runs)
@@ -197,6 +199,17 @@ inline std::vector<std::string> runs_of_other_settings(const fs::path& runs,
       mismatched.push_back(run.name());
   }
   return mismatched;
+}
+
+/// Says on stderr which finished runs were made with other settings than planned now, and
+/// what the user can do; `when` tells how they came ("" when they were there before the start).
+inline void report_other_settings(const fs::path& runs, const std::vector<std::string>& mismatched,
+                                  const char* when) {
+  std::cerr << "reproduce: " << count_of(mismatched.size(), "finished run") << " in " << runs
+            << (mismatched.size() == 1 ? " was" : " were")
+            << " made with other settings than planned now" << when << " (e.g. " << mismatched[0]
+            << ": see its .run file); rerun with the old settings, choose another --out, "
+               "or remove runs/<name>.* to redo them\n";
 }
 
 /// Whether `run` is among the finished runs (its name, not only its grid position).

@@ -12,6 +12,7 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <tuple>
 #include <vector>
 
@@ -174,6 +175,21 @@ struct Run {
     return std::make_tuple(task, difficulty, method_rank(method), clip_rank(clip), seed);
   }
 };
+
+/// Whether `name` has the shape of a run's name (`Run::name`: a task, its complexity, the
+/// method, the clip and the seed, "cartpole_p4_C_norm_s42"): a file in runs/ under any other
+/// name is a user's, and the runner neither counts nor removes it.
+[[nodiscard]] inline bool is_run_name(std::string_view name) {
+  const auto last = name.rfind("_s");
+  if (last == std::string_view::npos || last + 2 == name.size() ||
+      name.find_first_not_of("0123456789", last + 2) != std::string_view::npos)
+    return false;
+  for (const TaskInfo& task : tasks) {
+    const std::string prefix = concat(task.name, "_", task.complexity_short);
+    if (name.starts_with(prefix) && std::count(name.begin(), name.end(), '_') >= 4) return true;
+  }
+  return false;
+}
 
 /// Reads a runs/<name>.run file back (for runs of earlier sweeps that this one did not plan).
 inline std::optional<Run> parse_description(const std::string& text) {

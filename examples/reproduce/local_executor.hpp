@@ -106,6 +106,13 @@ public:
                 << " failed and will be redone by the next sweep:\n";
       for (const auto& f : failures_) std::cerr << f;
     }
+    // The start-up check saw the folder as it was: a run that another executor of other
+    // settings (another --epochs into the same --out) finished meanwhile is no result of this
+    // plan, and exit 0 would say that every planned run is.
+    if (const auto mismatched = runs_of_other_settings(runs_, plan_); !mismatched.empty()) {
+      report_other_settings(runs_, mismatched, ", by another executor during this sweep");
+      return 1;
+    }
     return failures_.empty() ? 0 : 1;
   }
 
@@ -121,6 +128,16 @@ private:
   /// and temporaries of interrupted writes: their runs are redone. A run whose lock another
   /// executor holds is under way there, and its files are left alone.
   void discard_partial_runs() {
+    // One file that cannot go (made immutable, another user's in a shared folder) stopped
+    // every executor in the folder, unrelated runs too: it is named, and its run fails when
+    // it is started (`start`).
+    const auto remove = [](const fs::path& file) {
+      std::error_code error;
+      fs::remove(file, error);
+      if (error)
+        std::cerr << "reproduce: warning: cannot remove " << file << ": " << error.message()
+                  << "; its run fails until the file can be removed\n";
+    };
     std::map<std::string, std::vector<fs::path>> by_run;
     for (const auto& entry : fs::directory_iterator(runs_)) {
       const std::string file = entry.path().filename().string();
@@ -129,15 +146,16 @@ private:
       std::string run_of;
       for (const std::string_view suffix : {".checkpoint", ".checkpoint.lock"})
         if (file.ends_with(suffix)) run_of = file.substr(0, file.size() - suffix.size());
-      if (!run_of.empty() && fs::exists(runs_ / (run_of + ".csv"))) {
-        fs::remove(entry.path());
+      if (!run_of.empty() && is_run_name(run_of) && fs::exists(runs_ / (run_of + ".csv"))) {
+        remove(entry.path());
         continue;
       }
       const auto end = std::min(
           {file.find(".partial."), file.find(".run.tmp."), file.find(".checkpoint.tmp.")});
-      if (end != std::string::npos) by_run[file.substr(0, end)].push_back(entry.path());
+      if (end != std::string::npos && is_run_name(file.substr(0, end)))
+        by_run[file.substr(0, end)].push_back(entry.path());
     }
-    std::size_t discarded = 0, resumed = 0;
+    std::size_t discarded = 0, resuming = 0, restarting = 0;
     for (const auto& [name, files] : by_run) {
       const FileLock lock = try_lock_run(runs_, name);
       if (!lock.held()) continue;
@@ -146,22 +164,26 @@ private:
       const bool resumable = fs::exists(runs_ / (name + ".checkpoint"));
       const fs::path kept = runs_ / (name + ".partial.csv");
       for (const auto& file : files)
-        if (!resumable || file != kept) fs::remove(file);
+        if (!resumable || file != kept) remove(file);
       ++discarded;
-      if (resumable && fs::exists(kept) && resumes_as_planned(name)) ++resumed;
+      // An executor of --run NAME clears every run's leftovers but runs NAME alone; `start`
+      // drops a checkpoint of other settings than the plan's.
+      const Run* planned = planned_run(name);
+      if (planned == nullptr) continue;
+      if (resumable && fs::exists(kept) && described_as(*planned)) ++resuming;
+      else ++restarting;
     }
     if (discarded > 0)
-      std::printf("reproduce: discarded %s of an interrupted sweep (their partial files); they "
-                  "are redone, %zu from their checkpoint\n",
-                  count_of(discarded, "unfinished run").c_str(), resumed);
+      std::printf("reproduce: discarded the partial files of %s of an interrupted sweep; of "
+                  "those planned here: %zu resuming from a checkpoint, %zu starting over\n",
+                  count_of(discarded, "unfinished run").c_str(), resuming, restarting);
   }
 
-  /// Whether the checkpoint of run `name` was written for the planned run's settings (`start`
-  /// removes one of other settings, and the run starts over).
-  [[nodiscard]] bool resumes_as_planned(const std::string& name) const {
+  /// The run of the plan named `name`, or nullptr.
+  [[nodiscard]] const Run* planned_run(const std::string& name) const {
     for (const Run& run : plan_)
-      if (run.name() == name) return described_as(run);
-    return false;
+      if (run.name() == name) return &run;
+    return nullptr;
   }
 
   /// Whether the run folder's description of `run`'s name is `run`'s.
@@ -214,29 +236,44 @@ private:
     }
     // A checkpoint resumes only the run it was written for (--epochs aside, the programs
     // refuse others): one left by a run of other settings under this name goes. Without a
-    // checkpoint the run starts over, and so does its training log.
-    if (!described_as(run)) remove_checkpoint(run);
-    if (!fs::exists(run_file(runs_, run, ".checkpoint")))
-      fs::remove(run_file(runs_, run, ".partial.csv"));
-    sbptt::write_file_atomically(run_file(runs_, run, ".run").string(), run.description());
+    // checkpoint the run starts over, and so does its training log. A file that cannot go
+    // fails this run alone.
+    try {
+      if (!described_as(run)) remove_checkpoint(run);
+      if (!fs::exists(run_file(runs_, run, ".checkpoint")))
+        fs::remove(run_file(runs_, run, ".partial.csv"));
+      sbptt::write_file_atomically(run_file(runs_, run, ".run").string(), run.description());
+    } catch (const fs::filesystem_error& e) {
+      return fail_to_start(name, concat("cannot remove ", e.path1(), ": ", e.code().message(),
+                                        "; remove it by hand"));
+    } catch (const sbptt::IoError& e) {
+      return fail_to_start(name, e.what());
+    }
     const auto argv = command_line(run, bin_dir_, runs_, options_.threads);
     // Like the CSV, the log gets its final name only when the run has finished.
     const fs::path log = run_file(runs_, run, ".partial.log");
     const int log_fd = sbptt::detail::open_above_standard_streams(
         log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (log_fd < 0) throw sbptt::IoError(concat("cannot write '", log.string(), "'"));
+    if (log_fd < 0)
+      return fail_to_start(name, concat("cannot write '", log.string(), "': ",
+                                        std::strerror(errno)));
     std::string command = "#";
     for (const auto& a : argv) command += " " + a;
     command += "\n";
     [[maybe_unused]] const auto written = ::write(log_fd, command.data(), command.size());
     const pid_t pid = spawn(argv, log_fd);
+    const int spawn_error = errno;
     ::close(log_fd);
-    if (pid < 0) {
-      failures_.push_back(concat("  ", name, ": fork failed: ", std::strerror(errno), "\n"));
-      return false;
-    }
+    if (pid < 0) return fail_to_start(name, concat("fork failed: ", std::strerror(spawn_error)));
     running_.push_back({&run, pid, std::chrono::steady_clock::now(), std::move(lock)});
     return true;
+  }
+
+  /// Records that run `name` could not start, and why; false, for `start` to return.
+  bool fail_to_start(const std::string& name, const std::string& why) {
+    failures_.push_back(concat("  ", name, ": ", why, "\n"));
+    if (!tty_) std::cerr << "reproduce: " << name << " failed: " << why << "\n";
+    return false;
   }
 
   /// A child ended: keep its log as a finished run, or record the failure.

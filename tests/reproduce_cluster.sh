@@ -67,7 +67,7 @@ submit=$(grep '^job=\$(sbatch' "$work/slurm.emit") || fail "--emit slurm printed
 (cd "$work" && bash -c "$submit") > /dev/null || fail "sbatch refused the emitted scripts"
 wait_for_jobs 180
 grep -q "8 of 8 planned runs done, 0 running (lock held), 0 missing" \
-  "$slurm_out/slurm/logs/merge.log" || fail "the merge job did not find all 8 runs done"
+  "$slurm_out"/slurm/logs/merge_*.log || fail "the merge job did not find all 8 runs done"
 [ "$(ls "$slurm_out/slurm/logs" | grep -c '^run_.*\.log$')" = 8 ] || fail "not a log per task"
 losses "$slurm_out" | cmp -s - "$work/reference" || fail "Slurm: other losses"
 ok "Slurm job array + merge job, a folder with blanks and quotes: the local losses, a log per task"

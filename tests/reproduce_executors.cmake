@@ -52,7 +52,8 @@ check("the local summary has 8 rows" rows EQUAL 9)
 set(P "${WORK_DIR}/parallel")
 execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${P}" --emit parallel
                 RESULT_VARIABLE rc OUTPUT_VARIABLE commands ERROR_VARIABLE err)
-check("--emit parallel exits 0 (${err})" rc EQUAL 0)
+check("--emit parallel exits 0, and counts the runs on stderr (${err})"
+      rc EQUAL 0 AND err MATCHES "8 of 8 planned runs to do")
 string(REGEX MATCHALL "[^\n]+\n" lines "${commands}")
 list(LENGTH lines n)
 check("--emit parallel prints 8 commands" n EQUAL 8)
@@ -69,8 +70,9 @@ check("--merge counts 8 done, 0 running, 0 missing"
 untimed_summary("${P}/summary.csv" summary)
 check("the emitted commands give the local summary (timing aside)" summary STREQUAL reference)
 execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${P}" --emit parallel
-                RESULT_VARIABLE rc OUTPUT_VARIABLE again)
-check("--emit parallel over a finished sweep prints nothing" rc EQUAL 0 AND NOT again)
+                RESULT_VARIABLE rc OUTPUT_VARIABLE again ERROR_VARIABLE err)
+check("--emit parallel over a finished sweep prints no command, and says so (${err})"
+      rc EQUAL 0 AND NOT again AND err MATCHES "all 8 planned runs are finished")
 
 # --- 3. three shards at once -------------------------------------------------------------------
 set(S "${WORK_DIR}/shards")
@@ -143,13 +145,17 @@ check("the array lists the 2 unfinished runs (${listed})"
 check("the array: 2 tasks, 3 at once, 2 CPUs, a time limit, a log per task"
       array MATCHES "#SBATCH --array=0-1%3\n" AND array MATCHES "#SBATCH --cpus-per-task=2\n"
       AND array MATCHES "#SBATCH --time=[1-9][0-9]*\n"
-      AND array MATCHES "#SBATCH --output=\"[^\n]*/slurm/logs/run_%a.log\"\n"
+      AND array MATCHES "#SBATCH --output=\"[^\n]*/slurm/logs/run_%A_%a.log\"\n"
       AND array MATCHES "--run \"\\$run\"")
 file(READ "${P}/slurm/merge.sh" merge)
-check("the merge job runs --merge" merge MATCHES "reproduce [^\n]* --merge\n")
+check("the merge job runs --merge, its log named by its job"
+      merge MATCHES "reproduce [^\n]* --merge\n" AND merge MATCHES "/slurm/logs/merge_%j.log")
 check("the printed sbatch commands chain the merge job after the array"
       printed MATCHES "sbatch --parsable [^\n]*array.sh[^\n]*--dependency=afterany:[^\n]*merge.sh")
-# The array's script runs its task's run as Slurm would (task 1: the second listed run).
+# The array's script runs its task's run as Slurm would (task 1: the second listed run),
+# from its own list: it read runs.txt when it ran, and a later --emit, which rewrites that
+# file, gave the tasks of an array still queued other runs, or none ("--run ''").
+file(WRITE "${P}/slurm/runs.txt" "a later emit's list\n")
 execute_process(COMMAND env SLURM_ARRAY_TASK_ID=1 bash "${P}/slurm/array.sh"
                 RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
 check("array task 1 runs guidance_rc0.001_C_norm_s43"
@@ -174,6 +180,31 @@ string(REGEX MATCHALL "held by another executor" waiting_lines "${swept_err}")
 list(LENGTH waiting_lines waiting_count)
 check("a sweep that waits 12 s for a held run says so at least twice (${waiting_count})"
       waiting_count GREATER_EQUAL 2)
+
+# A run that an executor of other settings (--epochs 2 against 3) finishes while this sweep
+# waits for it: the sweep exited 0, its table and summary.csv holding the other settings'
+# result (two sweeps into one --out at once); it now names the run and exits 1.
+set(O "${WORK_DIR}/other_settings")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --epochs 2 --out "${O}/earlier"
+                        --run cartpole_p4_C_norm_s42 RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
+check("a run of --epochs 2 for the test below" rc EQUAL 0)
+file(MAKE_DIRECTORY "${O}/now/runs")
+# Holds run $2's lock in $1/runs for 2 s and then gives it the finished files of $3/runs/$2,
+# the CSV last, as an executor that finishes the run would.
+file(WRITE "${WORK_DIR}/finish_elsewhere.sh" [=[
+flock "$1/runs/$2.lock" sh -c 'sleep 2; cp "$3/runs/$2.log" "$3/runs/$2.run" "$3/runs/$2.csv" "$1/runs/"' sh "$1" "$2" "$3" &
+sleep 0.5
+shift 3
+"$@"
+]=])
+execute_process(COMMAND sh "${WORK_DIR}/finish_elsewhere.sh" "${O}/now" cartpole_p4_C_norm_s42
+                        "${O}/earlier" "${REPRODUCE}" ${grid} --out "${O}/now"
+                RESULT_VARIABLE rc OUTPUT_QUIET ERROR_VARIABLE swept_err)
+set(named "1 finished run in [^\n]* was made with other settings than planned now, by another "
+          "executor during this sweep \\(e.g. cartpole_p4_C_norm_s42")
+string(CONCAT named ${named})
+check("a run finished meanwhile with other settings: exit 1, named (${swept_err})"
+      rc EQUAL 1 AND swept_err MATCHES "${named}")
 
 # --- 7. bad values ---------------------------------------------------------------------------------
 foreach(bad "--shard;0/3" "--shard;4/3" "--shard;2" "--emit;pbs" "--run;nosuchrun"

@@ -120,16 +120,27 @@ inline int emit_parallel(const Options& o, const std::vector<Run>& plan, const f
   std::vector<std::string> command{self.string()};
   const auto selection = selection_flags(o, bin_dir);
   command.insert(command.end(), selection.begin(), selection.end());
-  for (const auto& run : unfinished(o, plan, finished)) {
+  const std::vector<Run> left = unfinished(o, plan, finished);
+  for (const auto& run : left) {
     auto line = command;
     line.insert(line.end(), {"--run", run.name()});
     std::printf("%s\n", shell_line(line).c_str());
   }
+  // On stderr, so that the pipe to parallel takes the commands alone.
+  if (left.empty())
+    std::fprintf(stderr, "reproduce: all %zu planned runs are finished; nothing to hand out\n",
+                 plan.size());
+  else
+    std::fprintf(stderr, "reproduce: %zu of %zu planned runs to do, a command each on standard "
+                 "output\n", left.size(), plan.size());
   return 0;
 }
 
 /// --emit slurm: <out>/slurm/{runs.txt, array.sh, merge.sh}, and the sbatch commands. Array
-/// task i runs line i + 1 of runs.txt; --jobs K of them at once. The time limit is the longest
+/// task i runs the i-th name that array.sh holds (runs.txt lists the same names for the
+/// reader): sbatch keeps a copy of the script it was given, so an array still queued runs its
+/// own list when a later --emit rewrites the files. The logs carry the job's number, so a
+/// later wave does not overwrite them. --jobs K tasks at once. The time limit is the longest
 /// run's expected wall time (measured on finished runs when there are any) twice over, plus 5
 /// minutes for start-up and a slow node; the CPUs are --threads.
 inline int emit_slurm(const Options& o, const std::vector<Run>& plan, const fs::path& self,
@@ -142,10 +153,11 @@ inline int emit_slurm(const Options& o, const std::vector<Run>& plan, const fs::
   }
   const fs::path dir = fs::absolute(fs::path(o.out) / "slurm").lexically_normal();
   fs::create_directories(dir / "logs");
-  std::string names;
+  std::string names, quoted_names;
   double longest = 0;
   for (const auto& run : left) {
     names += run.name() + "\n";
+    quoted_names += "  " + shell_quote(run.name()) + "\n";
     longest = std::max(longest, finished.expected_seconds(run));
   }
   sbptt::write_file_atomically((dir / "runs.txt").string(), names);
@@ -155,20 +167,19 @@ inline int emit_slurm(const Options& o, const std::vector<Run>& plan, const fs::
   command.insert(command.end(), selection.begin(), selection.end());
   const std::string job = concat("sbptt-", o.profile);
   const std::string array = concat(
-      "#!/bin/bash\n# One array task per unfinished run of the plan (", dir.string(),
-      "/runs.txt);\n# written by reproduce --emit slurm. Resubmitting it is harmless: a "
+      "#!/bin/bash\n# One array task per unfinished run of the plan when it was written (as in ",
+      dir.string(), "/runs.txt),\n# by reproduce --emit slurm. Resubmitting it is harmless: a "
       "finished run is skipped.\n#SBATCH --job-name=", job, "\n#SBATCH --array=0-",
       left.size() - 1, "%", o.jobs, "\n#SBATCH --ntasks=1\n#SBATCH --cpus-per-task=", o.threads,
       "\n#SBATCH --time=", minutes, "\n#SBATCH --output=",
-      sbatch_quote((dir / "logs" / "run_%a.log").string()),
-      "\nset -euo pipefail\nrun=$(sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" ",
-      shell_quote((dir / "runs.txt").string()), ")\nexec ", shell_line(command),
-      " --run \"$run\"\n");
+      sbatch_quote((dir / "logs" / "run_%A_%a.log").string()),
+      "\nset -euo pipefail\nruns=(\n", quoted_names, ")\nrun=${runs[$SLURM_ARRAY_TASK_ID]}\n",
+      "exec ", shell_line(command), " --run \"$run\"\n");
   const std::string merge = concat(
       "#!/bin/bash\n# Collects the array's runs into summary.csv, the table and the figures.\n"
       "#SBATCH --job-name=", job, "-merge\n#SBATCH --ntasks=1\n#SBATCH --cpus-per-task=1\n"
-      "#SBATCH --time=30\n#SBATCH --output=", sbatch_quote((dir / "logs" / "merge.log").string()),
-      "\nexec ", shell_line(command), o.plot ? "" : " --no-plot", " --merge\n");
+      "#SBATCH --time=30\n#SBATCH --output=",
+      sbatch_quote((dir / "logs" / "merge_%j.log").string()), "\nexec ", shell_line(command), o.plot ? "" : " --no-plot", " --merge\n");
   sbptt::write_file_atomically((dir / "array.sh").string(), array);
   sbptt::write_file_atomically((dir / "merge.sh").string(), merge);
   std::printf("reproduce: %zu of %zu planned runs to do; wrote %s/array.sh (--array=0-%zu%%%ld, "

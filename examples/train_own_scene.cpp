@@ -37,7 +37,8 @@ int run_in(const std::filesystem::path& dir) {
   for (auto* set : {&train, &test})
     for (sbptt::Index i = 0; i < set->size(); ++i) (*set)(i) = rng.uniform(-1, 1);
 
-  sbptt::Trainer trainer(sim, network, sbptt::Objective<Loss>{Loss{PointMass::State::Zero()}}, 30,
+  const PointMass::State target = PointMass::State::Zero();
+  sbptt::Trainer trainer(sim, network, sbptt::Objective<Loss>{Loss{target}}, 30,
                          sbptt::Adam<double>({.learning_rate = 3e-3}),
                          {.method = sbptt::Method::Combined, .batch = 16, .shuffle = true});
   const sbptt::StopSignals stop("train_own_scene");
@@ -51,9 +52,12 @@ int run_in(const std::filesystem::path& dir) {
       {.epochs = 200, .evaluate_every = 5, .patience = 10, .restore_best = true,
        .log_csv = (dir / "log.csv").string(), .checkpoint = (dir / "run.checkpoint").string(),
        .save_params = (dir / "best.params").string(),
-       // What the checkpoint cannot read from the trainer: the scene's constants (the horizon
-       // and the objective it records itself), so that an edited scene starts over.
-       .identity = {{"dt", digits(sim.model().dt)}, {"friction", digits(sim.model().friction)}}},
+       // What the checkpoint cannot read from the trainer (it records the horizon and the
+       // objective's weights itself): the scene's constants and the loss's target, so that a
+       // run of an edited scene starts over.
+       .identity = {{"dt", digits(sim.model().dt)},
+                    {"friction", digits(sim.model().friction)},
+                    {"target", digits(target(0)) + " " + digits(target(1))}}},
       {.on_resume = [](long epoch) {
          std::printf("resumed from the checkpoint of epoch %ld\n", epoch);
        },

@@ -370,11 +370,7 @@ TEST_CASE("run: a checkpoint of another horizon, loss timing or loss weight is r
     RunSettings settings;
     settings.epochs = 3;
     settings.checkpoint = checkpoint.string();
-    const std::string before = file_text(checkpoint);
-    const auto result = run_training(trainer, train, test, settings);
-    // Only the run that matches goes on; restore the checkpoint for the next case.
-    std::ofstream(checkpoint) << before;
-    return result.epochs;
+    return run_training(trainer, train, test, settings).epochs;  // refused before any work
   };
   auto objective = testing::to_origin<double>();
   CHECK_THROWS_WITH(resume(3, objective),
@@ -393,6 +389,20 @@ TEST_CASE("run: a checkpoint of another horizon, loss timing or loss weight is r
   CHECK_THROWS_WITH(resume(6, objective),
                     Catch::Contains("was made with control_weight = 0; this run has "
                                     "control_weight = 0.25"));
+  // A checkpoint of this run written before these settings were recorded says so.
+  const std::string written = file_text(checkpoint);
+  std::string older;
+  std::istringstream lines(written);
+  for (std::string line; std::getline(lines, line);)
+    if (!line.starts_with("setting steps=") && !line.starts_with("setting loss_timing=") &&
+        !line.starts_with("setting step_weight=") && !line.starts_with("setting control_weight="))
+      older += line + "\n";
+  REQUIRE(older.size() < written.size());
+  std::ofstream(checkpoint) << older;
+  CHECK_THROWS_WITH(resume(6, testing::to_origin<double>()),
+                    Catch::Contains("has no setting steps (this run has steps = 6): it was "
+                                    "written before 2026-12-07"));
+  std::ofstream(checkpoint) << written;
   CHECK(resume(6, testing::to_origin<double>()) == 3);
 }
 

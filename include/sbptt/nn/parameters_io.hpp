@@ -22,6 +22,7 @@
 #include "sbptt/core/number_text.hpp"
 #include "sbptt/core/error.hpp"
 #include "sbptt/core/input_file.hpp"
+#include "sbptt/core/non_finite.hpp"
 #include "sbptt/core/types.hpp"
 
 namespace sbptt {
@@ -33,8 +34,10 @@ namespace sbptt {
 template <class Scalar>
 void save_parameters(const std::filesystem::path& path, const Vector<Scalar>& theta) {
   for (Index i = 0; i < theta.size(); ++i)
-    detail::require<NonFiniteError>(std::isfinite(theta(i)), "save_parameters: parameter ", i,
-                                    " is ", theta(i), ", expected a finite number");
+    if (!std::isfinite(theta(i)))
+      throw NonFiniteError(detail::concat("save_parameters: parameter ", i, " is ",
+                                          detail::value_text(static_cast<double>(theta(i))),
+                                          ", expected a finite number"));
   std::string text;
   for (Index i = 0; i < theta.size(); ++i) {
     detail::append_number(text, theta(i));

@@ -28,6 +28,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <functional>
+#include <iterator>
 #include <limits>
 #include <optional>
 #include <string>
@@ -327,6 +328,13 @@ template <class Scalar>
   return name;
 }
 
+namespace detail {
+/// Settings that `run_training` records since a later version: a checkpoint written before
+/// lacks them, which says when it was written, not that it is another run's.
+inline constexpr std::string_view settings_recorded_since_2026_12_07[] = {
+    "steps", "loss_timing", "step_weight", "control_weight"};
+}  // namespace detail
+
 /// Throws `InvalidArgument` naming the first setting in which the checkpoint at `path`
 /// differs from this run (`expected`), or one that only one of them has. A setting listed in
 /// `caller_names` goes by the caller's name (`caller_name`).
@@ -339,6 +347,14 @@ inline void require_same_settings(const std::vector<RunSetting>& expected,
     for (const RunSetting& f : found)
       if (f.name == want.name) have = &f;
     const std::string name = named(want.name);
+    if (have == nullptr &&
+        std::ranges::find(detail::settings_recorded_since_2026_12_07, want.name) !=
+            std::end(detail::settings_recorded_since_2026_12_07))
+      throw InvalidArgument(detail::concat(
+          "checkpoint '", path, "' has no setting ", name, " (this run has ", name, " = ",
+          want.value, "): it was written before 2026-12-07, when checkpoints began to record "
+          "the horizon and the objective; expected a checkpoint of this version (remove it to "
+          "start over)"));
     detail::require(have != nullptr, "checkpoint '", path, "' has no setting ", name,
                     " (this run has ", name, " = ", want.value,
                     "); expected a checkpoint of this run (remove it to start over)");

@@ -81,7 +81,7 @@ int run_reproduce(int argc, char** argv) {
   try {
     const fs::path runs = fs::path(options.out) / "runs";
     if (const auto mismatched = runs_of_other_settings(runs, plan); !mismatched.empty()) {
-      report_other_settings(runs, mismatched, "");
+      report_other_settings(runs, mismatched, false);
       return 1;
     }
     if (const auto folder = folder_among_run_files(runs)) {

@@ -192,7 +192,8 @@ file(MAKE_DIRECTORY "${O}/now/runs")
 # Holds run $2's lock in $1/runs for 2 s and then gives it the finished files of $3/runs/$2,
 # the CSV last, as an executor that finishes the run would.
 file(WRITE "${WORK_DIR}/finish_elsewhere.sh" [=[
-flock "$1/runs/$2.lock" sh -c 'sleep 2; cp "$3/runs/$2.log" "$3/runs/$2.run" "$3/runs/$2.csv" "$1/runs/"' sh "$1" "$2" "$3" &
+flock "$1/runs/$2.lock" sh -c 'sleep 2
+  cp "$3/runs/$2.log" "$3/runs/$2.run" "$3/runs/$2.csv" "$1/runs/"' sh "$1" "$2" "$3" &
 sleep 0.5
 shift 3
 "$@"

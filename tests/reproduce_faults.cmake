@@ -543,6 +543,60 @@ check("interrupted after --dry-run measured, while it prints: exit 130, saying s
       plan MATCHES "plan: exit code 130\n" AND plan MATCHES "interrupted while printing the plan"
       AND plan MATCHES "estimate printed: 0")
 
+# The runner's stop. On SIGTERM a task program ends its epoch and keeps it in its checkpoint,
+# which can take minutes in a large scene; the runner killed it 3 s later, and the epoch was
+# lost. Now it waits for its children, and a second signal kills them at once. The program
+# below has epochs of 4 s and notes each that ends.
+set(E "${WORK_DIR}/epoch_end")
+file(MAKE_DIRECTORY "${E}/bin")
+file(WRITE "${E}/bin/cartpole" [=[#!/bin/sh
+if [ "${1:-}" = --help ]; then
+  echo "flags: --csv FILE, --threads N, --epochs N, --seed N, --method M, --clip C, --samples N"
+  exit 0
+fi
+csv=
+while [ $# -gt 0 ]; do
+  [ "$1" = --csv ] && csv=$2
+  shift
+done
+out=$(dirname "$(dirname "$csv")")
+stop=
+trap 'stop=1' TERM
+while :; do
+  sleep 4 & pid=$!
+  while kill -0 "$pid" 2>/dev/null; do wait "$pid"; done
+  echo "an epoch ended" >> "$out/epochs_ended"
+  [ -n "$stop" ] && exit 143
+done
+]=])
+file(CHMOD "${E}/bin/cartpole" PERMISSIONS OWNER_READ OWNER_WRITE OWNER_EXECUTE)
+# $1 SIGTERMs to the runner (the rest of the line), the first after 1 s, then 0.5 s apart.
+file(WRITE "${E}/signal.sh" [=[
+n=$1
+shift
+"$@" > /dev/null 2> "$ERR" &
+pid=$!
+sleep 1
+for k in $(seq "$n"); do kill -TERM "$pid"; sleep 0.5; done
+wait "$pid"
+]=])
+foreach(signals 1 2)
+  execute_process(COMMAND env "ERR=${E}/err${signals}" sh "${E}/signal.sh" ${signals}
+                          "${REPRODUCE}" --tasks cartpole --complexities 4 --methods C
+                          --clips norm --seeds 1 --epochs 3 --no-plot --bin-dir "${E}/bin"
+                          --out "${E}/out${signals}" RESULT_VARIABLE rc)
+  file(READ "${E}/err${signals}" err)
+  set(ended "${E}/out${signals}/epochs_ended")
+  if(signals EQUAL 1)
+    check("one SIGTERM: the run ends its epoch, exit 130 (${err})"
+          rc EQUAL 130 AND EXISTS "${ended}" AND err MATCHES
+          "SIGTERM: stopping 1 running run after the current epoch, which keeps its work")
+  else()
+    check("a second SIGTERM kills the run at once, exit 130 (${err})"
+          rc EQUAL 130 AND NOT EXISTS "${ended}")
+  endif()
+endforeach()
+
 # --- 4. a file system without locks -------------------------------------------------------------
 # flock fails with ENOLCK everywhere (tests/support/flock_fails.cpp, preloaded), as on a
 # Lustre or NFS mount without lock support. A sweep stops before it runs anything and names
@@ -594,6 +648,7 @@ file(MAKE_DIRECTORY "${U}/runs")
 file(WRITE "${U}/runs/my_analysis.csv" "my,notes\n")
 file(WRITE "${U}/runs/summary.csv" "a nested sweep's summary\n")
 file(WRITE "${U}/runs/draft.partial.txt" "notes\n")
+file(WRITE "${U}/runs/chain_notes_for_me_s1.csv" "shaped almost like a run's name\n")
 execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${U}" RESULT_VARIABLE rc OUTPUT_QUIET
                 ERROR_VARIABLE err)
 execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${U}" --merge RESULT_VARIABLE merge_rc
@@ -601,7 +656,9 @@ execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${U}" --merge RESULT_VARIA
 check("a user's files in runs/ stay, unnamed (${err}${merge_err})"
       rc EQUAL 0 AND merge_rc EQUAL 0 AND EXISTS "${U}/runs/my_analysis.csv"
       AND EXISTS "${U}/runs/summary.csv" AND EXISTS "${U}/runs/draft.partial.txt"
-      AND NOT err MATCHES "my_analysis|summary \\(|draft" AND NOT merge_err MATCHES "my_analysis")
+      AND EXISTS "${U}/runs/chain_notes_for_me_s1.csv"
+      AND NOT err MATCHES "my_analysis|summary \\(|draft|notes"
+      AND NOT merge_err MATCHES "my_analysis|notes")
 
 # --- 5. fsync before a file counts ---------------------------------------------------------------
 # The runner is the first process in the trace; the fake programs' own renames are theirs.

@@ -185,7 +185,8 @@ execute_process(COMMAND "${REPRODUCE}" ${grid} --threads 3 --no-plot --out "${B}
                 OUTPUT_VARIABLE out_b ERROR_VARIABLE err_b)
 message(STATUS "sweep B, resumed:\n${out_b}${err_b}")
 check("resumed sweep B (another --threads) exits 0" rc EQUAL 0)
-check("the resumed sweep discarded the interrupted runs" out_b MATCHES "discarded the partial files of [1-9]")
+check("the resumed sweep discarded the interrupted runs"
+      out_b MATCHES "discarded the partial files of [1-9]")
 check_logs("${B}")
 file(STRINGS "${B}/fake_threads" threads_all)
 list(LENGTH threads_first first_count)

@@ -179,7 +179,8 @@ inline int emit_slurm(const Options& o, const std::vector<Run>& plan, const fs::
       "#!/bin/bash\n# Collects the array's runs into summary.csv, the table and the figures.\n"
       "#SBATCH --job-name=", job, "-merge\n#SBATCH --ntasks=1\n#SBATCH --cpus-per-task=1\n"
       "#SBATCH --time=30\n#SBATCH --output=",
-      sbatch_quote((dir / "logs" / "merge_%j.log").string()), "\nexec ", shell_line(command), o.plot ? "" : " --no-plot", " --merge\n");
+      sbatch_quote((dir / "logs" / "merge_%j.log").string()), "\nexec ", shell_line(command),
+      o.plot ? "" : " --no-plot", " --merge\n");
   sbptt::write_file_atomically((dir / "array.sh").string(), array);
   sbptt::write_file_atomically((dir / "merge.sh").string(), merge);
   std::printf("reproduce: %zu of %zu planned runs to do; wrote %s/array.sh (--array=0-%zu%%%ld, "

@@ -165,10 +165,22 @@ inline std::optional<fs::path> folder_among_run_files(const fs::path& runs) {
   return std::nullopt;
 }
 
+/// Removes `file` if it is there, and whether it went. One that cannot go (made immutable,
+/// another user's in a shared folder) is named in a warning: thrown, it stopped every executor
+/// in the folder, unrelated runs too.
+inline bool remove_or_warn(const fs::path& file) {
+  std::error_code error;
+  const bool removed = fs::remove(file, error);
+  if (error)
+    std::cerr << "reproduce: warning: cannot remove " << file << ": " << error.message()
+              << "; remove it by hand\n";
+  return removed;
+}
+
 /// Removes the finished-run files of the run `name` so that a sweep that plans it redoes it.
 inline void forget_finished(const fs::path& runs, const std::string& name) {
   for (const char* suffix : {".csv", ".log", ".run", ".checkpoint", ".checkpoint.lock"})
-    fs::remove(runs / (name + suffix));
+    remove_or_warn(runs / (name + suffix));
 }
 
 /// Rewrites <out>/summary.csv from every finished run on disk, under <out>/.lock, so that
@@ -178,7 +190,7 @@ inline FinishedRuns rebuild_summary(const fs::path& out) {
   FinishedRuns finished = scan_finished(out / "runs");
   for (const auto& entry : fs::directory_iterator(out))
     if (entry.path().filename().string().starts_with("summary.csv.tmp."))
-      fs::remove(entry.path());  // of a writer killed while it held the lock
+      remove_or_warn(entry.path());  // of a writer killed while it held the lock
   std::vector<Summary> rows;
   for (const auto& [key, s] : finished.summaries) rows.push_back(s);
   sbptt::write_file_atomically((out / "summary.csv").string(), summary_csv(rows));
@@ -202,14 +214,19 @@ inline std::vector<std::string> runs_of_other_settings(const fs::path& runs,
 }
 
 /// Says on stderr which finished runs were made with other settings than planned now, and
-/// what the user can do; `when` tells how they came ("" when they were there before the start).
+/// what the user can do; `during` when another executor made them while this one ran.
 inline void report_other_settings(const fs::path& runs, const std::vector<std::string>& mismatched,
-                                  const char* when) {
+                                  bool during) {
   std::cerr << "reproduce: " << count_of(mismatched.size(), "finished run") << " in " << runs
             << (mismatched.size() == 1 ? " was" : " were")
-            << " made with other settings than planned now" << when << " (e.g. " << mismatched[0]
-            << ": see its .run file); rerun with the old settings, choose another --out, "
-               "or remove runs/<name>.* to redo them\n";
+            << " made with other settings than planned now"
+            << (during ? ", by another executor during this sweep" : "") << " (e.g. "
+            << mismatched[0] << ": see its .run file); "
+            << (during ? "two sweeps of other settings share this --out: choose another --out "
+                         "for one of them, or remove runs/<name>.* to redo those runs"
+                       : "rerun with the old settings, choose another --out, or remove "
+                         "runs/<name>.* to redo them")
+            << "\n";
 }
 
 /// Whether `run` is among the finished runs (its name, not only its grid position).

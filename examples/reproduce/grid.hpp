@@ -3,6 +3,7 @@
 #pragma once
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -13,6 +14,7 @@
 #include <sstream>
 #include <string>
 #include <string_view>
+#include <system_error>
 #include <tuple>
 #include <vector>
 
@@ -176,19 +178,35 @@ struct Run {
   }
 };
 
-/// Whether `name` has the shape of a run's name (`Run::name`: a task, its complexity, the
-/// method, the clip and the seed, "cartpole_p4_C_norm_s42"): a file in runs/ under any other
-/// name is a user's, and the runner neither counts nor removes it.
+/// Whether `name` is the name of a run (`Run::name`: task_<complexity>_<method>_<clip>_s<seed>,
+/// "cartpole_p4_C_norm_s42", its complexity a number): a file in runs/ under any other name is
+/// a user's, and the runner neither counts nor removes it.
 [[nodiscard]] inline bool is_run_name(std::string_view name) {
-  const auto last = name.rfind("_s");
-  if (last == std::string_view::npos || last + 2 == name.size() ||
-      name.find_first_not_of("0123456789", last + 2) != std::string_view::npos)
-    return false;
+  const std::vector<std::string> parts = split(std::string(name), '_');
+  if (parts.size() != 5) return false;
+  const auto digits = [](std::string_view text) {
+    return !text.empty() && text.find_first_not_of("0123456789") == std::string_view::npos;
+  };
+  const auto is_number = [](std::string_view text) {  // from_chars: whatever the locale
+    double value = 0;
+    const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
+    return !text.empty() && error == std::errc() && end == text.data() + text.size() &&
+           std::isfinite(value);
+  };
+  bool task_and_complexity = false;
   for (const TaskInfo& task : tasks) {
-    const std::string prefix = concat(task.name, "_", task.complexity_short);
-    if (name.starts_with(prefix) && std::count(name.begin(), name.end(), '_') >= 4) return true;
+    const std::string_view prefix = task.complexity_short;
+    task_and_complexity = task_and_complexity ||
+                          (parts[0] == task.name && parts[1].starts_with(prefix) &&
+                           is_number(std::string_view(parts[1]).substr(prefix.size())));
   }
-  return false;
+  bool method = false;
+  for (const Method m : {Method::Regular, Method::Modified, Method::Combined, Method::Stopped,
+                         Method::NetworkOnly})
+    method = method || parts[2] == sbptt::label(m);
+  return task_and_complexity && method &&
+         (parts[3] == "none" || parts[3] == "value" || parts[3] == "norm") &&
+         parts[4].starts_with('s') && digits(std::string_view(parts[4]).substr(1));
 }
 
 /// Reads a runs/<name>.run file back (for runs of earlier sweeps that this one did not plan).

@@ -110,7 +110,7 @@ public:
     // settings (another --epochs into the same --out) finished meanwhile is no result of this
     // plan, and exit 0 would say that every planned run is.
     if (const auto mismatched = runs_of_other_settings(runs_, plan_); !mismatched.empty()) {
-      report_other_settings(runs_, mismatched, ", by another executor during this sweep");
+      report_other_settings(runs_, mismatched, true);
       return 1;
     }
     return failures_.empty() ? 0 : 1;
@@ -128,16 +128,6 @@ private:
   /// and temporaries of interrupted writes: their runs are redone. A run whose lock another
   /// executor holds is under way there, and its files are left alone.
   void discard_partial_runs() {
-    // One file that cannot go (made immutable, another user's in a shared folder) stopped
-    // every executor in the folder, unrelated runs too: it is named, and its run fails when
-    // it is started (`start`).
-    const auto remove = [](const fs::path& file) {
-      std::error_code error;
-      fs::remove(file, error);
-      if (error)
-        std::cerr << "reproduce: warning: cannot remove " << file << ": " << error.message()
-                  << "; its run fails until the file can be removed\n";
-    };
     std::map<std::string, std::vector<fs::path>> by_run;
     for (const auto& entry : fs::directory_iterator(runs_)) {
       const std::string file = entry.path().filename().string();
@@ -147,7 +137,7 @@ private:
       for (const std::string_view suffix : {".checkpoint", ".checkpoint.lock"})
         if (file.ends_with(suffix)) run_of = file.substr(0, file.size() - suffix.size());
       if (!run_of.empty() && is_run_name(run_of) && fs::exists(runs_ / (run_of + ".csv"))) {
-        remove(entry.path());
+        remove_or_warn(entry.path());
         continue;
       }
       const auto end = std::min(
@@ -163,8 +153,10 @@ private:
       // back to its size at the checkpoint), so that log stays.
       const bool resumable = fs::exists(runs_ / (name + ".checkpoint"));
       const fs::path kept = runs_ / (name + ".partial.csv");
+      bool all_gone = true;
       for (const auto& file : files)
-        if (!resumable || file != kept) remove(file);
+        if (!resumable || file != kept) all_gone = remove_or_warn(file) && all_gone;
+      if (!all_gone) continue;  // named above, and again by every sweep until it goes
       ++discarded;
       // An executor of --run NAME clears every run's leftovers but runs NAME alone; `start`
       // drops a checkpoint of other settings than the plan's.
@@ -210,8 +202,8 @@ private:
   /// Removes the run's checkpoint and the lock file its task program held on it (no program
   /// runs the run: this executor holds the run's lock); whether there was a checkpoint.
   bool remove_checkpoint(const Run& run) const {
-    fs::remove(run_file(runs_, run, ".checkpoint.lock"));
-    return fs::remove(run_file(runs_, run, ".checkpoint"));
+    remove_or_warn(run_file(runs_, run, ".checkpoint.lock"));
+    return remove_or_warn(run_file(runs_, run, ".checkpoint"));
   }
 
   /// Starts the run unless another executor holds its lock (the run waits in `waiting_` until
@@ -236,16 +228,16 @@ private:
     }
     // A checkpoint resumes only the run it was written for (--epochs aside, the programs
     // refuse others): one left by a run of other settings under this name goes. Without a
-    // checkpoint the run starts over, and so does its training log. A file that cannot go
-    // fails this run alone.
+    // checkpoint the run starts over, and so does its training log. A file that cannot be
+    // read or written fails this run alone; one that cannot be removed is named, and the task
+    // program then fails on the log it cannot replace.
     try {
       if (!described_as(run)) remove_checkpoint(run);
       if (!fs::exists(run_file(runs_, run, ".checkpoint")))
-        fs::remove(run_file(runs_, run, ".partial.csv"));
+        remove_or_warn(run_file(runs_, run, ".partial.csv"));
       sbptt::write_file_atomically(run_file(runs_, run, ".run").string(), run.description());
     } catch (const fs::filesystem_error& e) {
-      return fail_to_start(name, concat("cannot remove ", e.path1(), ": ", e.code().message(),
-                                        "; remove it by hand"));
+      return fail_to_start(name, concat(e.path1(), ": ", e.code().message()));
     } catch (const sbptt::IoError& e) {
       return fail_to_start(name, e.what());
     }
@@ -254,9 +246,11 @@ private:
     const fs::path log = run_file(runs_, run, ".partial.log");
     const int log_fd = sbptt::detail::open_above_standard_streams(
         log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (log_fd < 0)
+    if (log_fd < 0) {
+      const int open_error = errno;
       return fail_to_start(name, concat("cannot write '", log.string(), "': ",
-                                        std::strerror(errno)));
+                                        std::strerror(open_error)));
+    }
     std::string command = "#";
     for (const auto& a : argv) command += " " + a;
     command += "\n";
@@ -324,7 +318,7 @@ private:
                        strsignal(signal), killed ? ")" : "); its checkpoint is kept");
     } else if (WIFEXITED(status)) {
       const int code = WEXITSTATUS(status);
-      failure = code == 2   ? "exit code 2 (bad flags)"
+      failure = code == 2   ? "exit code 2 (bad flags, or a checkpoint of other settings)"
                 : code == 127 ? "exit code 127 (could not execute the program)"
                               : concat("exit code ", code);
       // The program failed, perhaps on its checkpoint (refused, or its log cut): the next
@@ -349,12 +343,26 @@ private:
     std::chrono::steady_clock::duration quiet_interval = std::chrono::seconds(10);
     while (true) {
       if (interrupted) {
+        // On SIGTERM a task program ends its epoch and keeps it in its checkpoint, which may
+        // take minutes in a large scene: killed 3 s later, a run lost that epoch. A second
+        // signal (Ctrl-C again; Slurm's SIGKILL needs none) kills them at once.
         for (const auto& c : running_) ::kill(c.pid, SIGTERM);
-        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+        if (!running_.empty()) {
+          finish_progress();
+          std::cerr << "reproduce: "
+                    << (interrupted == SIGHUP ? "SIGHUP" : sbptt::signal_name(interrupted))
+                    << ": stopping "
+                    << count_of(running_.size(), "running run")
+                    << " after the current epoch, which keeps its work; a second signal "
+                       "kills them at once\n";
+        }
+        bool killed = false;
         while (!running_.empty()) {
           reap();
-          if (std::chrono::steady_clock::now() > deadline)
+          if (!killed && signals_received > 1) {
             for (const auto& c : running_) ::kill(c.pid, SIGKILL);
+            killed = true;
+          }
           std::this_thread::sleep_for(std::chrono::milliseconds(20));
         }
         return 130;

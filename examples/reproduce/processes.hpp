@@ -30,7 +30,13 @@
 namespace reproduce {
 
 inline volatile std::sig_atomic_t interrupted = 0;
-extern "C" void on_signal(int signal_number) { interrupted = signal_number; }
+/// Signals received: the first lets the running task programs end their epoch, the second
+/// kills them (local_executor.hpp).
+inline volatile std::sig_atomic_t signals_received = 0;
+extern "C" void on_signal(int signal_number) {
+  interrupted = signal_number;
+  signals_received = signals_received + 1;
+}
 
 /// SIGINT, SIGTERM and SIGHUP stop the sweep, but one the runner was started ignoring
 /// (sbptt/train/stop_signals.hpp): `nohup reproduce ... &` must outlive a hangup.

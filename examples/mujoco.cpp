@@ -133,11 +133,11 @@ int check_derivatives(const MujocoSimulator<Scalar>& sim, const TaskOptions& o, 
   // An error that is not finite checked nothing: the step or its derivatives were NaN, or too
   // large to compare, at one of the states, which a printed line with exit 0 would hide.
   if (!std::isfinite(worst.worst())) {
-    const std::string cause = detail::note_after(": ", detail::take_refusal_note(sim));
+    const std::string note = detail::note_after(": ", detail::take_refusal_note(sim));
     std::fprintf(stderr, "mujoco: %s: an error is not finite: the step or its derivatives are "
                  "NaN or too large to compare at one of the 5 states%s; expected finite "
                  "errors (check the model's values). %s\n", o.model.c_str(),
-                 cause.c_str(), where.c_str());
+                 note.c_str(), where.c_str());
     return 3;
   }
   const auto tolerance = static_cast<double>(JacobianCheck<Scalar>::smooth_tolerance());

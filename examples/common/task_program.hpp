@@ -246,14 +246,14 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
     }
     // Not as an event of epoch `epoch`: a resumed run's last epoch may not have been evaluated.
     // The simulator's refusals are taken here, so that the first event does not claim them.
-    const std::string cause = detail::note_after("; ", detail::take_refusal_note(sim));
+    const std::string note = detail::note_after("; ", detail::take_refusal_note(sim));
     if (const auto& where = trainer.engine().forward_non_finite())
       std::fprintf(stderr, "%s: warning: the %s parameters give a non-finite %s (%s) in the test "
                            "set%s%s\n",
                    name, epoch == 0 ? "initial" : "resumed",
                    std::string(to_string(where->quantity)).c_str(),
                    detail::value_text(where->value).c_str(), describe_where(*where).c_str(),
-                   cause.c_str());
+                   note.c_str());
     stop_signals.emplace(name);
   };
   callbacks.on_non_finite = [&](const NonFiniteEvent& event, bool skipped) {

@@ -151,12 +151,13 @@ private:
       if (!lock.held()) continue;
       // A checkpoint continues the training log it was written with (the program cuts it
       // back to its size at the checkpoint), so that log stays.
-      const bool resumable = fs::exists(runs_ / (name + ".checkpoint"));
+      const bool finished = fs::exists(runs_ / (name + ".csv"));  // its temporaries alone
+      const bool resumable = !finished && fs::exists(runs_ / (name + ".checkpoint"));
       const fs::path kept = runs_ / (name + ".partial.csv");
       bool all_gone = true;
       for (const auto& file : files)
         if (!resumable || file != kept) all_gone = remove_or_warn(file) && all_gone;
-      if (!all_gone) continue;  // named above, and again by every sweep until it goes
+      if (!all_gone || finished) continue;  // named above, and again until it goes
       ++discarded;
       // An executor of --run NAME clears every run's leftovers but runs NAME alone; `start`
       // drops a checkpoint of other settings than the plan's.
@@ -166,8 +167,9 @@ private:
       else ++restarting;
     }
     if (discarded > 0)
-      std::printf("reproduce: discarded the partial files of %s of an interrupted sweep; of "
-                  "those planned here: %zu resuming from a checkpoint, %zu starting over\n",
+      std::printf("reproduce: discarded the partial files of %s of an interrupted sweep (one "
+                  "that resumes keeps its checkpoint and training log); of those planned here: "
+                  "%zu resuming from a checkpoint, %zu starting over\n",
                   count_of(discarded, "unfinished run").c_str(), resuming, restarting);
   }
 

@@ -19,7 +19,8 @@ struct SquaredDistanceLoss {
                     target.size(), " entries; expected the simulator's state_dim = ", state_dim);
     if (const auto bad = first_non_finite(target))
       throw InvalidArgument(detail::concat("SquaredDistanceLoss: the target's entry ", bad->row,
-                                           " is ", target(bad->row), "; expected finite numbers"));
+                                           " is ", detail::value_text(target(bad->row)),
+                                           "; expected finite numbers"));
   }
 
   typename State::Scalar operator()(const State& x, State* grad) const {

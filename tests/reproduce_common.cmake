@@ -15,6 +15,21 @@ function(install_fake_task_programs dir)
   endforeach()
 endfunction()
 
+# The start of a script that works in a fresh WORK_DIR with the fake task programs in
+# WORK_DIR/fake: its -D variables checked, and `grid` the six runs of the cart pole's 4 poles,
+# R and C, seeds 42, 43, 44 (R s43 stops after 2 epochs, exit 3).
+macro(start_with_fake_cart_pole_grid script)
+  foreach(var REPRODUCE WORK_DIR)
+    if(NOT DEFINED ${var})
+      message(FATAL_ERROR "${script}: pass -D${var}=...")
+    endif()
+  endforeach()
+  file(REMOVE_RECURSE "${WORK_DIR}")
+  install_fake_task_programs("${WORK_DIR}/fake")
+  set(grid --tasks cartpole --complexities 4 --methods R,C --clips norm --seeds 3 --epochs 4
+           --jobs 2 --no-plot --bin-dir "${WORK_DIR}/fake")
+endmacro()
+
 function(check condition_text)
   if(NOT (${ARGN}))
     message(FATAL_ERROR "FAILED: ${condition_text}")

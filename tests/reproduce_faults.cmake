@@ -29,18 +29,8 @@
 #      fsync'ed just before, and its folder just after (a file written unnamed, O_TMPFILE, is
 #      fsync'ed through its descriptor and then linked to the name that is renamed).
 cmake_minimum_required(VERSION 3.20)
-foreach(var REPRODUCE WORK_DIR)
-  if(NOT DEFINED ${var})
-    message(FATAL_ERROR "reproduce_faults.cmake: pass -D${var}=...")
-  endif()
-endforeach()
 include("${CMAKE_CURRENT_LIST_DIR}/reproduce_common.cmake")
-file(REMOVE_RECURSE "${WORK_DIR}")
-install_fake_task_programs("${WORK_DIR}/fake")
-
-# cart pole 4 poles; R and C; seeds 42, 43, 44: 6 runs (R s43 stops after 2 epochs, exit 3).
-set(grid --tasks cartpole --complexities 4 --methods R,C --clips norm --seeds 3 --epochs 4
-         --jobs 2 --no-plot --bin-dir "${WORK_DIR}/fake")
+start_with_fake_cart_pole_grid(reproduce_faults.cmake)
 set(out "${WORK_DIR}/sweep")
 
 # --- 1. damaged finished runs ----------------------------------------------------------------

@@ -9,18 +9,8 @@
 #   3. on one SIGTERM the runner waits for its task programs to end their epoch; on a second
 #      it kills them at once.
 cmake_minimum_required(VERSION 3.20)
-foreach(var REPRODUCE WORK_DIR)
-  if(NOT DEFINED ${var})
-    message(FATAL_ERROR "reproduce_folder.cmake: pass -D${var}=...")
-  endif()
-endforeach()
 include("${CMAKE_CURRENT_LIST_DIR}/reproduce_common.cmake")
-file(REMOVE_RECURSE "${WORK_DIR}")
-install_fake_task_programs("${WORK_DIR}/fake")
-
-# cart pole 4 poles; R and C; seeds 42, 43, 44: 6 runs (R s43 stops after 2 epochs, exit 3).
-set(grid --tasks cartpole --complexities 4 --methods R,C --clips norm --seeds 3 --epochs 4
-         --jobs 2 --no-plot --bin-dir "${WORK_DIR}/fake")
+start_with_fake_cart_pole_grid(reproduce_folder.cmake)
 
 # A leftover that cannot be removed (chattr +i; root, or another user's file in a shared
 # folder): every executor in the folder stopped before any run with a bare "filesystem error:

@@ -200,12 +200,20 @@ struct Run {
                           (parts[0] == task.name && parts[1].starts_with(prefix) &&
                            is_number(std::string_view(parts[1]).substr(prefix.size())));
   }
-  bool method = false;
-  for (const Method m : {Method::Regular, Method::Modified, Method::Combined, Method::Stopped,
-                         Method::NetworkOnly})
-    method = method || parts[2] == sbptt::label(m);
-  return task_and_complexity && method &&
-         (parts[3] == "none" || parts[3] == "value" || parts[3] == "norm") &&
+  // The method and clip as a run's name writes them: the parsers' round trip, which also
+  // refuses the long names ("combined") that parse_method accepts.
+  const auto written_as_in_names = [&](const std::string& text, auto parse, auto write) {
+    try {
+      return std::string(write(parse(text))) == text;
+    } catch (const sbptt::InvalidArgument&) {
+      return false;
+    }
+  };
+  return task_and_complexity &&
+         written_as_in_names(parts[2], sbptt::parse_method,
+                             [](Method m) { return sbptt::label(m); }) &&
+         written_as_in_names(parts[3], sbptt::parse_clip_mode,
+                             [](ClipMode c) { return sbptt::to_string(c); }) &&
          parts[4].starts_with('s') && digits(std::string_view(parts[4]).substr(1));
 }
 

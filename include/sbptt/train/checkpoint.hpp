@@ -347,17 +347,19 @@ inline void require_same_settings(const std::vector<RunSetting>& expected,
     for (const RunSetting& f : found)
       if (f.name == want.name) have = &f;
     const std::string name = named(want.name);
-    if (have == nullptr &&
-        std::ranges::find(detail::settings_recorded_since_2026_12_07, want.name) !=
-            std::end(detail::settings_recorded_since_2026_12_07))
+    if (have == nullptr) {
+      const bool recorded_later =
+          std::ranges::find(detail::settings_recorded_since_2026_12_07, want.name) !=
+          std::end(detail::settings_recorded_since_2026_12_07);
       throw InvalidArgument(detail::concat(
           "checkpoint '", path, "' has no setting ", name, " (this run has ", name, " = ",
-          want.value, "): it was written before 2026-12-07, when checkpoints began to record "
-          "the horizon and the objective; expected a checkpoint of this version (remove it to "
-          "start over)"));
-    detail::require(have != nullptr, "checkpoint '", path, "' has no setting ", name,
-                    " (this run has ", name, " = ", want.value,
-                    "); expected a checkpoint of this run (remove it to start over)");
+          want.value, recorded_later
+                          ? "): it was written before 2026-12-07, when checkpoints began to "
+                            "record the horizon and the objective; expected a checkpoint of "
+                            "this version"
+                          : "); expected a checkpoint of this run",
+          " (remove it to start over)"));
+    }
     if (have->value == want.value) continue;
     // The file's 17 digits of a number are noise to a reader; two numbers a run wrote differ
     // in their shortest forms too.

@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -20,6 +21,7 @@
 #include "sbptt/core/concepts.hpp"
 #include "sbptt/core/finite_difference.hpp"
 #include "sbptt/core/rng.hpp"
+#include "sbptt/core/taylor_test.hpp"
 #include "sbptt/nn/init.hpp"
 #include "sbptt/nn/network.hpp"
 #include "sbptt/sim/cartpole.hpp"
@@ -195,6 +197,11 @@ TEST_CASE("mujoco: A and B are the derivatives of the step with every integrator
       CHECK(check.state_jacobian_error < 1e-6);
       CHECK(check.control_jacobian_error < 1e-6);
       CHECK(check.vjp_error < 1e-6);
+      // The library's Taylor test sees the differences' own error (order 1 in B where the step
+      // is linear in u), and bounds it well below 1e-8.
+      const auto taylor = taylor_test(sim, x, u, static_cast<std::uint64_t>(trial + 1));
+      INFO(describe(taylor));
+      CHECK(taylor.passed(1e-8));
       for (std::size_t k = 1; k < remainders.size(); ++k) {
         CHECK(remainders[k - 1] / remainders[k] > 3.5);
         CHECK(remainders[k - 1] / remainders[k] < 4.5);

@@ -11,6 +11,7 @@
 #include "sbptt/core/number_text.hpp"
 #include "sbptt/core/rng.hpp"
 #include "sbptt/core/sign.hpp"
+#include "sbptt/core/taylor_test.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/sim/autodiff.hpp"
 #include "sbptt/sim/cart_chain.hpp"

@@ -1,6 +1,6 @@
 #pragma once
-/// \file The Taylor test of a simulator's VJP: the twin of `check_jacobians` that needs no
-/// step size and no scale. Finite differences compare a derivative with a difference quotient
+/// \file The Taylor test of a simulator's VJP: the twin of `check_jacobians` with no
+/// difference step to tune. Finite differences compare a derivative with a difference quotient
 /// at one step, whose truncation and rounding errors depend on the scene's scales; a stiff scene
 /// can fail them with correct derivatives. The Taylor test instead watches how a remainder falls.
 ///
@@ -11,16 +11,21 @@
 ///
 /// with Aᵀλ and Bᵀλ from `sim.vjp`. For a twice differentiable step r(h) = O(h²) when the VJP
 /// is right, so each halving of h divides r by 4 (observed order log₂ r(h)/r(h/2) → 2). A VJP
-/// wrong by any amount e leaves r(h) ≈ e·h, order → 1, once h is small enough for that term to
-/// lead. The halving goes on until r(h) reaches the rounding of the difference,
+/// wrong by a relative e leaves r(h) ≈ |e·p·h + c·h²| (p the prediction's slope, c the
+/// curvature), order → 1 once h is small enough for the first term to lead. The halving goes
+/// on until two remainders in a row reach the rounding of the difference,
 ///
 ///     ρ(h) = ε · Σᵢ |λᵢ| (|Pᵢ(x + Δx, u + Δu)| + |Pᵢ(x, u)|),
 ///
-/// so an error is found wherever it exceeds rounding. A step that is linear along the direction
-/// (a linear scene, or a spring chain) leaves r at rounding from the first h: its VJP agrees with
-/// the exact difference to rounding, which the test reports as such.
+/// (one alone may be where c·h² cancels e·p·h), so an error is found where its term exceeds
+/// rounding at some h below the curvature's lead. A step that is linear along the direction (a
+/// linear scene, or a spring chain) leaves r at rounding from the first h: its VJP agrees with
+/// the exact difference to the test's resolution, which the test reports as such. ρ counts the
+/// rounding of P's values, not of the work inside the step: a step with cancellation inside
+/// leaves r flat above ρ, which the test reports as inconclusive.
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <cstdio>
 #include <limits>
@@ -38,90 +43,142 @@ namespace sbptt {
 /// The remainders of a `taylor_test`, one row per step h = h₀, h₀/2, … (see the file comment).
 template <class Scalar>
 struct TaylorTest {
-  /// A remainder counts as above rounding when it exceeds this many times ρ(h); below, a
-  /// rounding error of ρ moves the observed order by at most log₂(1 + 1/16) ≈ 0.09.
+  /// A remainder counts as above rounding when it exceeds this many times ρ(h). Both
+  /// remainders of a pair then carry at most 1/16 of rounding, which moves their order by at
+  /// most log₂(17/15) ≈ 0.18 (as long as ρ bounds the rounding).
   static constexpr Scalar rounding_margin = 16;
+  /// The order a right VJP reaches: 2 less the rounding margin's 0.18 (a wrong one shows 1).
+  static constexpr Scalar min_order = Scalar(1.8);
+  /// How far log₂ of the measured change's ratio over a pair may stray from the prediction's
+  /// (which halves exactly): beyond it the step's own rounding, not its slope, moves the change.
+  static constexpr Scalar halving_slack = Scalar(0.2);
 
   struct Row {
-    Scalar step = 0;       ///< h
-    Scalar remainder = 0;  ///< r(h)
-    Scalar rounding = 0;   ///< ρ(h)
-    Scalar first_order = 0;  ///< |⟨Aᵀλ, Δx⟩ + ⟨Bᵀλ, Δu⟩|: the change the VJP predicts
+    Scalar step = 0;             ///< h
+    Scalar remainder = 0;        ///< r(h)
+    Scalar rounding = 0;         ///< ρ(h)
+    Scalar predicted_change = 0;  ///< |⟨Aᵀλ, Δx⟩ + ⟨Bᵀλ, Δu⟩|: what the VJP predicts
+    Scalar measured_change = 0;   ///< |⟨λ, P(x + Δx, u + Δu) − P(x, u)⟩|: what the step did
     [[nodiscard]] bool above_rounding() const { return remainder > rounding_margin * rounding; }
   };
+  /// Every step tried, until two in a row reached rounding (one alone may be a zero of the
+  /// remainder, where curvature cancels an error), a NaN, or the last halving.
   std::vector<Row> rows;
 
-  /// log₂ r(hₖ)/r(hₖ₊₁) for each pair of rows whose both remainders are above rounding, in
-  /// the order of falling h; NaN where a remainder is NaN.
+  /// log₂ r(hₖ)/r(hₖ₊₁) for each pair of neighbouring rows both above rounding, in the order of
+  /// falling h.
   [[nodiscard]] std::vector<Scalar> orders() const {
     std::vector<Scalar> result;
-    for (std::size_t k = 0; k + 1 < rows.size(); ++k) {
-      const Row &larger = rows[k], &smaller = rows[k + 1];
-      const bool has_nan = std::isnan(larger.remainder) || std::isnan(smaller.remainder);
-      if (!has_nan && !(larger.above_rounding() && smaller.above_rounding())) break;
-      result.push_back(std::log2(larger.remainder / smaller.remainder));
-      if (has_nan) break;
-    }
+    for (std::size_t k = 0; k + 1 < rows.size(); ++k)
+      if (pair_above_rounding(k)) result.push_back(order_at(k));
     return result;
   }
 
-  /// The order at the smallest pair of steps above rounding: what the VJP's error shows once
-  /// the step's curvature no longer leads. NaN when there is no such pair.
+  /// The order of the last pair above rounding, at the smallest steps: what the VJP's error
+  /// shows once the step's curvature no longer leads. NaN without such a pair or after a NaN.
   [[nodiscard]] Scalar asymptotic_order() const {
-    const std::vector<Scalar> all = orders();
-    return all.empty() ? std::numeric_limits<Scalar>::quiet_NaN() : all.back();
+    const std::ptrdiff_t k = last_pair();
+    return k < 0 || has_nan() ? std::numeric_limits<Scalar>::quiet_NaN()
+                              : order_at(static_cast<std::size_t>(k));
   }
 
-  /// The smallest r(h) / |⟨Aᵀλ, Δx⟩ + ⟨Bᵀλ, Δu⟩| over the rows, r(h) taken as at least the
-  /// rounding margin times ρ(h) (below it the remainder is noise, and may be 0 by chance). A
-  /// VJP whose predicted change along this direction is off by a relative e leaves r(h) ≥
-  /// e·|prediction| − O(h²), so e is at most this bound. Sharp near the h where curvature and
-  /// rounding balance (about √ε of a well-scaled step); NaN when a remainder is NaN.
-  [[nodiscard]] Scalar relative_error_bound() const {
-    Scalar bound = std::numeric_limits<Scalar>::infinity();
-    for (const Row& row : rows) {
-      if (std::isnan(row.remainder)) return row.remainder;
-      const Scalar resolved = std::max(row.remainder, rounding_margin * row.rounding);
-      if (row.first_order > Scalar(0)) bound = std::min(bound, resolved / row.first_order);
-    }
-    return bound;
-  }
-
-  /// The change the VJP predicts at h₀ stands above rounding, so the test can see it (an
-  /// adjoint nearly orthogonal to the step's response leaves nothing to test).
-  [[nodiscard]] bool conclusive() const {
-    return !rows.empty() && rows.front().first_order > rounding_margin * rows.front().rounding;
-  }
-
-  /// r(h₀) is already at rounding: along this direction the step is linear (to rounding) and
-  /// the VJP predicts its change to within `relative_error_bound()`.
+  /// The two first remainders are at rounding: along this direction the step is linear (to
+  /// rounding) and the VJP predicts its change to within `relative_error_estimate()`.
   [[nodiscard]] bool exact_to_rounding() const {
-    return !rows.empty() && !std::isnan(rows.front().remainder) && !rows.front().above_rounding();
+    return rows.size() >= 2 && !has_nan() && !rows[0].above_rounding() &&
+           !rows[1].above_rounding();
   }
 
-  /// The order a right VJP reaches: 2 less room for the rounding margin (a wrong one shows 1).
-  static constexpr Scalar min_order = Scalar(1.8);
+  /// The smallest relative error of the prediction that shows above rounding at h₀:
+  /// rounding_margin·ρ(h₀)/|prediction(h₀)|.
+  [[nodiscard]] Scalar resolution() const {
+    if (rows.empty()) return std::numeric_limits<Scalar>::infinity();
+    return rounding_margin * rows.front().rounding / rows.front().predicted_change;
+  }
+
+  /// The coarsest resolution the test accepts: the tolerance `check_jacobians` applies to a
+  /// smooth step (1e-6 in double, 2e-2 in float).
+  [[nodiscard]] static Scalar max_resolution() {
+    return std::numeric_limits<Scalar>::epsilon() > Scalar(1e-10) ? Scalar(2e-2) : Scalar(1e-6);
+  }
+
+  /// Over the pair that gives the asymptotic order, the step's change halved with h as the
+  /// prediction did. A step with cancellation inside it (rounding far above ρ) stops doing so:
+  /// its change sticks at a multiple of its own rounding, and r then follows the prediction.
+  [[nodiscard]] bool change_halves() const {
+    const std::ptrdiff_t k = last_pair();
+    if (k < 0) return false;
+    const Row& larger = rows[static_cast<std::size_t>(k)];
+    const Row& smaller = rows[static_cast<std::size_t>(k) + 1];
+    const Scalar measured = std::log2(larger.measured_change / smaller.measured_change);
+    const Scalar predicted = std::log2(larger.predicted_change / smaller.predicted_change);
+    return std::abs(measured - predicted) <= halving_slack;
+  }
+
+  /// The test can tell a right VJP from a wrong one: no NaN, a resolution no coarser than
+  /// `max_resolution()` (an adjoint nearly orthogonal to the step's response, or float's
+  /// rounding, leaves the prediction too close to rounding), and, unless exact to rounding, a
+  /// change that still halves at the smallest steps (`change_halves`).
+  [[nodiscard]] bool conclusive() const {
+    if (rows.empty() || has_nan()) return false;
+    if (!(resolution() <= max_resolution())) return false;
+    return exact_to_rounding() || change_halves();
+  }
+
+  /// The VJP's relative error along this direction, as the remainder shows it: at most
+  /// `resolution()` when exact to rounding (the step is linear there, so r = e·|prediction|);
+  /// else r/|prediction| at the smallest step above rounding, which is e up to the curvature's
+  /// share c·h/|prediction| there (an estimate, not a bound: curvature may oppose the error).
+  /// NaN after a NaN.
+  [[nodiscard]] Scalar relative_error_estimate() const {
+    if (rows.empty() || has_nan()) return std::numeric_limits<Scalar>::quiet_NaN();
+    if (exact_to_rounding()) return resolution();
+    for (auto row = rows.rbegin(); row != rows.rend(); ++row)
+      if (row->above_rounding()) return row->remainder / row->predicted_change;
+    return std::numeric_limits<Scalar>::quiet_NaN();
+  }
 
   /// The VJP passes: the test is conclusive, and the VJP is exact to rounding, or its
-  /// asymptotic order is at least `min_order`, or its relative error bound is at most
+  /// asymptotic order is at least `min_order`, or its relative error estimate is at most
   /// `tolerance`. The default 0 fails any error that shows above rounding; derivatives that
   /// are themselves finite differences (MuJoCo's) are off by about 1e-10 and need a tolerance.
   [[nodiscard]] bool passed(Scalar tolerance = 0) const {
     return conclusive() && (exact_to_rounding() || asymptotic_order() >= min_order ||
-                            relative_error_bound() <= tolerance);
+                            relative_error_estimate() <= tolerance);
+  }
+
+  /// Index k of the last pair (k, k + 1) both above rounding; −1 for none.
+  [[nodiscard]] std::ptrdiff_t last_pair() const {
+    for (std::size_t k = rows.size(); k >= 2; --k)
+      if (pair_above_rounding(k - 2)) return static_cast<std::ptrdiff_t>(k - 2);
+    return -1;
+  }
+
+  [[nodiscard]] bool has_nan() const {
+    return std::any_of(rows.begin(), rows.end(), [](const Row& row) {
+      return std::isnan(row.remainder) || std::isnan(row.rounding);
+    });
+  }
+
+private:
+  [[nodiscard]] bool pair_above_rounding(std::size_t k) const {
+    return rows[k].above_rounding() && rows[k + 1].above_rounding();
+  }
+  [[nodiscard]] Scalar order_at(std::size_t k) const {
+    return std::log2(rows[k].remainder / rows[k + 1].remainder);
   }
 };
 
 /// Runs the Taylor test of `sim.vjp` at (x, u) along (dx, du) with the adjoint `lambda`,
-/// halving h from `initial_step` until the remainder reaches rounding (at most `max_halvings`
-/// times). Throws `InvalidArgument` for sizes other than the simulator's or a step that is not
-/// finite and > 0.
+/// halving h from `initial_step` until two remainders in a row reach rounding (at most
+/// `max_halvings` times). Throws `InvalidArgument` for sizes other than the simulator's or a
+/// step that is not finite and > 0.
 template <Simulator Sim>
 [[nodiscard]] TaylorTest<typename Sim::Scalar> taylor_test(
     const Sim& sim, const typename Sim::State& x, const typename Sim::Control& u,
     const typename Sim::State& dx, const typename Sim::Control& du,
-    const typename Sim::State& lambda, typename Sim::Scalar initial_step = typename Sim::Scalar(0.1),
-    int max_halvings = 60) {
+    const typename Sim::State& lambda,
+    typename Sim::Scalar initial_step = typename Sim::Scalar(0.1), int max_halvings = 60) {
   using Scalar = typename Sim::Scalar;
   using State = typename Sim::State;
   using Control = typename Sim::Control;
@@ -145,6 +202,7 @@ template <Simulator Sim>
 
   const Scalar epsilon = std::numeric_limits<Scalar>::epsilon();
   TaylorTest<Scalar> result;
+  int at_rounding_in_a_row = 0;
   Scalar h = initial_step;
   for (int halving = 0; halving <= max_halvings; ++halving, h /= Scalar(2)) {
     const State x_moved = x + h * dx;
@@ -157,9 +215,12 @@ template <Simulator Sim>
     row.step = h;
     row.remainder = std::abs(change - predicted);
     row.rounding = epsilon * lambda.cwiseAbs().dot(State(moved.cwiseAbs() + base.cwiseAbs()));
-    row.first_order = std::abs(predicted);
+    row.predicted_change = std::abs(predicted);
+    row.measured_change = std::abs(change);
     result.rows.push_back(row);
-    if (!row.above_rounding()) break;
+    if (std::isnan(row.remainder) || std::isnan(row.rounding)) break;
+    at_rounding_in_a_row = row.above_rounding() ? 0 : at_rounding_in_a_row + 1;
+    if (at_rounding_in_a_row == 2) break;
   }
   return result;
 }
@@ -177,14 +238,15 @@ struct VjpTaylorTest {
 
 /// The Taylor tests of `sim.vjp` at (x, u) along seeded random directions: δᵢ = zᵢ·max(1,
 /// |xᵢ|), ηⱼ = zⱼ·max(1, |uⱼ|) and λ = z, each z drawn from N(0, I) and rescaled to |z|² =
-/// its size, so every entry of A and B takes part.
-/// Costs about 2 × 40 steps and two VJPs in double, whatever the state's size (finite
-/// differences of every entry cost 2(n + k) steps and n VJPs).
+/// its size, so every entry of A and B takes part. Costs two VJPs and at most 2 × (2 +
+/// max_halvings) steps, whatever the state's size (finite differences of every entry cost
+/// 2(n + k) steps and n VJPs). A scene whose step is defined only near (x, u) (a joint limit,
+/// a positive mass) takes a smaller `initial_step`.
 template <Simulator Sim>
-[[nodiscard]] VjpTaylorTest<typename Sim::Scalar> taylor_test(const Sim& sim,
-                                                              const typename Sim::State& x,
-                                                              const typename Sim::Control& u,
-                                                              std::uint64_t seed = 1) {
+[[nodiscard]] VjpTaylorTest<typename Sim::Scalar> taylor_test(
+    const Sim& sim, const typename Sim::State& x, const typename Sim::Control& u,
+    std::uint64_t seed = 1, typename Sim::Scalar initial_step = typename Sim::Scalar(0.1),
+    int max_halvings = 60) {
   using Scalar = typename Sim::Scalar;
   using State = typename Sim::State;
   using Control = typename Sim::Control;
@@ -199,50 +261,56 @@ template <Simulator Sim>
   };
   const State dx = draw(x), lambda = draw(State(x * Scalar(0)));
   const Control du = draw(u);
-  return {taylor_test(sim, x, u, dx, Control(du * Scalar(0)), lambda),
-          taylor_test(sim, x, u, State(dx * Scalar(0)), du, lambda)};
+  return {taylor_test(sim, x, u, dx, Control(du * Scalar(0)), lambda, initial_step, max_halvings),
+          taylor_test(sim, x, u, State(dx * Scalar(0)), du, lambda, initial_step, max_halvings)};
 }
 
 /// The test in words: "order 2.00 at h = 1.53e-06 (r falls from 2.13e-13 to 5.32e-14), 16
-/// halvings above rounding (agrees to 9.9e-09 relative)", "exact to rounding: r(0.1) =
-/// 4.03e-17, rounding 1.2e-15 (agrees to 1.3e-11 relative)", "inconclusive: …".
+/// pairs above rounding, relative error about 1e-08", "exact to rounding: r(0.1) = 4.03e-17,
+/// rounding 1.2e-15, relative error at most 1.3e-11", "inconclusive: …".
 template <class Scalar>
 [[nodiscard]] std::string describe(const TaylorTest<Scalar>& test) {
   if (test.rows.empty()) return "nothing compared";
-  char text[256];
+  char text[320];
   const auto& first = test.rows.front();
-  if (!test.conclusive()) {
+  const auto value = [](Scalar x) { return static_cast<double>(x); };
+  if (test.has_nan()) {
+    std::snprintf(text, sizeof text, "inconclusive: the step or the VJP gave NaN at h = %.3g",
+                  value(test.rows.back().step));
+  } else if (!(test.resolution() <= test.max_resolution())) {
     std::snprintf(text, sizeof text,
-                  "inconclusive: the predicted change %.3g at h = %.3g is within rounding %.3g "
-                  "(try another seed or a larger initial step)",
-                  static_cast<double>(first.first_order), static_cast<double>(first.step),
-                  static_cast<double>(first.rounding));
-    return text;
-  }
-  if (test.exact_to_rounding()) {
+                  "inconclusive: at h = %.3g the predicted change %.3g resolves relative errors "
+                  "only down to %.2g (16 times rounding %.3g over it), expected at most %.2g: "
+                  "try another seed, a larger initial step, or double",
+                  value(first.step), value(first.predicted_change), value(test.resolution()),
+                  value(first.rounding), value(test.max_resolution()));
+  } else if (test.exact_to_rounding()) {
     std::snprintf(text, sizeof text,
-                  "exact to rounding: r(%.3g) = %.3g, rounding %.3g (agrees to %.2g relative)",
-                  static_cast<double>(first.step), static_cast<double>(first.remainder),
-                  static_cast<double>(first.rounding),
-                  static_cast<double>(test.relative_error_bound()));
-    return text;
+                  "exact to rounding: r(%.3g) = %.3g and r(%.3g) = %.3g, rounding %.3g; "
+                  "relative error at most %.2g",
+                  value(first.step), value(first.remainder), value(test.rows[1].step),
+                  value(test.rows[1].remainder), value(first.rounding),
+                  value(test.relative_error_estimate()));
+  } else if (test.last_pair() < 0) {
+    std::snprintf(text, sizeof text,
+                  "no order measured: no two neighbouring steps above rounding between h = "
+                  "%.3g and %.3g",
+                  value(first.step), value(test.rows.back().step));
+  } else {
+    const auto k = static_cast<std::size_t>(test.last_pair());
+    const auto& larger = test.rows[k];
+    const auto& smaller = test.rows[k + 1];
+    std::snprintf(text, sizeof text,
+                  "%sorder %.2f at h = %.3g (r falls from %.3g to %.3g), %zu pairs above "
+                  "rounding, relative error about %.2g%s",
+                  test.conclusive() ? "" : "inconclusive: ", value(test.asymptotic_order()),
+                  value(smaller.step), value(larger.remainder), value(smaller.remainder),
+                  test.orders().size(), value(test.relative_error_estimate()),
+                  test.conclusive() ? ""
+                                    : ": there the step's change no longer halves with h, so "
+                                      "its own rounding, far above the estimate (cancellation "
+                                      "inside it), decides r");
   }
-  const std::vector<Scalar> orders = test.orders();
-  if (orders.empty()) {
-    std::snprintf(text, sizeof text, "no order measured: r(%.3g) = %.3g, r(%.3g) = %.3g",
-                  static_cast<double>(first.step), static_cast<double>(first.remainder),
-                  static_cast<double>(test.rows.back().step),
-                  static_cast<double>(test.rows.back().remainder));
-    return text;
-  }
-  const auto& larger = test.rows[orders.size() - 1];
-  const auto& smaller = test.rows[orders.size()];
-  std::snprintf(text, sizeof text,
-                "order %.2f at h = %.3g (r falls from %.3g to %.3g), %zu halvings above "
-                "rounding (agrees to %.2g relative)",
-                static_cast<double>(orders.back()), static_cast<double>(smaller.step),
-                static_cast<double>(larger.remainder), static_cast<double>(smaller.remainder),
-                orders.size(), static_cast<double>(test.relative_error_bound()));
   return text;
 }
 

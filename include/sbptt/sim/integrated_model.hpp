@@ -14,6 +14,17 @@ namespace sbptt::detail {
 
 constexpr int half_or_dynamic(int n) { return n == Eigen::Dynamic ? Eigen::Dynamic : n / 2; }
 
+/// The model declares a fixed, odd kStateSize (false without one: a static_assert that named
+/// kStateSize would add its own errors to the message for a model that lacks it).
+template <class M>
+constexpr bool has_odd_fixed_state_size() {
+  if constexpr (requires { M::kStateSize; }) {
+    return M::kStateSize != Eigen::Dynamic && M::kStateSize % 2 != 0;
+  } else {
+    return false;
+  }
+}
+
 /// A model with a templated `acceleration(x, u, a)` (tested at double).
 template <class M>
 concept IsSecondOrder = requires(const M& m, const ColumnOf<double, M::kStateSize>& x,

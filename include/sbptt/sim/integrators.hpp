@@ -223,8 +223,7 @@ class Integrated {
                 "for a second-order model, `template <class T> void acceleration(const "
                 "ColumnOf<T, N>& x, const ColumnOf<T, K>& u, ColumnOf<T, N/2>& a) const` "
                 "(N = kStateSize, K = kControlSize)");
-  static_assert(!detail::IsSecondOrder<Model> || Model::kStateSize == Eigen::Dynamic ||
-                    Model::kStateSize % 2 == 0,
+  static_assert(!detail::IsSecondOrder<Model> || !detail::has_odd_fixed_state_size<Model>(),
                 "sbptt::Integrated: a second-order model's state is (q, v), two halves of one "
                 "size: its kStateSize must be even");
   static_assert(!std::same_as<Method, SemiImplicitEuler> || detail::IsSecondOrder<Model>,

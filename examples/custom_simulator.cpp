@@ -21,7 +21,10 @@ int with_stdout_checked(int code) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::signal(SIGXFSZ, SIG_IGN);  // past `ulimit -f` a write then fails instead of killing
+  // Past `ulimit -f`, or with the reader of stdout gone (`| head`), a write then fails
+  // instead of killing the program unreported.
+  std::signal(SIGXFSZ, SIG_IGN);
+  std::signal(SIGPIPE, SIG_IGN);
   if (argc == 2 && std::strcmp(argv[1], "--help") == 0) {
     std::printf("usage: custom_simulator\ntrains the point mass of docs/api.md with the combined "
                 "update, printing its loss every 200 iterations up to 1000; no options\n");

@@ -27,7 +27,7 @@
 #include "sbptt/optim/adam.hpp"
 #include "sbptt/sim/linear.hpp"
 #include "sbptt/train/trainer.hpp"
-#include "file_size_limit.hpp"
+#include "write_signals.hpp"
 #include "linear_feedback.hpp"
 #include "lqr.hpp"
 #include "standard_streams.hpp"
@@ -193,7 +193,7 @@ std::string study(double radius, int steps) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  sbptt::examples::ignore_file_size_signal();
+  sbptt::examples::ignore_write_signals();
   if (argc == 2 && std::string_view(argv[1]) == "--help") {
     std::printf("usage: lqr_convergence\ncompares R, M and C with the Riccati optimum of a linear "
                 "scene (docs/results.md); no options, about a minute\n");

@@ -94,11 +94,13 @@ int run_in(const std::filesystem::path& dir) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  // Past a file-size limit (ulimit -f) the default SIGXFSZ kills the program silently with its
-  // files unwritten; ignored, the write fails and the run reports it (exit 1, the parameters
-  // still saved). Written out here, not taken from examples/common, so that a copy of this
-  // file and point_mass.hpp builds against the installed headers alone.
+  // Past a file-size limit (ulimit -f) the default SIGXFSZ, and with the reader of stdout gone
+  // (`| head`) the default SIGPIPE, kill the program silently with its files unwritten;
+  // ignored, the write fails and the run reports it (exit 1, the parameters still saved).
+  // Written out here, not taken from examples/common, so that a copy of this file and
+  // point_mass.hpp builds against the installed headers alone.
   std::signal(SIGXFSZ, SIG_IGN);
+  std::signal(SIGPIPE, SIG_IGN);
   const std::string argument = argc > 1 ? argv[1] : ".";
   if (argument == "--help") {
     std::printf("%s\n", kUsage);

@@ -193,6 +193,29 @@ TEST_CASE("checkpoint: a second run of a checkpoint in use is refused before any
   CHECK(second.trainer.epoch() == 3);
 }
 
+TEST_CASE("checkpoint: a log or parameters file in the place of its lock is refused", "[train]") {
+  // `--csv ck.lock --checkpoint ck`: the log's first write renamed a new file over the lock,
+  // so a second run of the same command locked another inode and both trained on one
+  // checkpoint (found by a fault probe of the task programs).
+  using sbptt::testing::LinearTrainer;
+  using sbptt::testing::spread;
+  LinearTrainer<double> run(Method::Combined);
+  const Matrix<double> train = spread<double>(9, -1.0), test = spread<double>(4, 0.3);
+  RunSettings settings;
+  settings.epochs = 2;
+  settings.checkpoint = scratch("own_lock.checkpoint").string();
+  fs::remove(settings.checkpoint);
+  for (std::string* output : {&settings.log_csv, &settings.save_params}) {
+    *output = settings.checkpoint + ".lock";
+    CHECK_THROWS_WITH(run_training(run.trainer, train, test, settings),
+                      Catch::Contains("' and checkpoint's lock file '" + settings.checkpoint +
+                                      ".lock' are the same file"));
+    CHECK_FALSE(fs::exists(settings.checkpoint));
+    CHECK(run.trainer.epoch() == 0);
+    output->clear();
+  }
+}
+
 TEST_CASE("files opened while stderr is closed do not take its number", "[train]") {
   // A program started with `2>&-`: the first file it opened got fd 2, and every message meant
   // for stderr landed in its training log (found by a fault probe of the task programs).

@@ -16,7 +16,7 @@
 
 #include <CLI/CLI.hpp>
 
-#include "file_size_limit.hpp"
+#include "write_signals.hpp"
 #include "flag_values.hpp"
 
 namespace sbptt::examples {
@@ -25,7 +25,7 @@ class CommandLine {
 public:
   CommandLine(std::string program, std::string description)
       : app_(std::move(description), std::move(program)) {
-    ignore_file_size_signal();
+    ignore_write_signals();
     app_.allow_extras();  // unknown flags are reported by parse(), in the words of the others
     app_.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
     app_.set_help_flag("--help", "print every flag with its meaning, default and range; exit");

@@ -1,6 +1,6 @@
 #pragma once
 // A program's printed output is part of its work: the log of a run that a full disk or a
-// file-size limit (SIGXFSZ ignored: file_size_limit.hpp) cut short must not end with exit 0,
+// file-size limit (SIGXFSZ ignored: write_signals.hpp) cut short must not end with exit 0,
 // or `reproduce` would keep a truncated runs/<name>.log as a finished run's.
 #include <cerrno>
 #include <cstdio>

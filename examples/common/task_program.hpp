@@ -144,13 +144,9 @@ inline std::vector<RunSetting> task_identity(const TaskOptions& o) {
   return identity;
 }
 
-/// Trains `controller` for o.epochs epochs (or dumps gradients) with `run_training`, printing
-/// progress and every non-finite event to stderr.
-template <class Sim, class Ctrl, class Loss>
-int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objective<Loss>& objective,
-          Index steps, DataSplit<typename Sim::Scalar> data) {
-  using Scalar = typename Sim::Scalar;
-  const char* name = to_string(o.task);
+/// The file flags, checked by `task_main` before any work (drawing the sets of a large
+/// --samples takes seconds): every output can be written, and no file is named twice.
+inline void check_file_flags(const TaskOptions& o) {
   for (const auto& [flag, path] : {std::pair{"--csv", &o.csv}, std::pair{"--save-params", &o.save_params},
                                    std::pair{"--dump-gradients", &o.dump_gradients},
                                    std::pair{"--checkpoint", &o.checkpoint}})
@@ -161,7 +157,17 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                           {"--csv", o.csv, true},
                           {"--save-params", o.save_params, true},
                           {"--dump-gradients", o.dump_gradients, true},
-                          {"--checkpoint", o.checkpoint, true}});
+                          {"--checkpoint", o.checkpoint, true},
+                          {"--checkpoint's lock file", checkpoint_lock_path(o.checkpoint), false}});
+}
+
+/// Trains `controller` for o.epochs epochs (or dumps gradients) with `run_training`, printing
+/// progress and every non-finite event to stderr.
+template <class Sim, class Ctrl, class Loss>
+int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objective<Loss>& objective,
+          Index steps, DataSplit<typename Sim::Scalar> data) {
+  using Scalar = typename Sim::Scalar;
+  const char* name = to_string(o.task);
   if (!o.init_params.empty())
     detail::prefixing_errors("--init-params", [&] { load_parameters(o.init_params, controller); });
   if (!o.init_states.empty())
@@ -343,11 +349,17 @@ int task_main(Task task, int argc, char** argv, Body&& body) {
       return 2;
     }
     try {
+      check_file_flags(options);
       return options.use_float ? body.template operator()<float>(options)
                                : body.template operator()<double>(options);
     } catch (const InvalidArgument& e) {
       std::cerr << name << ": " << e.what() << "\n";
       return 2;
+    } catch (const ResourceError& e) {
+      std::cerr << name << ": cannot start the threads of --threads " << options.threads
+                << (options.evaluate_beside ? " and --evaluate-beside" : "") << ": " << e.what()
+                << "\n";
+      return 1;
     } catch (const std::bad_alloc&) {
       std::cerr << name << ": out of memory for --samples " << options.samples
                 << " (and as many test samples)" << state_size_flags(options) << ", --batch "

@@ -65,10 +65,11 @@ inline pid_t spawn(const std::vector<std::string>& argv, int log_fd, bool search
     ::prctl(PR_SET_PDEATHSIG, SIGKILL);
     if (::getppid() != parent) ::_exit(127);  // the runner died before prctl took effect
     // exec passes an ignored signal on: whatever the runner was started ignoring, its SIGTERM
-    // must stop the child.
+    // must stop the child, and the SIGPIPE and SIGXFSZ it ignores itself (write_signals.hpp)
+    // are the child's own business (a task program that is a script expects `| head` to work).
     struct sigaction action {};
     action.sa_handler = SIG_DFL;
-    for (int s : {SIGINT, SIGTERM, SIGHUP}) ::sigaction(s, &action, nullptr);
+    for (int s : {SIGINT, SIGTERM, SIGHUP, SIGPIPE, SIGXFSZ}) ::sigaction(s, &action, nullptr);
     // dup2 onto the same number leaves close-on-exec set: clear it instead.
     const auto onto = [](int from, int to) {
       if (from != to) ::dup2(from, to);

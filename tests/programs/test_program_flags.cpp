@@ -313,6 +313,33 @@ TEST_CASE("bench and accuracy check --csv before measuring and name the user's p
   }
 }
 
+TEST_CASE("the task programs check their file flags before the sets are drawn", "[programs]") {
+  // quantum --samples 20000 --nx 1024 drew its sets for 1.8 s (645 MB) before it refused a --csv
+  // in a missing folder. Sets that do not fit the 4 GB of `ulimit -v` show the order without
+  // the wait, on any machine: the memory bound comes with drawing the sets.
+  const Result r = run("quantum", "--samples 20000 --nx 1024 --csv /nonexistent/sbptt/x.csv",
+                       "ulimit -v 4000000; ");
+  INFO(r.output);
+  CHECK(r.status == 1);
+  CHECK(r.output.find("quantum: --csv '/nonexistent/sbptt/x.csv': directory '/nonexistent/sbptt' "
+                      "does not exist") != std::string::npos);
+  CHECK(r.output.find("GiB") == std::string::npos);
+
+  // The checkpoint's lock file is no place for an output: a log renamed over it left a second
+  // run of the same command a lock of its own, and both trained on one checkpoint.
+  const fs::path dir = fs::path(scratch("lock_role"));
+  fs::create_directories(dir);
+  const std::string checkpoint = (dir / "ck").string();
+  const Result lock = run("cartpole", "--epochs 1 --samples 8 --csv " + checkpoint +
+                                          ".lock --checkpoint " + checkpoint);
+  INFO(lock.output);
+  CHECK(lock.status == 1);
+  CHECK(lock.output.find("cartpole: --csv '" + checkpoint +
+                         ".lock' and --checkpoint's lock file '" + checkpoint +
+                         ".lock' are the same file") != std::string::npos);
+  CHECK_FALSE(fs::exists(checkpoint));
+}
+
 TEST_CASE("bench_mujoco checks --source before measuring: exit 1, naming the flag", "[programs]") {
   // Found by a fault probe: the table's header came first, then exit 2 (a bad flag's code) with
   // load_mujoco_model's message, which did not name --source.

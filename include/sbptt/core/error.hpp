@@ -33,6 +33,12 @@ public:
   using Error::Error;
 };
 
+/// A resource the system would not give: a thread (a process or memory limit).
+class ResourceError : public Error {
+public:
+  using Error::Error;
+};
+
 /// A NaN or Inf where a finite number is required.
 class NonFiniteError : public Error {
 public:
@@ -60,8 +66,8 @@ void require(bool condition, Parts&&... parts) {
 }
 
 /// `work()`, with "`prefix`: " in front of the message of an `InvalidArgument`, `ParseError`,
-/// `IoError` or `NonFiniteError` it throws, rethrown as that type: a reader names its file, and
-/// only its caller knows which flag or setting gave it.
+/// `IoError`, `NonFiniteError` or `ResourceError` it throws, rethrown as that type: a reader
+/// names its file, and only its caller knows which flag or setting gave it.
 template <class Work>
 decltype(auto) prefixing_errors(const std::string& prefix, Work&& work) {
   try {
@@ -74,6 +80,8 @@ decltype(auto) prefixing_errors(const std::string& prefix, Work&& work) {
     throw IoError(concat(prefix, ": ", e.what()));
   } catch (const NonFiniteError& e) {
     throw NonFiniteError(concat(prefix, ": ", e.what()));
+  } catch (const ResourceError& e) {
+    throw ResourceError(concat(prefix, ": ", e.what()));
   }
 }
 

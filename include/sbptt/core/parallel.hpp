@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <exception>
 #include <mutex>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -49,23 +50,33 @@ inline void back_off(int& turns) {
 class ThreadPool {
 public:
   /// \param threads total threads of a run, ≥ 1 (1: `run` executes inline, no worker exists).
+  /// Throws `ResourceError` when the system will not start them all (a process limit such as
+  /// ulimit -u or a container's pids limit, or ulimit -v), after stopping those it started.
   explicit ThreadPool(Index threads) {
     require(threads >= 1, "ThreadPool: threads = ", threads, "; expected at least 1");
     workers_.reserve(static_cast<std::size_t>(threads - 1));
-    for (Index w = 1; w < threads; ++w) workers_.emplace_back([this, w] { work(w); });
+    for (Index w = 1; w < threads; ++w) {
+      try {
+        workers_.emplace_back([this, w] { work(w); });
+      } catch (const std::system_error& e) {
+        // The destructor does not run for a constructor that throws; joinable threads left
+        // behind would terminate the program, or hang it in the condition variable's end.
+        stop_and_join();
+        throw ResourceError(concat("the system started ", w, " of the ", threads,
+                                   " threads asked for (the caller's included): ", e.what(),
+                                   "; expected a thread count within the process's limits "
+                                   "(ulimit -u, a container's or Slurm's pids limit, ulimit -v)"));
+      } catch (...) {  // std::thread allocates its state first: bad_alloc under ulimit -v
+        stop_and_join();
+        throw;
+      }
+    }
   }
 
   ThreadPool(const ThreadPool&) = delete;
   ThreadPool& operator=(const ThreadPool&) = delete;
 
-  ~ThreadPool() {
-    stop_.store(true, std::memory_order_relaxed);
-    // The wake-up is a new generation: with the last run's size left in place, a worker still
-    // in `drain` would claim its items again and call a task whose captures may be gone.
-    count_.store(0, std::memory_order_release);
-    publish();
-    for (auto& worker : workers_) worker.join();
-  }
+  ~ThreadPool() { stop_and_join(); }
 
   /// Threads taking part in a run, the caller included.
   [[nodiscard]] Index threads() const { return static_cast<Index>(workers_.size()) + 1; }
@@ -200,6 +211,15 @@ private:
       done_.fetch_add(1, std::memory_order_release);
       seen = state_.load(std::memory_order_acquire);
     }
+  }
+
+  void stop_and_join() {
+    stop_.store(true, std::memory_order_relaxed);
+    // The wake-up is a new generation: with the last run's size left in place, a worker still
+    // in `drain` would claim its items again and call a task whose captures may be gone.
+    count_.store(0, std::memory_order_release);
+    publish();
+    for (auto& worker : workers_) worker.join();
   }
 
   void work(Index worker) {

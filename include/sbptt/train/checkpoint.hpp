@@ -409,13 +409,19 @@ template <class Scalar>
   return parse_checkpoint<Scalar>(text, path, check_settings);
 }
 
-/// The lock of a run on its checkpoint: `<checkpoint>.lock` beside the file the path names
-/// (links followed), held until the result is destroyed; none for an empty path. Two runs of
-/// one checkpoint would interleave their rows in the log and leave it resumable by neither.
-/// Throws `IoError` when another run holds it. A file system without locks runs unlocked.
+/// `<checkpoint>.lock` beside the file `checkpoint` names (links followed); "" for an empty
+/// path.
+[[nodiscard]] inline std::string checkpoint_lock_path(const std::string& checkpoint) {
+  return checkpoint.empty() ? std::string() : detail::final_target(checkpoint).string() + ".lock";
+}
+
+/// The lock of a run on its checkpoint, `checkpoint_lock_path(checkpoint)`, held until the
+/// result is destroyed; none for an empty path. Two runs of one checkpoint would interleave
+/// their rows in the log and leave it resumable by neither. Throws `IoError` when another run
+/// holds it. A file system without locks runs unlocked.
 [[nodiscard]] inline detail::FileLock lock_checkpoint(const std::string& checkpoint) {
   if (checkpoint.empty()) return {};
-  const std::string lock_file = detail::final_target(checkpoint).string() + ".lock";
+  const std::string lock_file = checkpoint_lock_path(checkpoint);
   detail::FileLock lock = detail::FileLock::take(lock_file, false);
   detail::require<IoError>(!lock.busy(), "checkpoint '", checkpoint, "' is in use: another run "
                            "holds '", lock_file, "' (the same command started twice?); "

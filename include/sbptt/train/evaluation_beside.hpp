@@ -23,6 +23,20 @@
 
 namespace sbptt {
 
+namespace detail {
+
+/// The pool of the evaluation beside the training: its one thread beside the caller. Its
+/// failure names it, as the message would otherwise count 2 threads a user never asked for.
+inline ThreadPool evaluation_thread_pool() {
+  try {
+    return ThreadPool(2);
+  } catch (const ResourceError& e) {
+    throw ResourceError(concat("evaluate_beside: its thread beside the training: ", e.what()));
+  }
+}
+
+}  // namespace detail
+
 /// The second thread, engine and controller copy of `run_training`'s `evaluate_beside`.
 template <class TrainerT>
 class EvaluationBeside {
@@ -34,7 +48,7 @@ public:
       : controller_(trainer.controller()),
         engine_(trainer.engine().simulator(), controller_, trainer.engine().objective(),
                 trainer.engine().steps()),
-        pool_(2) {
+        pool_(detail::evaluation_thread_pool()) {
     static_assert(std::copy_constructible<Ctrl>,
                   "the evaluation beside the training needs a copy of the controller");
     // A view of a network (one holding a reference to it) copies as a second view of it: the

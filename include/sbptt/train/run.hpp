@@ -143,9 +143,13 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
                                    std::pair{"parameters file", &settings.save_params}}) {
     if (!path->empty()) check_output_path(*path, what);
   }
+  // The lock too (never written, so an input beside it is no clash): a log renamed over it
+  // would leave a second run of the checkpoint a lock of its own.
   require_distinct_files({{"training log", settings.log_csv, true},
                           {"checkpoint", settings.checkpoint, true},
-                          {"parameters file", settings.save_params, true}});
+                          {"parameters file", settings.save_params, true},
+                          {"checkpoint's lock file", checkpoint_lock_path(settings.checkpoint),
+                           false}});
   const detail::FileLock checkpoint_lock =
       detail::naming_checkpoint(settings, [&] { return lock_checkpoint(settings.checkpoint); });
 

@@ -1,0 +1,149 @@
+// What the programs do when the system says no: threads it will not start (a process limit,
+// played by support/thread_start_fails.cpp), and a reader that went away (`| head`). Either
+// used to end a run without a word (a hang, an abort, or death by SIGPIPE with the parameters
+// unsaved); now each ends with exit 1 and, where stderr still reaches someone, says why.
+//
+// SBPTT_EXAMPLES_DIR (environment) runs these tests against other builds of the programs.
+#include <catch2/catch.hpp>
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "programs/program_runner.hpp"
+#include "support/address_sanitizer.hpp"
+#include "support/files.hpp"
+
+namespace fs = std::filesystem;
+using sbptt::testing::examples_dir;
+using sbptt::testing::file_text;
+using sbptt::testing::fresh_directory;
+
+namespace {
+
+/// Runs `command` through `sh -c` (under `timeout 120`: a program that blocked would fail, not
+/// hang the suite) with stdout, and stderr unless the command redirects it, on a pipe whose
+/// reading end is already closed: every write to it fails (or raises SIGPIPE). Returns the wait
+/// status.
+int run_into_closed_pipe(const std::string& command) {
+  int ends[2];
+  REQUIRE(::pipe(ends) == 0);
+  ::close(ends[0]);
+  const pid_t pid = ::fork();
+  REQUIRE(pid >= 0);
+  if (pid == 0) {
+    ::signal(SIGPIPE, SIG_DFL);  // as a shell starts a pipeline's programs
+    ::dup2(ends[1], 1);
+    ::dup2(ends[1], 2);
+    ::close(ends[1]);
+    const std::string timed = "exec timeout 120 " + command;
+    ::execl("/bin/sh", "sh", "-c", timed.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  ::close(ends[1]);
+  int status = 0;
+  REQUIRE(::waitpid(pid, &status, 0) == pid);
+  return status;
+}
+
+std::string describe_status(int status) {
+  if (WIFSIGNALED(status)) return "killed by signal " + std::to_string(WTERMSIG(status));
+  return "exit " + std::to_string(WEXITSTATUS(status));
+}
+
+}  // namespace
+
+TEST_CASE("a reader that went away: the run finishes its files and exits 1, not by SIGPIPE",
+          "[programs]") {
+  // `guidance … 2>&1 | head -2` died at its next line with exit 141, its log one row long and
+  // --save-params never written.
+  const fs::path dir = fresh_directory("closed_pipe");
+  const std::string params = (dir / "p.txt").string(), log = (dir / "log.csv").string();
+  const std::string run = examples_dir() + "/guidance --epochs 3 --samples 16 --csv " + log +
+                          " --save-params " + params;
+  int status = run_into_closed_pipe(run);
+  INFO(describe_status(status));
+  CHECK((WIFEXITED(status) && WEXITSTATUS(status) == 1));
+  CHECK(fs::exists(params));
+  const std::string rows = file_text(log);
+  CHECK(std::count(rows.begin(), rows.end(), '\n') == 4);  // the header and 3 epochs
+
+  // With stderr elsewhere, it says why.
+  const std::string said = (dir / "stderr.txt").string();
+  fs::remove(params);
+  fs::remove(log);
+  status = run_into_closed_pipe(run + " 2>" + said);
+  INFO(describe_status(status) << "\n" << file_text(said));
+  CHECK((WIFEXITED(status) && WEXITSTATUS(status) == 1));
+  CHECK(file_text(said).find("guidance: standard output or standard error was not written in "
+                             "full: Broken pipe") != std::string::npos);
+  CHECK(fs::exists(params));
+
+  // Every program's usage into a closed pipe: exit 1, none killed.
+  for (const std::string program :
+       {"toy", "cartpole", "guidance", "quantum", "mujoco", "rotation", "accuracy",
+        "lqr_convergence", "bench", "bench_mujoco", "reproduce"}) {
+    status = run_into_closed_pipe(examples_dir() + "/" + program + " --help");
+    INFO(program << ": " << describe_status(status));
+    CHECK((WIFEXITED(status) && WEXITSTATUS(status) == 1));
+  }
+  for (const std::string program : {"custom_simulator", "train_own_scene"}) {
+    const std::string arguments =
+        program == "train_own_scene" ? fresh_directory("closed_pipe_own_scene").string() : "";
+    status = run_into_closed_pipe(examples_dir() + "/" + program + " " + arguments);
+    INFO(program << ": " << describe_status(status));
+    CHECK((WIFEXITED(status) && WEXITSTATUS(status) == 1));
+  }
+
+  // The runner finishes its sweep (it died at its next line, killing its runs), and its task
+  // programs get SIGPIPE back as they would from a shell (it passed its own ignoring on).
+  const fs::path out = dir / "sweep";
+  status = run_into_closed_pipe(examples_dir() + "/reproduce --tasks cartpole --complexities 1 "
+                                "--methods R --clips norm --seeds 1 --epochs 2 --samples 8 "
+                                "--no-plot --out " + out.string());
+  INFO("reproduce: " << describe_status(status));
+  CHECK((WIFEXITED(status) && WEXITSTATUS(status) == 1));
+  const std::string summary = file_text(out / "summary.csv");
+  CHECK(std::count(summary.begin(), summary.end(), '\n') == 2);  // the header and the run
+}
+
+TEST_CASE("threads the system will not start: exit 1 naming --threads, no hang, no abort",
+          "[programs]") {
+#ifndef SBPTT_THREAD_START_FAILS
+  WARN("built without the thread-start shim (a sanitizer build): not checked");
+#else
+  if (sbptt::testing::address_sanitizer) {
+    WARN("AddressSanitizer must be the first library: the shim cannot be preloaded");
+    return;
+  }
+  // Under ulimit -u or a pids limit the pool's constructor threw with its started workers
+  // still joinable: std::terminate (exit 134) when one had started, a hang for ever when many.
+  const std::string shim = std::string("LD_PRELOAD=") + SBPTT_THREAD_START_FAILS;
+  const fs::path dir = fresh_directory("thread_limit");
+  // --evaluate-beside starts a pool of 2 threads (one new) after the engine's.
+  for (const auto& [allowed, flags] : std::vector<std::pair<int, std::string>>{
+           {0, "--threads 8"}, {1, "--threads 8"}, {5, "--threads 8"},
+           {0, "--threads 2 --evaluate-beside"}, {1, "--threads 2 --evaluate-beside"},
+           {7, "--threads 8 --evaluate-beside"}}) {
+    const auto r = sbptt::testing::run(
+        "cartpole", flags + " --epochs 1 --samples 8 --csv " + (dir / "l.csv").string(),
+        "SBPTT_THREADS_ALLOWED=" + std::to_string(allowed) + " " + shim + " timeout 60 ");
+    INFO(allowed << " threads allowed, " << flags << "\n" << r.output);
+    CHECK(r.status == 1);
+    CHECK(r.output.find("cartpole: cannot start the threads of " + flags.substr(0, 11)) !=
+          std::string::npos);
+    CHECK(r.output.find("threads asked for (the caller's included): Resource temporarily "
+                        "unavailable") != std::string::npos);
+    const bool beside_failed = flags.find("beside") != std::string::npos && allowed > 0;
+    CHECK((r.output.find(flags.substr(0, 11) + " and --evaluate-beside: evaluate_beside: its "
+                         "thread beside the training: the system started 1 of the 2") !=
+           std::string::npos) == beside_failed);
+  }
+#endif
+}

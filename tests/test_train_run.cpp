@@ -185,6 +185,25 @@ TEMPLATE_TEST_CASE("run: a checkpointed run resumed twice ends bit for bit as on
   }
 }
 
+TEST_CASE("run: a stop asked for in the last epoch ends a finished run", "[train]") {
+  // Nothing is left to resume: the run is `Finished`, not `Requested` (a program would
+  // otherwise tell its user to run it again, and a runner would count it unfinished).
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  for (const bool beside : {false, true}) {
+    INFO("evaluate_beside " << beside);
+    for (long stop_at : {2L, 3L}) {
+      Setup<double> s(Method::Regular, 3);
+      RunSettings settings = fresh_checkpoint_run("last.checkpoint", 3);
+      settings.evaluate_beside = beside;
+      RunCallbacks callbacks;
+      callbacks.should_stop = [&](const EpochRecord& r) { return r.epoch == stop_at; };
+      const auto result = run_training(s.trainer, train, test, settings, callbacks);
+      CHECK(result.epochs == stop_at);
+      CHECK(result.end == (stop_at == 3 ? RunEnd::Finished : RunEnd::Requested));
+    }
+  }
+}
+
 TEST_CASE("run: a checkpoint after skipped batches resumes as one run", "[train]") {
   // One train sample overflows the rollout, so the batch that holds it is skipped in every
   // epoch (SkipBatch): Adam has taken one step fewer per epoch than there are batches, which

@@ -328,7 +328,11 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                    signal_name(signal), result.epochs, resume.c_str(), saved.c_str());
       return 128 + signal;
     }
-    case RunEnd::Finished: break;
+    case RunEnd::Finished:
+      if (signal != 0)
+        std::fprintf(stderr, "%s: %s came in the last epoch, which then ended the run\n", name,
+                     signal_name(signal));
+      break;
   }
   if (result.last && result.last->test_loss)
     std::printf("final test loss %.9g\n", *result.last->test_loss);

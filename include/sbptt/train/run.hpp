@@ -303,7 +303,8 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
       if (log) log->append(record);
       if (callbacks.on_epoch) callbacks.on_epoch(record);
       stop = callbacks.should_stop && callbacks.should_stop(record);
-      if (stop) result.end = RunEnd::Requested;
+      // A stop asked for in the last epoch cuts nothing: the run has finished.
+      if (stop && record.epoch < settings.epochs) result.end = RunEnd::Requested;
       if (settings.patience > 0 && since_best >= settings.patience) {
         result.end = RunEnd::EarlyStop;
         stop = true;

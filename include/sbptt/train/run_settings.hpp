@@ -53,7 +53,8 @@ struct RunCallbacks {
   /// the epoch then ends the run (`RunEnd::NonFinite`: no batch of it was finite, or its
   /// evaluation was not), which undoes the epoch.
   std::function<void(const NonFiniteEvent&, bool skipped)> on_non_finite{};
-  /// Asked after each epoch; true ends the run (`RunEnd::Requested`) after its checkpoint.
+  /// Asked after each epoch; true ends the run (`RunEnd::Requested`) after its checkpoint,
+  /// but for the last epoch, after which the run is `Finished` either way.
   std::function<bool(const EpochRecord&)> should_stop{};
   /// Once every setting, output and checkpoint has been checked (and a checkpoint resumed),
   /// before the first epoch: `epoch` is the number of epochs already done (0 for a new run).

@@ -5,6 +5,8 @@
 
 #include <unistd.h>
 
+#include <algorithm>
+#include <cstring>
 #include <filesystem>
 #include <limits>
 #include <string>
@@ -130,6 +132,64 @@ TEST_CASE("checkpoint: a setting given twice is refused, naming both lines", "[t
                       Catch::Contains("checkpoint 'test.checkpoint', line 4: setting --samples "
                                       "again (line 3 gave it); expected each setting once"));
   }
+}
+
+TEST_CASE("checkpoint: the file's own text is echoed with its control bytes escaped",
+          "[train]") {
+  // A damaged or hostile file must not drive the terminal (ESC sequences) or cut the message
+  // (a NUL ends a C string in fprintf); what follows the value must still be said.
+  const std::string hostile = std::string("3\x1b[2J") + '\0' + "7";
+  const std::string shown = "3\\x1b[2J\\x007";
+  auto without_control_bytes = [](const std::string& message) {
+    return std::ranges::none_of(message, [](char c) {
+      return static_cast<unsigned char>(c) < 0x20 || c == 0x7f;
+    });
+  };
+  auto message_of = [](auto&& call) {
+    try {
+      call();
+    } catch (const std::exception& e) {
+      return std::string(e.what(), std::strlen(e.what()));
+    }
+    return std::string("(nothing thrown)");
+  };
+  Checkpoint<double> c;
+  c.settings = {{"method", "C"}, {"--samples", hostile}, {hostile, "1"}};
+  c.shuffle_state = Rng(1).state();
+  c.epoch = 1;
+  const std::string text = checkpoint_text(c);
+  const Checkpoint<double> read = parse_checkpoint<double>(text, "test.checkpoint");
+  REQUIRE(read.settings[1].value == hostile);
+
+  const std::string other_value = message_of([&] {
+    require_same_settings({{"method", "C"}, {"--samples", "32"}}, read.settings, "c");
+  });
+  INFO(other_value);
+  CHECK(without_control_bytes(other_value));
+  CHECK_THAT(other_value, Catch::Contains("--samples = " + shown + "; this run has --samples = 32"));
+
+  const std::string unknown = message_of([&] {
+    require_same_settings({{"method", "C"}, {"--samples", hostile}}, read.settings, "c");
+  });
+  INFO(unknown);
+  CHECK(without_control_bytes(unknown));
+  CHECK_THAT(unknown, Catch::Contains("made with setting " + shown + " = 1, which this run"));
+
+  std::string twice = text;
+  twice.insert(twice.find("setting method"), "setting " + hostile + "=1\n");
+  const std::string again =
+      message_of([&] { (void)parse_checkpoint<double>(twice, "test.checkpoint"); });
+  INFO(again);
+  CHECK(without_control_bytes(again));
+  CHECK_THAT(again, Catch::Contains("setting " + shown + " again (line 2 gave it)"));
+
+  std::string wrong_key = text;
+  wrong_key.replace(wrong_key.find("epoch 1"), 5, hostile);
+  const std::string key =
+      message_of([&] { (void)parse_checkpoint<double>(wrong_key, "test.checkpoint"); });
+  INFO(key);
+  CHECK(without_control_bytes(key));
+  CHECK_THAT(key, Catch::Contains(shown + " 1', expected 'epoch"));
 }
 
 TEST_CASE("checkpoint: best parameters exactly when an epoch was best, or refused", "[train]") {

@@ -69,6 +69,10 @@ namespace detail {
 
 inline constexpr std::string_view checkpoint_magic = "sbptt-checkpoint 1";
 
+/// How much of a setting's name or value a message shows of the file's text, escaped: a
+/// damaged file must neither drive the terminal nor cut the message at a NUL.
+inline constexpr std::size_t setting_chars = 120;
+
 template <class Scalar>
 void append_vector(std::string& text, const char* key, const Vector<Scalar>& values) {
   text += concat(key, " ", values.size(), "\n");
@@ -114,7 +118,7 @@ public:
     const std::string_view line = next();
     require<ParseError>(line.substr(0, key.size()) == key &&
                             (line.size() == key.size() || line[key.size()] == ' '),
-                        where(), ": '", line.substr(0, 60), "', expected '", key, " …'");
+                        where(), ": '", printable(line, 60), "', expected '", key, " …'");
     return line.size() > key.size() ? line.substr(key.size() + 1) : std::string_view{};
   }
 
@@ -239,7 +243,8 @@ template <class Scalar>
     std::string name(setting.substr(0, equals));
     // A run writes each setting once; of two, either could be the one compared.
     for (std::size_t i = 0; i < c.settings.size(); ++i)
-      detail::require<ParseError>(c.settings[i].name != name, in.where(), ": setting ", name,
+      detail::require<ParseError>(c.settings[i].name != name, in.where(), ": setting ",
+                                  detail::printable(name, detail::setting_chars),
                                   " again (line ", i + 2,  // the settings follow line 1
                                   " gave it); expected each setting once");
     c.settings.push_back({std::move(name), std::string(setting.substr(equals + 1))});
@@ -370,15 +375,18 @@ inline void require_same_settings(const std::vector<RunSetting>& expected,
       now = want.value;
     }
     throw InvalidArgument(detail::concat("checkpoint '", path, "' was made with ", name, " = ",
-                                         made, "; this run has ", name, " = ", now,
+                                         detail::printable(made, detail::setting_chars), "; this run has ",
+                                         name, " = ", now,
                                          "; expected the same settings (remove it to start "
                                          "over)"));
   }
   for (const RunSetting& f : found) {
     bool known = false;
     for (const RunSetting& want : expected) known = known || want.name == f.name;
-    detail::require(known, "checkpoint '", path, "' was made with setting ", named(f.name),
-                    " = ", f.value, ", which this run does not have; expected a checkpoint of "
+    detail::require(known, "checkpoint '", path, "' was made with setting ",
+                    detail::printable(named(f.name), detail::setting_chars), " = ",
+                    detail::printable(f.value, detail::setting_chars),
+                    ", which this run does not have; expected a checkpoint of "
                     "this run (remove it to start over)");
   }
 }

@@ -53,6 +53,32 @@ TEST_CASE("checkpoint: an epoch whose squared update norm overflowed reads back"
   CHECK_THROWS_AS(parse_checkpoint<double>(checkpoint_text(c), "test.checkpoint"), ParseError);
 }
 
+TEST_CASE("checkpoint: a count of numbers beyond the lines left is refused before reading",
+          "[train]") {
+  // 'params 100000000' made the reader allocate 10^8 numbers before finding the file short:
+  // under a memory limit that was reported as running out of memory for the run's sizes.
+  Checkpoint<double> c;
+  c.shuffle_state = Rng(1).state();
+  c.epoch = 1;
+  c.params = Vector<double>::Constant(3, 0.5);
+  const std::string text = checkpoint_text(c);
+  REQUIRE_NOTHROW(parse_checkpoint<double>(text, "test.checkpoint"));
+  const auto lines_after = [&](const std::string& key) {
+    const std::size_t at = text.find("\n" + key + " ") + 1;
+    return std::count(text.begin() + static_cast<std::ptrdiff_t>(at), text.end(), '\n') - 1;
+  };
+  for (const std::string key : {"params", "best_params", "adam_m", "adam_v"}) {
+    std::string spoiled = text;
+    const std::size_t at = spoiled.find("\n" + key + " ") + 1;
+    spoiled.replace(at, spoiled.find('\n', at) - at, key + " 100000000");
+    INFO(key);
+    CHECK_THROWS_WITH(parse_checkpoint<double>(spoiled, "test.checkpoint"),
+                      Catch::Contains(": 100000000 numbers in " + key + "; expected at most the " +
+                                      std::to_string(lines_after(key)) +
+                                      " lines left in the file"));
+  }
+}
+
 TEST_CASE("checkpoint: the last record's epoch is a whole number in range, or refused",
           "[train]") {
   // 1.5 was read as epoch 1, and 1e300 converted to a long out of its range (undefined).

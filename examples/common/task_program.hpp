@@ -161,6 +161,19 @@ inline void check_file_flags(const TaskOptions& o) {
                           {"--checkpoint's lock file", checkpoint_lock_path(o.checkpoint), false}});
 }
 
+/// `load()` of the input file `path` that `flag` names: its errors prefixed with the flag, and
+/// memory that runs out while reading said to be the file's (`task_main`'s message for
+/// std::bad_alloc names the run's sizes, which did not cause it).
+template <class Load>
+decltype(auto) load_input_file(const char* flag, const std::string& path, Load&& load) {
+  try {
+    return detail::prefixing_errors(flag, std::forward<Load>(load));
+  } catch (const std::bad_alloc&) {
+    throw IoError(detail::concat(flag, ": out of memory reading '", path,
+                                 "'; expected a file whose numbers fit in memory"));
+  }
+}
+
 /// Trains `controller` for o.epochs epochs (or dumps gradients) with `run_training`, printing
 /// progress and every non-finite event to stderr.
 template <class Sim, class Ctrl, class Loss>
@@ -169,10 +182,12 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
   using Scalar = typename Sim::Scalar;
   const char* name = to_string(o.task);
   if (!o.init_params.empty())
-    detail::prefixing_errors("--init-params", [&] { load_parameters(o.init_params, controller); });
+    load_input_file("--init-params", o.init_params,
+                    [&] { load_parameters(o.init_params, controller); });
   if (!o.init_states.empty())
-    data.train = detail::prefixing_errors(
-        "--init-states", [&] { return load_states<Scalar>(o.init_states, sim.state_dim()); });
+    data.train = load_input_file("--init-states", o.init_states, [&] {
+      return load_states<Scalar>(o.init_states, sim.state_dim());
+    });
   if (!o.dump_gradients.empty())
     return dump_gradients(o, sim, controller, objective, steps, data.train);
 

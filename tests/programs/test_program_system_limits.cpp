@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <utility>
 #include <vector>
@@ -146,4 +147,32 @@ TEST_CASE("threads the system will not start: exit 1 naming --threads, no hang, 
            std::string::npos) == beside_failed);
   }
 #endif
+}
+
+TEST_CASE("memory that runs out reading an input file is said to be that file's", "[programs]") {
+  // A states file too large for `ulimit -v` was reported as "out of memory for --samples 8 …;
+  // expected sizes whose data and trajectories fit in memory": sizes that were not the cause.
+  if (sbptt::testing::address_sanitizer) {
+    WARN("AddressSanitizer cannot start under ulimit -v: not checked");
+    return;
+  }
+  const fs::path dir = fresh_directory("input_memory");
+  const std::string limit = "ulimit -v 40000; ";  // 40 MB
+  const auto started = sbptt::testing::run("cartpole", "--epochs 1 --samples 8", limit);
+  INFO(started.output);
+  REQUIRE(started.status == 0);  // the run itself fits
+  // 1.5 million rows of 4 numbers: 48 MB as doubles.
+  const fs::path states = dir / "states.csv";
+  {
+    std::string rows;
+    for (int i = 0; i < 1'500'000; ++i) rows += "0,0,0,0\n";
+    std::ofstream(states, std::ios::binary) << rows;
+  }
+  const auto r = sbptt::testing::run(
+      "cartpole", "--epochs 1 --samples 8 --init-states " + states.string(), limit);
+  INFO(r.output);
+  CHECK(r.status == 1);
+  CHECK(r.output.find("cartpole: --init-states: out of memory reading '" + states.string() +
+                      "'") != std::string::npos);
+  CHECK(r.output.find("--samples") == std::string::npos);
 }

@@ -141,6 +141,11 @@ public:
     const long count = integer(key);
     require<ParseError>(count >= 0 && count <= 100'000'000, where(), ": ", count,
                         " numbers; expected 0 to 10^8");
+    // A number a line: a count past the lines left is damage, found before its allocation.
+    const auto lines_left = std::count(text_.begin() + static_cast<std::ptrdiff_t>(position_),
+                                       text_.end(), '\n');
+    require<ParseError>(count <= lines_left, where(), ": ", count, " numbers in ", key,
+                        "; expected at most the ", lines_left, " lines left in the file");
     Vector<Scalar> values(count);
     for (long i = 0; i < count; ++i) {
       const std::string_view text = next();

@@ -1,8 +1,8 @@
 // A user's own scene (the point mass of point_mass.hpp) trained with the library's driver:
 // combined update, a test set, a CSV log, the best parameters kept, early stop, checkpoints.
-// SIGINT or SIGTERM stops it after the current epoch with its work saved (exit 128 + the
-// signal). Rerun it after a stop or a kill and it resumes from the checkpoint, and says so. A
-// template to copy: it and point_mass.hpp need only the installed headers.
+// SIGINT, SIGTERM, SIGHUP or SIGXCPU stops it after the current epoch with its work saved (exit
+// 128 + the signal). Rerun it after a stop or a kill and it resumes from the checkpoint, and says
+// so. A template to copy: it and point_mass.hpp need only the installed headers.
 //   train_own_scene [DIRECTORY]      (writes log.csv, run.checkpoint, best.params there;
 //                                     in the working directory without one)
 #include <csignal>

@@ -11,7 +11,9 @@
 #      checkpoint or partial file is left;
 #   3. a checkpoint left by a run of other settings under the same name is not resumed;
 #   4. a checkpoint whose training log is gone (the programs refuse to resume it) fails the run
-#      once, is removed, and the next sweep redoes the run from epoch 1.
+#      once, is removed, and the next sweep redoes the run from epoch 1;
+#   5. a run that ends on a signal its program answers (exit 128 + SIGHUP or SIGXCPU, as on
+#      SIGINT or SIGTERM) keeps its checkpoint, and the next sweep resumes it.
 # Without the CHECKPOINTS marker the fake programs do not list --checkpoint in --help, and the
 # runner passes no --checkpoint (reproduce_resume.cmake covers that case).
 cmake_minimum_required(VERSION 3.20)
@@ -103,3 +105,23 @@ execute_process(COMMAND "${REPRODUCE}" ${grid} --seeds 1 --methods C --out "${G}
                 RESULT_VARIABLE again OUTPUT_QUIET ERROR_QUIET)
 check("the next sweep redoes the run from epoch 1" again EQUAL 0
       AND EXISTS "${G}/runs/cartpole_p4_C_norm_s42.csv")
+
+# --- 5. a run ended by a signal its program answers keeps its checkpoint ------------------------
+# SIGHUP's and SIGXCPU's exit codes (129, 152) were counted as a program's failure, and the
+# checkpoint that the program had just written was removed.
+foreach(signal 1 24)
+  set(H "${WORK_DIR}/signal_${signal}")
+  math(EXPR code "128 + ${signal}")
+  file(MAKE_DIRECTORY "${H}")
+  file(WRITE "${H}/stop_cartpole_p4_C_norm_s42" "${code}\n")
+  execute_process(COMMAND "${REPRODUCE}" ${grid} --seeds 1 --methods C --out "${H}"
+                  RESULT_VARIABLE first OUTPUT_QUIET ERROR_VARIABLE first_err)
+  check("exit ${code}: the run is listed as stopped by signal ${signal}, its checkpoint kept (${first_err})"
+        first EQUAL 1 AND first_err MATCHES "stopped by signal ${signal} \\([^)]*\\). its checkpoint is kept"
+        AND EXISTS "${H}/runs/cartpole_p4_C_norm_s42.checkpoint")
+  execute_process(COMMAND "${REPRODUCE}" ${grid} --seeds 1 --methods C --out "${H}"
+                  RESULT_VARIABLE again OUTPUT_QUIET ERROR_QUIET)
+  file(READ "${H}/fake_resumes" resumed)
+  check("exit ${code}: the next sweep resumed the run after its epoch 1 (${resumed})"
+        again EQUAL 0 AND resumed STREQUAL "cartpole_p4_C_norm_s42 1\n")
+endforeach()

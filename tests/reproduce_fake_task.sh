@@ -7,7 +7,9 @@
 # When a file `checkpoints` sits beside it, its --help lists --checkpoint FILE, which it then
 # keeps like the real programs: after every epoch, the epoch and the log's length; a restart
 # cuts the log (which must still be there, at least that long; else exit 1 like the real
-# programs) back to that length and resumes after that epoch (noted in fake_resumes).
+# programs) back to that length and resumes after that epoch (noted in fake_resumes). A file
+# `stop_<run name>` in the out dir holding an exit code makes the run end with it after its
+# epoch (the file removed): a task program stopped by a signal it answers exits 128 + it.
 task=$(basename "$0")
 csv= epochs=1 seed=0 method= clip= complexity= threads=1 checkpoint=
 if [ "${1:-}" = --help ]; then
@@ -67,6 +69,9 @@ while [ "$e" -le "$stop" ]; do
     echo "$e $((e + 1))" > "$checkpoint.tmp.$$" && mv "$checkpoint.tmp.$$" "$checkpoint"
   fi
   echo "$task: epoch $e"
+  if [ -f "$out/stop_$name" ]; then
+    code=$(cat "$out/stop_$name"); rm -f "$out/stop_$name"; exit "$code"
+  fi
   sleep 0.12
   e=$((e + 1))
 done

@@ -12,6 +12,8 @@
 
 namespace {
 
+constexpr int stop_kinds[] = {SIGINT, SIGTERM, SIGHUP, SIGXCPU};
+
 /// The handler the process has for `signal` now.
 void (*disposition(int signal))(int) {
   struct sigaction current {};
@@ -37,23 +39,23 @@ void quietly(Body&& body) {
 
 TEST_CASE("stop signals: the first signal is noted and gets its default action back",
           "[train]") {
-  for (const int signal : {SIGINT, SIGTERM}) {
+  // SIGHUP (a closed terminal, a dropped ssh connection) and SIGXCPU (a soft CPU-time limit,
+  // which batch systems send before their kill) ended a run at once with nothing saved.
+  for (const int signal : stop_kinds) {
     INFO(sbptt::signal_name(signal));
-    REQUIRE(std::signal(SIGINT, SIG_DFL) != SIG_ERR);  // not Catch's own handlers
-    REQUIRE(std::signal(SIGTERM, SIG_DFL) != SIG_ERR);
+    for (const int kind : stop_kinds)
+      REQUIRE(std::signal(kind, SIG_DFL) != SIG_ERR);  // not Catch's own handlers
     {
       const sbptt::StopSignals stop("test");
       CHECK_FALSE(stop.requested());
-      CHECK(disposition(signal) != SIG_DFL);
+      for (const int kind : stop_kinds) CHECK(disposition(kind) != SIG_DFL);
       quietly([&] { REQUIRE(::raise(signal) == 0); });
       CHECK(stop.requested());
       CHECK(stop.signal() == signal);
-      // A second one, of either kind, would end the process.
-      CHECK(disposition(SIGINT) == SIG_DFL);
-      CHECK(disposition(SIGTERM) == SIG_DFL);
+      // A second one, of any kind, would end the process.
+      for (const int kind : stop_kinds) CHECK(disposition(kind) == SIG_DFL);
     }
-    CHECK(disposition(SIGINT) == SIG_DFL);
-    CHECK(disposition(SIGTERM) == SIG_DFL);
+    for (const int kind : stop_kinds) CHECK(disposition(kind) == SIG_DFL);
   }
 }
 
@@ -61,15 +63,15 @@ TEST_CASE("stop signals: a second signal of the other kind ends the process at o
           "[train]") {
   // Ctrl-C, then a SIGTERM from a timeout or a scheduler: found by a review, the SIGTERM was
   // caught again and replaced the SIGINT. In a child, which the second signal must kill.
-  for (const auto& [first, second] : {std::pair{SIGINT, SIGTERM}, std::pair{SIGTERM, SIGINT}}) {
+  for (const auto& [first, second] : {std::pair{SIGINT, SIGTERM}, std::pair{SIGTERM, SIGINT},
+                                      std::pair{SIGHUP, SIGINT}, std::pair{SIGXCPU, SIGHUP}}) {
     INFO(sbptt::signal_name(first) << " then " << sbptt::signal_name(second));
     const pid_t child = ::fork();
     REQUIRE(child >= 0);
     if (child == 0) {
       const int null = ::open("/dev/null", O_WRONLY);
       ::dup2(null, 2);
-      std::signal(SIGINT, SIG_DFL);
-      std::signal(SIGTERM, SIG_DFL);
+      for (const int kind : stop_kinds) std::signal(kind, SIG_DFL);
       const sbptt::StopSignals stop("child");
       ::raise(first);
       ::raise(second);

@@ -212,8 +212,8 @@ inline void require_float_range(const char* flag, double value) {
       " with the chosen gradient (docs/programs.md). Exit codes: 0 success, 1 error, 2 bad "
       "flag, 3 a non-finite value stopped training",
       task == Task::Mujoco ? " or --check-derivatives found derivatives that disagree" : "",
-      ", 130 and 143 after SIGINT and SIGTERM stopped training (after the epoch they came in, "
-      "its outputs written)."));
+      ", 130, 143, 129 and 152 after SIGINT, SIGTERM, SIGHUP and SIGXCPU stopped training (after "
+      "the epoch they came in, its outputs written)."));
   cli.value("--method", "R|M|C|S|N",
             "gradient: regular, modified, combined, stopped, network-only (long names and "
             "full/physics/stop work too)", "C",

@@ -112,14 +112,14 @@ inline std::string describe_status(int status) {
   return "ended";
 }
 
-/// The signal that stopped a task program, or 0: the one that killed it, or SIGINT or SIGTERM
-/// when it ended on them with exit code 128 + the signal, after the epoch in which they came
-/// and with its checkpoint written (docs/programs.md).
+/// The signal that stopped a task program, or 0: the one that killed it, or one of
+/// `StopSignals` (SIGINT, SIGTERM, SIGHUP, SIGXCPU) when it ended on it with exit code 128 + the
+/// signal, after the epoch in which it came and with its checkpoint written (docs/programs.md).
 inline int stopping_signal(int status) {
   if (WIFSIGNALED(status)) return WTERMSIG(status);
   if (!WIFEXITED(status)) return 0;
   const int signal = WEXITSTATUS(status) - 128;
-  return signal == SIGINT || signal == SIGTERM ? signal : 0;
+  return sbptt::is_stop_signal(signal) ? signal : 0;
 }
 
 inline bool is_executable(const fs::path& path) {

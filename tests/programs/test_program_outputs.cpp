@@ -26,6 +26,7 @@
 
 #include "programs/program_runner.hpp"
 #include "sbptt/nn/parameters_io.hpp"
+#include "sbptt/train/stop_signals.hpp"
 #include "support/address_sanitizer.hpp"
 #include "support/files.hpp"
 
@@ -58,10 +59,9 @@ Outcome launch(const std::string& program, const std::string& arguments,
   const pid_t pid = fork();
   REQUIRE(pid >= 0);
   if (pid == 0) {
-    // The program starts with SIGINT and SIGTERM at their default (then `prefix` may ignore
-    // them), whatever this test program was started ignoring.
-    signal(SIGINT, SIG_DFL);
-    signal(SIGTERM, SIG_DFL);
+    // The program starts with the stop signals at their default (then `prefix` may ignore
+    // them), whatever this test program was started ignoring (nohup ignores SIGHUP).
+    for (const int stop : {SIGINT, SIGTERM, SIGHUP}) signal(stop, SIG_DFL);
     execl("/bin/sh", "sh", "-c", command.c_str(), static_cast<char*>(nullptr));
     _exit(127);
   }
@@ -417,10 +417,12 @@ TEST_CASE("killed with SIGKILL at random epochs, a rerun with --checkpoint ends 
   }
 }
 
-TEST_CASE("SIGINT or SIGTERM stops after the current epoch, keeps its work and says so; the "
-          "rerun ends bit for bit as one uninterrupted run", "[programs]") {
+TEST_CASE("SIGINT, SIGTERM or SIGHUP stops after the current epoch, keeps its work and says "
+          "so; the rerun ends bit for bit as one uninterrupted run", "[programs]") {
   // Checkpoints only every 1000 epochs: what the rerun resumes from is written on the signal.
-  for (const int signal : {SIGINT, SIGTERM}) {
+  // SIGHUP (a closed terminal) killed the run at once, its parameters unsaved.
+  for (const int signal : {SIGINT, SIGTERM, SIGHUP}) {
+    const std::string name = sbptt::signal_name(signal);
     const CartPoleRun run("interrupt", "");
     const auto& [dir, log_path, common, params, log] = run;
     const auto rows = [&] { return run.rows(); };
@@ -428,16 +430,14 @@ TEST_CASE("SIGINT or SIGTERM stops after the current epoch, keeps its work and s
                                   " --checkpoint-every 1000";
     const Outcome stopped =
         launch("cartpole", resumable, "", [&] { return rows() >= 3; }, "", signal);
-    INFO((signal == SIGINT ? "SIGINT" : "SIGTERM") << "\n" << stopped.output);
+    INFO(name << "\n" << stopped.output);
     REQUIRE(stopped.status == 128 + signal);
     const long done = rows();
     CHECK(done >= 3);
     CHECK(done < 30);
-    CHECK(contains(stopped.output, "stopped by " + std::string(signal == SIGINT ? "SIGINT" : "SIGTERM") +
-                                       " after epoch " + std::to_string(done)));
+    CHECK(contains(stopped.output, "stopped by " + name + " after epoch " + std::to_string(done)));
     CHECK(contains(stopped.output, "run the same command again to resume"));
     // Said when the signal comes, not only after the epoch (which may take minutes).
-    const std::string name = signal == SIGINT ? "SIGINT" : "SIGTERM";
     CHECK(contains(stopped.output, "cartpole: " + name + ": stopping after the current epoch, "
                                    "which keeps its work; a second " + name + " stops at once"));
     CHECK(fs::exists(dir / "p.txt"));

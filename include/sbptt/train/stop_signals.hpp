@@ -1,8 +1,10 @@
 #pragma once
-/// \file Stopping a run cleanly on SIGINT or SIGTERM. While a `StopSignals` lives, the first of
+/// \file Stopping a run cleanly on SIGINT, SIGTERM, SIGHUP or SIGXCPU: Ctrl-C, a kill or a
+/// scheduler's end of a job, a closed terminal or dropped ssh connection, a soft CPU-time limit
+/// (which batch systems send before their kill). While a `StopSignals` lives, the first of
 /// those signals is noted and announced on stderr at once (an epoch of a large scene may take
-/// minutes, and silence would read as a signal lost), and both signals get their default action
-/// back, so that a second one, of either kind, ends the process at once. `requested()` as
+/// minutes, and silence would read as a signal lost), and all four get their default action
+/// back, so that a second one, of any kind, ends the process at once. `requested()` as
 /// `RunCallbacks::should_stop` then ends the run after its current epoch (`RunEnd::Requested`)
 /// with that epoch's log row, a checkpoint and the parameters written (docs/training.md,
 /// "Stopping on a signal"). Its end gives back the handlers there were before.
@@ -20,6 +22,7 @@
 #include <csignal>
 #include <cstdio>
 #include <initializer_list>
+#include <iterator>
 #include <vector>
 
 #include "sbptt/core/error.hpp"
@@ -28,27 +31,30 @@ namespace sbptt {
 
 namespace detail_stop_signals {
 
-constexpr int handled[2] = {SIGINT, SIGTERM};
+constexpr int handled[] = {SIGINT, SIGTERM, SIGHUP, SIGXCPU};
+constexpr int kinds = static_cast<int>(std::size(handled));
 
 // Atomics, not volatile: the handler may run on any of the library's threads.
 static_assert(std::atomic<int>::is_always_lock_free, "a signal handler needs lock-free atomics");
 inline std::atomic<int> caught{0};                   ///< the first signal that came, or 0
-inline std::atomic<bool> installed[2] = {false, false};  ///< per `handled`
+inline std::atomic<bool> installed[kinds] = {};  ///< per `handled`
 inline std::atomic<bool> alive{false};               ///< a StopSignals exists
 
 /// The notice of each of `handled`, composed before the handlers are installed: a handler may
 /// only write(2) it.
-inline char notice[2][256];
-inline std::size_t notice_size[2];
+inline char notice[kinds][256];
+inline std::size_t notice_size[kinds];
 
 extern "C" inline void note(int signal) {
   const int saved_errno = errno;  // of the code the signal interrupted
-  for (int k = 0; k < 2; ++k)
+  for (int k = 0; k < kinds; ++k)
     if (installed[k]) std::signal(handled[k], SIG_DFL);
   int none = 0;
   if (caught.compare_exchange_strong(none, signal)) {
-    const int k = signal == SIGINT ? 0 : 1;
-    [[maybe_unused]] const auto written = ::write(2, notice[k], notice_size[k]);
+    for (int k = 0; k < kinds; ++k) {
+      if (handled[k] != signal) continue;
+      [[maybe_unused]] const auto written = ::write(2, notice[k], notice_size[k]);
+    }
   }
   errno = saved_errno;
 }
@@ -66,14 +72,27 @@ extern "C" inline void note(int signal) {
   return kept;
 }
 
-/// "SIGINT" or "SIGTERM".
+/// Whether `signal` is one that a `StopSignals` answers (a program that has one then exits
+/// with 128 + it, its work saved).
+[[nodiscard]] inline bool is_stop_signal(int signal) {
+  return std::ranges::find(detail_stop_signals::handled, signal) !=
+         std::end(detail_stop_signals::handled);
+}
+
+/// "SIGINT", "SIGTERM", "SIGHUP", "SIGXCPU"; "a signal" for any other.
 [[nodiscard]] inline const char* signal_name(int signal) {
-  return signal == SIGINT ? "SIGINT" : "SIGTERM";
+  switch (signal) {
+    case SIGINT: return "SIGINT";
+    case SIGTERM: return "SIGTERM";
+    case SIGHUP: return "SIGHUP";
+    case SIGXCPU: return "SIGXCPU";
+    default: return "a signal";
+  }
 }
 
 class StopSignals {
  public:
-  /// Installs the handlers of SIGINT and SIGTERM (of those not ignored now). The notice a
+  /// Installs the handlers of SIGINT, SIGTERM, SIGHUP and SIGXCPU (of those not ignored now). The notice a
   /// signal prints starts with `program`. Throws `InvalidArgument` if another `StopSignals`
   /// lives.
   explicit StopSignals(const char* program) {
@@ -86,7 +105,7 @@ class StopSignals {
     action.sa_handler = s::note;
     sigemptyset(&action.sa_mask);
     for (const int signal : s::handled) sigaddset(&action.sa_mask, signal);  // one at a time
-    for (int k = 0; k < 2; ++k) {
+    for (int k = 0; k < s::kinds; ++k) {
       const char* name = signal_name(s::handled[k]);
       const int size = std::snprintf(s::notice[k], sizeof s::notice[k],
                                      "%s: %s: stopping after the current epoch, which keeps its "
@@ -97,14 +116,14 @@ class StopSignals {
       s::installed[k] = sigaction(s::handled[k], nullptr, &previous_[k]) == 0 &&
                         previous_[k].sa_handler != SIG_IGN;
     }
-    for (int k = 0; k < 2; ++k)
+    for (int k = 0; k < s::kinds; ++k)
       if (s::installed[k]) sigaction(s::handled[k], &action, nullptr);
   }
 
   /// Gives back the handlers there were before.
   ~StopSignals() {
     namespace s = detail_stop_signals;
-    for (int k = 0; k < 2; ++k) {
+    for (int k = 0; k < s::kinds; ++k) {
       if (s::installed[k]) sigaction(s::handled[k], &previous_[k], nullptr);
       s::installed[k] = false;
     }
@@ -116,12 +135,12 @@ class StopSignals {
   StopSignals(StopSignals&&) = delete;
   StopSignals& operator=(StopSignals&&) = delete;
 
-  /// The first signal that came (SIGINT or SIGTERM), or 0.
+  /// The first signal that came (SIGINT, SIGTERM, SIGHUP or SIGXCPU), or 0.
   [[nodiscard]] int signal() const { return detail_stop_signals::caught; }
   [[nodiscard]] bool requested() const { return signal() != 0; }
 
  private:
-  struct sigaction previous_[2] {};
+  struct sigaction previous_[detail_stop_signals::kinds] {};
 };
 
 }  // namespace sbptt

@@ -252,13 +252,19 @@ int main(int argc, char** argv) {
                 ("x" + std::to_string(settings.threads) + "t").c_str(), "rt ns", "sim ns",
                 "trajKiB", "RSS MiB");
     std::vector<Row> rows;
+    // The CSV is rewritten after every row: a signal in the minutes of measuring loses the row
+    // under way, not those measured.
+    const auto keep = [&](const Row& row) {
+      rows.push_back(row);
+      if (!settings.csv.empty()) write_csv(settings, rows);
+    };
     for (const auto& job : jobs) {
       Row row{job.task, job.scalar, std::string(1, job.method), in_child(job.run)};
       const RowResult& r = row.result;
       if (r.ok == 0) {
         std::printf("%-14s %-6s %-1s failed: %s\n", job.task.c_str(), job.scalar.c_str(),
                     row.method.c_str(), r.error);
-        rows.push_back(row);
+        keep(row);
         continue;
       }
       const std::string round_trip =
@@ -271,10 +277,9 @@ int main(int argc, char** argv) {
                   r.ms_epoch / r.ms_threads, round_trip.c_str(), r.sim_ns,
                   r.trajectory_bytes / 1024, r.rss_kib / 1024);
       if (!sbptt::examples::streams_written("bench")) return 1;
-      rows.push_back(row);
+      keep(row);
     }
     summarize(rows, settings.threads);
-    if (!settings.csv.empty()) write_csv(settings, rows);
     return sbptt::examples::with_streams_checked("bench", 0);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench: %s\n", e.what());

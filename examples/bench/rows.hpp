@@ -1,6 +1,7 @@
 #pragma once
 /// \file What bench measures for one row and how it builds each task's row, in a child process.
 
+#include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -9,6 +10,7 @@
 #include <atomic>
 #include <barrier>
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <exception>
 #include <functional>
@@ -521,9 +523,14 @@ inline RowResult in_child(const std::function<RowResult()>& body) {
   int fds[2];
   if (pipe(fds) != 0) throw sbptt::IoError("bench: pipe() failed");
   std::fflush(nullptr);
+  const pid_t parent = getpid();
   const pid_t pid = fork();
   if (pid < 0) throw sbptt::IoError("bench: fork() failed");
   if (pid == 0) {
+    // A bench stopped by a signal (kill, a scheduler) takes its measuring child with it, which
+    // would otherwise burn a core to the end of its row.
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (getppid() != parent) _exit(1);  // it died before the line above
     close(fds[0]);
     RowResult r;
     try {

@@ -108,6 +108,12 @@ public:
         throw InvalidArgument(detail::concat(token, " needs a value; the next word, '",
                                              argv[i + 1], "', is a flag (a value that starts "
                                              "with -- is written ", token, "=VALUE)"));
+      // CLI11 reads "--flag=" as "--flag" and takes the next word too.
+      if (token.ends_with('=') && takes_value(token.substr(0, token.size() - 1))) {
+        const std::string flag = token.substr(0, token.size() - 1);
+        throw InvalidArgument(detail::concat(flag, " needs a value; '", token, "' gives none "
+                                             "(expected ", flag, "=VALUE or ", flag, " VALUE)"));
+      }
       for (const auto& [flag, reason] : refused_)
         if (token == flag || token.rfind(flag + "=", 0) == 0)
           throw InvalidArgument(detail::concat(flag, ": ", reason));

@@ -8,9 +8,9 @@
 // in full, ...), 2 bad flags, 3 a non-finite value stopped training (--save-params still saves
 // the parameters the trainer rolled back to: those of the last logged epoch, or the initial
 // ones; mujoco: or --check-derivatives found derivatives that disagree), 128 + the signal:
-// SIGINT or SIGTERM stopped training after the epoch it came in (its log row, checkpoint and
-// parameters written; a second one ends the program at once; one the program was started
-// ignoring stays ignored: sbptt/train/stop_signals.hpp).
+// SIGINT, SIGTERM, SIGHUP or SIGXCPU stopped training after the epoch it came in (its log row,
+// checkpoint and parameters written; a second one ends the program at once; one the program was
+// started ignoring stays ignored: sbptt/train/stop_signals.hpp).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>

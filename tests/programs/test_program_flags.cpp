@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -194,7 +195,8 @@ TEST_CASE("--help of the task programs lists every exit code they can end with",
     INFO(program << " --help\n" << r.output);
     REQUIRE(r.status == 0);
     for (const std::string code : {"0 success", "1 error", "2 bad flag", "3 a non-finite value",
-                                   "130 and 143 after SIGINT and SIGTERM"})
+                                   "130, 143, 129 and 152 after SIGINT, SIGTERM, SIGHUP and "
+                                   "SIGXCPU"})
       CHECK(r.output.find(code) != std::string::npos);
   }
 }
@@ -271,6 +273,15 @@ TEST_CASE("numbers beyond the type's range, numbers not in decimals, contradicti
              "with -- is written --csv=VALUE)"},
         Case{"reproduce", "--out --dry-run", "--out needs a value; the next word, '--dry-run'"},
         Case{"toy", "--lr --epochs 1", "--lr needs a value; the next word, '--epochs'"},
+        // "--flag=" with nothing after '=' (an unset shell variable) did the same: the next
+        // word was taken as its value, whatever it was.
+        Case{"cartpole", "--save-params= --float --epochs 1",
+             "--save-params needs a value; '--save-params=' gives none (expected "
+             "--save-params=VALUE or --save-params VALUE)"},
+        Case{"cartpole", "--epochs= --samples 4", "--epochs needs a value; '--epochs=' gives none"},
+        Case{"cartpole", "--csv= --help", "--csv needs a value; '--csv=' gives none"},
+        Case{"reproduce", "--out= --dry-run", "--out needs a value; '--out=' gives none"},
+        Case{"rotation", "--k=", "--k needs a value; '--k=' gives none"},
         // A value that starts with one '-' is still a value, for its own check.
         Case{"mujoco", "--model x.xml --target -1e7", "--target '-1e7': item 1, '-1e7', is not a "
                                                       "number in [-1000000, 1000000]"},
@@ -344,6 +355,70 @@ TEST_CASE("the task programs check their file flags before the sets are drawn", 
                          ".lock' and --checkpoint's lock file '" + checkpoint +
                          ".lock' are the same file") != std::string::npos);
   CHECK_FALSE(fs::exists(checkpoint));
+}
+
+TEST_CASE("a loop of symbolic links is refused naming the flag that gave it", "[programs]") {
+  // "'loop1': too many levels of symbolic links", of which of the flags the user had to guess.
+  const fs::path dir = fs::path(scratch("link_loop"));
+  fs::create_directories(dir);
+  const fs::path loop1 = dir / "loop1", loop2 = dir / "loop2";
+  fs::remove(loop1);
+  fs::remove(loop2);
+  fs::create_symlink(loop2, loop1);
+  fs::create_symlink(loop1, loop2);
+  for (const auto& [program, flag] :
+       {std::pair{"cartpole", "--save-params"}, std::pair{"cartpole", "--csv"},
+        std::pair{"cartpole", "--checkpoint"}, std::pair{"cartpole", "--init-params"},
+        std::pair{"rotation", "--csv"}, std::pair{"mujoco", "--model"}}) {
+    const std::string rest = std::string(program) == "mujoco"     ? " --target 0"
+                             : std::string(program) == "rotation" ? " --iterations 1"
+                                                                  : " --epochs 1";
+    const Result r = run(program, std::string(flag) + " " + loop1.string() + rest);
+    INFO(program << " " << flag << "\n" << r.output);
+    CHECK(r.status == 1);
+    CHECK(r.output.find(std::string(program) + ": " + flag + ": '" + loop1.string() +
+                        "': too many levels of symbolic links") != std::string::npos);
+  }
+}
+
+TEST_CASE("reproduce hands a relative --out that starts with -- to its programs as a path",
+          "[programs]") {
+  // docs/programs.md tells users to write such a value --out=--results; the runner then passed
+  // "--csv --results/runs/…" on, which every task program refused (exit 2): every run failed.
+  const fs::path dir = fs::path(scratch("dash_out"));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const Result r = run("reproduce", "--tasks cartpole --complexities 1 --methods R --clips norm "
+                                    "--seeds 1 --epochs 2 --samples 8 --no-plot --out=--results",
+                       "cd '" + dir.string() + "' && ");
+  INFO(r.output);
+  CHECK(r.status == 0);
+  CHECK(fs::exists(dir / "--results" / "runs" / "cartpole_p1_R_norm_s42.csv"));
+}
+
+TEST_CASE("bench --csv keeps the rows measured before a signal", "[programs]") {
+  // The CSV was written at the end alone: a SIGTERM in the minutes of measuring lost every row.
+  const fs::path dir = fs::path(scratch("bench_signal"));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const fs::path csv = dir / "b.csv", out = dir / "b.out", said = dir / "said";
+  const std::string script =
+      sbptt::testing::examples_dir() + "/bench --tasks cartpole1 --scalars float,double "
+      "--methods R --repeats 1 --csv " + csv.string() + " > " + out.string() + " 2>&1 & pid=$!; "
+      "i=0; until grep -q '^cartpole1 *float' " + out.string() + "; do i=$((i+1)); "
+      "[ $i -gt 1200 ] && break; sleep 0.1; done; kill -TERM $pid; wait $pid; echo exit $? > " +
+      said.string();
+  std::ofstream(dir / "run.sh") << script << "\n";
+  REQUIRE(std::system(("sh " + (dir / "run.sh").string()).c_str()) == 0);
+  auto text = [](const fs::path& path) {
+    std::ifstream in(path);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  INFO(text(out));
+  CHECK(text(said) == "exit 143\n");
+  const std::string rows = text(csv);
+  CHECK(rows.starts_with("task,scalar,method,"));
+  CHECK(rows.find("\ncartpole1,float,R,") != std::string::npos);
 }
 
 TEST_CASE("bench_mujoco checks --source before measuring: exit 1, naming the flag", "[programs]") {

@@ -65,7 +65,8 @@ inline constexpr std::size_t temporary_suffix_bytes = 36;
     if (error) return current;
     current = link.is_absolute() ? link : current.parent_path() / link;
   }
-  throw IoError(concat("'", path.string(), "': too many levels of symbolic links"));
+  throw IoError(concat("'", path.string(), "': too many levels of symbolic links (a loop?); "
+                       "expected links that end at a file or a free name"));
 }
 
 /// `::open(path, flags, mode)`, the descriptor moved above 2 when it took the number of a
@@ -221,7 +222,8 @@ inline void remove_dead_writers_temporaries(const std::filesystem::path& target)
 inline void check_output_path(const std::string& path, std::string_view what) {
   detail::require<IoError>(!path.empty(), what, ": the path is empty; expected a file path to "
                                                 "write (an unset shell variable?)");
-  const std::filesystem::path target = detail::final_target(path);
+  const std::filesystem::path target =
+      detail::prefixing_errors(std::string(what), [&] { return detail::final_target(path); });
   std::error_code error;
   const auto status = std::filesystem::status(target, error);
   // What is there, as the kernel resolves the path: the same file as `final_target` for a

@@ -50,7 +50,10 @@ struct FileKey {
 inline void require_distinct_files(const std::vector<FileRole>& files) {
   std::vector<detail::FileKey> keys;
   keys.reserve(files.size());
-  for (const FileRole& f : files) keys.push_back(f.path.empty() ? detail::FileKey{} : detail::file_key(f.path));
+  for (const FileRole& f : files)
+    keys.push_back(f.path.empty() ? detail::FileKey{}
+                                  : detail::prefixing_errors(
+                                        f.what, [&] { return detail::file_key(f.path); }));
   for (std::size_t i = 0; i < files.size(); ++i) {
     for (std::size_t j = i + 1; j < files.size(); ++j) {
       if (files[i].path.empty() || files[j].path.empty()) continue;

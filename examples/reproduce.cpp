@@ -78,6 +78,14 @@ int run_reproduce(int argc, char** argv) {
   const fs::path self = own_executable(argv[0]);
   const fs::path own_dir = self.parent_path();
   const fs::path bin_dir = options.bin_dir.empty() ? own_dir : fs::path(options.bin_dir);
+  if (options.emit == "parallel") {
+    try {
+      require_one_line_paths(options, self, bin_dir);
+    } catch (const InvalidArgument& e) {
+      std::cerr << "reproduce: " << e.what() << "\n";
+      return 2;
+    }
+  }
   try {
     const fs::path runs = fs::path(options.out) / "runs";
     if (const auto mismatched = runs_of_other_settings(runs, plan); !mismatched.empty()) {

@@ -14,8 +14,10 @@
 #      a sweep waits for a run that another process holds, says so again while it waits, with
 #      the age of the run's log, then runs it;
 #   6. --emit slurm writes a job array of the unfinished runs (--array=0-(n-1)%K, the CPUs,
-#      a time limit, a log per task) and a merge job, and prints the sbatch commands;
-#   7. --run, --shard, --emit refuse bad values and each other with exit 2.
+#      a time limit, a log per task) and a merge job with the figures' flags, and prints the
+#      sbatch commands;
+#   7. --run, --shard, --emit refuse bad values and each other with exit 2, and --emit
+#      parallel a folder whose commands would not fit on one line.
 cmake_minimum_required(VERSION 3.20)
 foreach(var REPRODUCE WORK_DIR)
   if(NOT DEFINED ${var})
@@ -150,6 +152,19 @@ check("the array: 2 tasks, 3 at once, 2 CPUs, a time limit, a log per task"
 file(READ "${P}/slurm/merge.sh" merge)
 check("the merge job runs --merge, its log named by its job"
       merge MATCHES "reproduce [^\n]* --merge\n" AND merge MATCHES "/slurm/logs/merge_%j.log")
+# The figures' flags reach the merge job: without them it plotted with the system's python
+# (often without matplotlib on a cluster) and drew nothing, with a warning in its log alone.
+set(M "${WORK_DIR}/merge_flags")
+file(MAKE_DIRECTORY "${M}")
+file(WRITE "${M}/plot.py" "")
+set(plotting_grid ${grid})
+list(REMOVE_ITEM plotting_grid --no-plot)
+execute_process(COMMAND "${REPRODUCE}" ${plotting_grid} --out "${M}/out" --python /usr/bin/python3
+                        --plot-script plot.py --emit slurm
+                WORKING_DIRECTORY "${M}" RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
+file(READ "${M}/out/slurm/merge.sh" merge_flags)
+check("merge.sh carries --python and --plot-script, the script's path made absolute (${merge_flags})"
+      rc EQUAL 0 AND merge_flags MATCHES " --python /usr/bin/python3 --plot-script ${M}/plot.py --merge\n")
 check("the printed sbatch commands chain the merge job after the array"
       printed MATCHES "sbatch --parsable [^\n]*array.sh[^\n]*--dependency=afterany:[^\n]*merge.sh")
 # The array's script runs its task's run as Slurm would (task 1: the second listed run),
@@ -216,3 +231,11 @@ foreach(bad "--shard;0/3" "--shard;4/3" "--shard;2" "--emit;pbs" "--run;nosuchru
   check("${bad}: exit 2 naming ${flag} (${err})" rc EQUAL 2 AND err MATCHES "${flag}")
 endforeach()
 check("no bad value created the folder" NOT EXISTS "${WORK_DIR}/bad")
+
+# A line break in --out printed each command over two lines (exit 0), which GNU parallel, which
+# reads a command a line, ran as two broken halves.
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${WORK_DIR}/new\nline" --emit parallel
+                RESULT_VARIABLE rc OUTPUT_VARIABLE printed ERROR_VARIABLE err)
+check("--emit parallel refuses a line break in --out: exit 2, naming it, nothing printed (${err})"
+      rc EQUAL 2 AND err MATCHES "--out '[^']*new.x0aline' with --emit parallel: its path holds a control character"
+      AND NOT printed)

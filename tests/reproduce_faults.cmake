@@ -46,8 +46,8 @@ file(WRITE "${runs}/cartpole_p4_R_norm_s42.csv" "")  # emptied
 file(READ "${runs}/cartpole_p4_C_norm_s42.csv" text)  # cut mid-line
 string(LENGTH "${text}" length)
 math(EXPR cut "${length} - 7")
-string(SUBSTRING "${text}" 0 ${cut} text)
-file(WRITE "${runs}/cartpole_p4_C_norm_s42.csv" "${text}")
+string(SUBSTRING "${text}" 0 ${cut} text_cut)
+file(WRITE "${runs}/cartpole_p4_C_norm_s42.csv" "${text_cut}")
 file(STRINGS "${runs}/cartpole_p4_C_norm_s43.csv" rows)  # cut at a line boundary
 list(REMOVE_AT rows -1)
 list(JOIN rows "\n" text)
@@ -79,6 +79,17 @@ foreach(name IN LISTS damaged guidance_rc0.001_C_norm_s42)
 endforeach()
 check("the damaged run of the earlier sweep is named as left to a sweep that plans it"
       again_err MATCHES "guidance_rc0.001_C_norm_s42[^\n]*not planned")
+# Damaged files were removed, those of a run not planned too, whatever made them damaged (a
+# blank line an editor added, CRLF from a copy): the work in them is kept aside instead.
+check("a damaged run's files are moved to runs/damaged/, and the runner says so"
+      again MATCHES "cartpole_p4_C_norm_s42: [^\n]*the run is redone, its files moved to [^\n]*runs/damaged"
+      AND again_err MATCHES "guidance_rc0.001_C_norm_s42 [^\n]*moved to [^\n]*runs/damaged")
+file(READ "${runs}/damaged/guidance_rc0.001_C_norm_s42.csv" kept_unplanned)
+file(READ "${runs}/damaged/cartpole_p4_C_norm_s42.csv" kept_cut)
+check("runs/damaged/ holds the damaged files as they were"
+      kept_unplanned STREQUAL "epoch,batch_loss" AND kept_cut STREQUAL text_cut
+      AND EXISTS "${runs}/damaged/guidance_rc0.001_C_norm_s42.log"
+      AND EXISTS "${runs}/damaged/cartpole_p4_C_norm_s42.run")
 untimed_summary("${out}/summary.csv" repaired)
 string(REGEX REPLACE "[^\n]*guidance[^\n]*\n" "" undamaged_cartpole "${undamaged}")
 check("summary.csv after the repair equals the undamaged one (timing aside, no guidance row)"
@@ -500,6 +511,19 @@ check("killed while --dry-run measures: the next --dry-run removes its folder\n$
       dry MATCHES "left in TMPDIR: \\[sbptt-reproduce-probe-[0-9]+\\]"
       AND dry MATCHES "next dry run: exit code 0\n" AND dry MATCHES "${removed}"
       AND dry MATCHES "left after it: \\[\\]")
+
+# TMPDIR empty or naming no folder: the dry run printed no plan, with "filesystem error:
+# temp_directory_path: ..." that named neither TMPDIR nor what was expected.
+execute_process(COMMAND env TMPDIR= "${REPRODUCE}" ${grid} --out "${WORK_DIR}/dry" --dry-run
+                RESULT_VARIABLE rc OUTPUT_VARIABLE dry ERROR_VARIABLE dry_err)
+check("an empty TMPDIR reads as unset: the dry run measures in /tmp (${dry_err})"
+      rc EQUAL 0 AND dry MATCHES "reproduce: measured ")
+execute_process(COMMAND env "TMPDIR=${WORK_DIR}/no/such/folder" "${REPRODUCE}" ${grid}
+                        --out "${WORK_DIR}/dry" --dry-run
+                RESULT_VARIABLE rc OUTPUT_VARIABLE dry ERROR_VARIABLE dry_err)
+check("a TMPDIR that is no folder: exit 1, naming it and what is expected, nothing made (${dry_err})"
+      rc EQUAL 1 AND dry_err MATCHES "TMPDIR '${WORK_DIR}/no/such/folder' is no folder"
+      AND dry_err MATCHES "expected" AND NOT EXISTS "${WORK_DIR}/no")
 
 # An interrupt after the last measurement, while the plan is printed: the runner printed the
 # whole plan and exited 0. Its stdout is a pipe that is not read until the signal has been

@@ -17,6 +17,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -74,6 +75,19 @@ inline void remove_killed_probes(const fs::path& temp) {
   }
 }
 
+/// The folder of the measurements' scratch folders: TMPDIR, or /tmp where it is unset or empty
+/// (as POSIX reads it). Throws `IoError` when TMPDIR names no folder: made here, it would be
+/// left behind.
+inline fs::path temporary_folder() {
+  const char* set = std::getenv("TMPDIR");
+  if (set == nullptr || *set == '\0') return "/tmp";
+  std::error_code error;
+  if (!fs::is_directory(set, error))
+    throw sbptt::IoError(concat("TMPDIR '", set, "' is no folder; expected the folder for "
+                                "--dry-run's scratch files (or TMPDIR unset, for /tmp)"));
+  return set;
+}
+
 /// Wall seconds of `probe` run for `epochs` epochs (stdout and stderr discarded; its training
 /// log goes to `scratch`/runs/), or nothing when a signal interrupted it.
 inline std::optional<double> time_probe(Run probe, long epochs, const fs::path& bin_dir,
@@ -97,10 +111,15 @@ inline std::optional<double> time_probe(Run probe, long epochs, const fs::path& 
 inline std::optional<MeasuredCosts> measure_costs(const std::vector<Run>& plan,
                                                   const fs::path& bin_dir, long threads) {
   MeasuredCosts costs;
-  const fs::path temp = fs::temp_directory_path();
+  const fs::path temp = temporary_folder();
   remove_killed_probes(temp);
   const fs::path scratch = temp / concat(probe_folder_prefix, ::getpid());
-  fs::create_directories(scratch / "runs");
+  std::error_code error;
+  fs::create_directories(scratch / "runs", error);
+  if (error)
+    throw sbptt::IoError(concat("--dry-run measures the task programs in a scratch folder in '",
+                                temp.string(), "' (TMPDIR, else /tmp), which could not be made: ",
+                                error.message(), "; expected a writable folder there"));
   struct Cleanup {
     fs::path path;
     ~Cleanup() {

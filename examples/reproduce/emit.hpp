@@ -12,9 +12,11 @@
 #include <filesystem>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include <sbptt/core/atomic_file.hpp>
+#include <sbptt/core/number_text.hpp>
 
 #include "finished_run.hpp"
 #include "options.hpp"
@@ -72,6 +74,23 @@ inline void require_slurm_folder(const Options& o) {
                                                   "of the logs' file-name pattern"
                                                 : "a control character",
                                  "; expected a folder without them"));
+}
+
+/// Refuses, before any work, a path that --emit parallel cannot put on one line (the reader
+/// takes a command a line): a control character in --out, --bin-dir or the runner's own path.
+inline void require_one_line_paths(const Options& o, const fs::path& self,
+                                   const fs::path& bin_dir) {
+  for (const auto& [what, path] : {std::pair{"--out", fs::path(o.out)},
+                                   std::pair{"--bin-dir", bin_dir},
+                                   std::pair{"the runner's own path", self}}) {
+    const std::string text = path.string();
+    if (std::any_of(text.begin(), text.end(),
+                    [](char c) { return std::iscntrl(static_cast<unsigned char>(c)) != 0; }))
+      throw InvalidArgument(concat(what, " '", sbptt::detail::printable(text, 200),
+                                   "' with --emit parallel: its path holds a control character, "
+                                   "and the commands go one a line; expected a folder without "
+                                   "one"));
+  }
 }
 
 /// The flags that select the plan, with absolute folders: the same plan from any directory.
@@ -175,12 +194,25 @@ inline int emit_slurm(const Options& o, const std::vector<Run>& plan, const fs::
       sbatch_quote((dir / "logs" / "run_%A_%a.log").string()),
       "\nset -euo pipefail\nruns=(\n", quoted_names, ")\nrun=${runs[$SLURM_ARRAY_TASK_ID]}\n",
       "exec ", shell_line(command), " --run \"$run\"\n");
+  // The figures' own flags too: on a cluster --python names a venv's python, as the system's
+  // often lacks matplotlib, and the merge job would then draw nothing, with a warning alone.
+  std::vector<std::string> merging = command;
+  if (!o.plot) merging.emplace_back("--no-plot");
+  if (o.plot && !o.python.empty())
+    merging.insert(merging.end(),
+                   {"--python", o.python.find('/') == std::string::npos
+                                    ? o.python  // a name on PATH
+                                    : fs::absolute(o.python).lexically_normal().string()});
+  if (o.plot && !o.plot_script.empty())
+    merging.insert(merging.end(),
+                   {"--plot-script", fs::absolute(o.plot_script).lexically_normal().string()});
+  merging.emplace_back("--merge");
   const std::string merge = concat(
       "#!/bin/bash\n# Collects the array's runs into summary.csv, the table and the figures.\n"
       "#SBATCH --job-name=", job, "-merge\n#SBATCH --ntasks=1\n#SBATCH --cpus-per-task=1\n"
       "#SBATCH --time=30\n#SBATCH --output=",
-      sbatch_quote((dir / "logs" / "merge_%j.log").string()), "\nexec ", shell_line(command),
-      o.plot ? "" : " --no-plot", " --merge\n");
+      sbatch_quote((dir / "logs" / "merge_%j.log").string()), "\nexec ", shell_line(merging),
+      "\n");
   sbptt::write_file_atomically((dir / "array.sh").string(), array);
   sbptt::write_file_atomically((dir / "merge.sh").string(), merge);
   std::printf("reproduce: %zu of %zu planned runs to do; wrote %s/array.sh (--array=0-%zu%%%ld, "

@@ -144,7 +144,7 @@ inline FinishedRuns scan_finished(const fs::path& runs) {
 /// Says on stderr that the run `name`, which the current plan does not hold, is damaged and
 /// in no summary; `then` is what becomes of its files.
 inline void warn_unplanned_damage(const std::string& name, const std::string& why,
-                                  const char* then) {
+                                  const std::string& then) {
   std::cerr << "reproduce: warning: " << name << " (not planned now): " << why
             << "; left out of summary.csv" << then << "\n";
 }
@@ -177,9 +177,24 @@ inline bool remove_or_warn(const fs::path& file) {
   return removed;
 }
 
-/// Removes the finished-run files of the run `name` so that a sweep that plans it redoes it.
-inline void forget_finished(const fs::path& runs, const std::string& name) {
-  for (const char* suffix : {".csv", ".log", ".run", ".checkpoint", ".checkpoint.lock"})
+/// Where `set_aside_damaged` keeps a damaged run's files: runs/damaged/.
+inline fs::path damaged_folder(const fs::path& runs) { return runs / "damaged"; }
+
+/// Moves the finished-run files of the damaged run `name` into `damaged_folder` (over an
+/// earlier damaged copy of that run there), so that a sweep that plans it redoes it, and
+/// removes its checkpoint. Moved, not removed: what made them damaged may be a blank line an
+/// editor added or a copy's CRLF, and the rows are the user's work. A file that cannot be
+/// moved is removed (named in a warning when that fails too).
+inline void set_aside_damaged(const fs::path& runs, const std::string& name) {
+  std::error_code error;
+  fs::create_directories(damaged_folder(runs), error);
+  for (const char* suffix : {".csv", ".log", ".run"}) {
+    const fs::path file = runs / (name + suffix);
+    if (!fs::exists(fs::symlink_status(file, error))) continue;
+    fs::rename(file, damaged_folder(runs) / (name + suffix), error);
+    if (error) remove_or_warn(file);
+  }
+  for (const char* suffix : {".checkpoint", ".checkpoint.lock"})
     remove_or_warn(runs / (name + suffix));
 }
 

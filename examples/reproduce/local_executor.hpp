@@ -185,17 +185,20 @@ private:
     return read_text(run_file(runs_, run, ".run")) == run.description();
   }
 
-  /// Finished runs whose files do not hold together (finished_run.hpp): named, removed, and,
-  /// when planned, redone.
+  /// Finished runs whose files do not hold together (finished_run.hpp): named, set aside in
+  /// runs/damaged/, and, when planned, redone.
   void forget_damaged() {
     std::set<std::string> planned;
     for (const Run& run : plan_) planned.insert(run.name());
+    const std::string aside = damaged_folder(runs_).string();
     for (const auto& [name, why] : scan_finished(runs_).damaged) {
       if (planned.contains(name))
-        std::printf("reproduce: %s: %s; the run is redone\n", name.c_str(), why.c_str());
+        std::printf("reproduce: %s: %s; the run is redone, its files moved to %s\n",
+                    name.c_str(), why.c_str(), aside.c_str());
       else
-        warn_unplanned_damage(name, why, " and removed, so that a sweep that plans it redoes it");
-      forget_finished(runs_, name);
+        warn_unplanned_damage(name, why, concat(" and moved to ", aside,
+                                                ", so that a sweep that plans it redoes it"));
+      set_aside_damaged(runs_, name);
     }
   }
 

@@ -54,12 +54,16 @@ inline void require_task_program(const Run& run, const fs::path& bin_dir, bool f
 inline std::vector<std::string> command_line(const Run& run, const fs::path& bin_dir,
                                              const fs::path& runs, long threads) {
   const fs::path program = bin_dir / run.info().program;
+  // A relative --out such as --results would read as a flag where a value is due.
+  auto path_value = [](const fs::path& path) {
+    return path.string().starts_with('-') ? "./" + path.string() : path.string();
+  };
   std::vector<std::string> argv{program.string()};
   for (const auto& f : run.flags()) argv.push_back(f);
   argv.insert(argv.end(), {"--threads", std::to_string(threads), "--csv",
-                           run_file(runs, run, ".partial.csv").string()});
+                           path_value(run_file(runs, run, ".partial.csv"))});
   if (supports_checkpoints(program))
-    argv.insert(argv.end(), {"--checkpoint", run_file(runs, run, ".checkpoint").string()});
+    argv.insert(argv.end(), {"--checkpoint", path_value(run_file(runs, run, ".checkpoint"))});
   return argv;
 }
 

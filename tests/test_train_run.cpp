@@ -96,6 +96,61 @@ TEST_CASE("run: the log file grows by one write per epoch, each byte written onc
   CHECK(log.size() == static_cast<long long>(fs::file_size(path)));
 }
 
+TEST_CASE("run: a log removed during the run is put back; one replaced ends the run",
+          "[train]") {
+  // Removed (or renamed away), the log went on growing unlinked and was lost at the end, the
+  // run ending as a success; its checkpoint, which names the log, could not be resumed.
+  const Matrix<double> train = spread<double>(6, -1.0), test = spread<double>(2, 0.2);
+  const fs::path removed = scratch("removed.csv"), moved = scratch("moved.csv");
+  for (const bool rename_away : {false, true}) {
+    INFO("renamed away " << rename_away);
+    Setup<double> s(Method::Regular, 3);
+    RunSettings settings = fresh_checkpoint_run("removed.checkpoint", 6);
+    settings.log_csv = removed.string();
+    TrainingLog rows;
+    RunCallbacks callbacks;
+    callbacks.on_epoch = [&](const EpochRecord& r) {
+      rows.add(r);
+      if (r.epoch != 2) return;
+      if (rename_away)
+        fs::rename(removed, moved);
+      else
+        fs::remove(removed);
+    };
+    const auto result = run_training(s.trainer, train, test, settings, callbacks);
+    CHECK(result.end == RunEnd::Finished);
+    CHECK(file_text(removed) == rows.csv());
+    // The checkpoint continues it: a rerun of more epochs resumes.
+    Setup<double> again(Method::Regular, 3);
+    settings.epochs = 8;
+    const auto resumed = run_training(again.trainer, train, test, settings);
+    CHECK(resumed.resumed_from == 6);
+    CHECK(resumed.end == RunEnd::Finished);
+  }
+
+  // Another file in its place is another writer's: the run ends, the parameters saved, and
+  // that file is left as it is.
+  const fs::path params = scratch("replaced.txt");
+  Setup<double> s(Method::Regular, 3);
+  RunSettings settings;
+  settings.epochs = 6;
+  settings.log_csv = scratch("replaced.csv").string();
+  settings.save_params = params.string();
+  RunCallbacks callbacks;
+  callbacks.on_epoch = [&](const EpochRecord& r) {
+    if (r.epoch != 2) return;
+    fs::remove(settings.log_csv);
+    std::ofstream(settings.log_csv) << "another file\n";
+  };
+  const auto result = run_training(s.trainer, train, test, settings, callbacks);
+  CHECK(result.end == RunEnd::OutputFailed);
+  CHECK(result.epochs == 3);  // its row was the write refused
+  CHECK_THAT(result.output_error, Catch::Contains("training log '" + settings.log_csv +
+                                                  "' was replaced by another file during the run"));
+  CHECK(file_text(settings.log_csv) == "another file\n");
+  CHECK(result.saved_params == params.string());
+}
+
 TEST_CASE("run: an empty test set trains, and the best is by train loss", "[train]") {
   Setup<double> s(Method::Regular);
   const Matrix<double> train = spread<double>(6, -0.8), none(1, 0);

@@ -20,6 +20,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <charconv>
 #include <optional>
 #include <string>
@@ -162,8 +163,10 @@ public:
     if (fd_ >= 0) ::close(fd_);
   }
 
-  /// Appends the row of `record` with one write. Throws `IoError` (e.g. disk full).
+  /// Appends the row of `record` with one write. Throws `IoError` (e.g. disk full, or the log
+  /// replaced: `keep_in_place`).
   void append(const EpochRecord& record) {
+    keep_in_place();
     const std::string row = training_log_row(record);
     const int error = detail::write_all(fd_, row);
     if (error != 0) {
@@ -193,6 +196,36 @@ public:
   [[nodiscard]] const std::string& path() const { return path_; }
 
 private:
+  /// Puts the log back at its path when it was removed or renamed away during the run: its
+  /// rows live on in the open file, but the checkpoints name the path, and a resume would
+  /// find no log there. Throws `IoError` when another file has taken the path, or the open
+  /// file no longer holds exactly what this log wrote: another writer's work, not to be
+  /// overwritten.
+  void keep_in_place() {
+    struct stat open_file {}, at_path {};
+    detail::require<IoError>(::fstat(fd_, &open_file) == 0 && open_file.st_size == size_,
+                             "training log '", path_, "' was changed by another writer during "
+                             "the run (it has ", open_file.st_size, " bytes where this run "
+                             "wrote ", size_, "); expected it left to this run");
+    if (::stat(path_.c_str(), &at_path) == 0) {
+      detail::require<IoError>(at_path.st_dev == open_file.st_dev &&
+                                   at_path.st_ino == open_file.st_ino,
+                               "training log '", path_, "' was replaced by another file during "
+                               "the run, which is left as it is; expected the log left to this "
+                               "run");
+      return;
+    }
+    if (errno != ENOENT) return;  // the path cannot be looked at: the write will say why
+    std::string rows(static_cast<std::size_t>(size_), '\0');
+    const ::ssize_t got = ::pread(fd_, rows.data(), rows.size(), 0);
+    detail::require<IoError>(got == static_cast<::ssize_t>(rows.size()), "training log '",
+                             path_, "' was removed during the run, and reading its rows back "
+                             "failed: ", got < 0 ? detail::os_reason(errno) : "it is shorter");
+    write_file_atomically(path_, rows);
+    TrainingLogFile restored(path_);
+    std::swap(fd_, restored.fd_);
+  }
+
   /// The file's first `size` bytes are the header and whole rows numbered 1 … `rows`.
   void require_rows(long long size, long rows) const {
     std::string text(static_cast<std::size_t>(size), '\0');

@@ -414,7 +414,10 @@ void precision(const std::string& name, const SimD& sim_d, const SimF& sim_f, co
   }
 }
 
-void write_csv(const std::string& path) {
+/// Writes the points so far; `announce` says so on stdout (once, at the end). Written after
+/// each simulator's sweeps too, so that a signal in the half minute loses the simulator under
+/// way, not those measured.
+void write_csv(const std::string& path, bool announce = true) {
   std::string text = "sim,sweep,scalar,steps,nx,h,ms,state_error,grad_error,loss_error\n";
   char line[256];
   for (const auto& p : points) {
@@ -425,7 +428,7 @@ void write_csv(const std::string& path) {
     text += line;
   }
   sbptt::write_file_atomically(path, text);
-  std::printf("\nwrote %s\n", path.c_str());
+  if (announce) std::printf("\nwrote %s\n", path.c_str());
 }
 
 }  // namespace
@@ -481,6 +484,7 @@ int main(int argc, char** argv) {
                 objective(make(0.0f, 100)), net, x0, 100);
       integrator_axis(net, x0);
     }
+    if (!csv.empty()) write_csv(csv, false);
     {  // guidance 2-4, T = 4 (paper: m = 60)
       const auto make = [](auto s, Index m) {
         sbptt::GuidanceOptions o;
@@ -496,6 +500,7 @@ int main(int argc, char** argv) {
       precision("guidance", make(0.0, 60), make(0.0f, 60), objective(make(0.0, 60)),
                 objective(make(0.0f, 60)), net, x0, 60);
     }
+    if (!csv.empty()) write_csv(csv, false);
     {  // quantum, Nx = 32, T = 8 (paper: m = 128), target n = 4
       const auto net = cnn();
       const auto make = [](auto s, Index m) { return quantum<decltype(s)>(32, m); };

@@ -48,6 +48,9 @@ namespace {
 int run_reproduce(int argc, char** argv) {
   Options options;
   std::vector<Run> plan;
+  const fs::path self = own_executable(argv[0]);
+  const fs::path own_dir = self.parent_path();
+  fs::path bin_dir;
   try {
     options = parse_options(argc, argv);
     if (options.help) return 0;  // parse_options printed it
@@ -55,11 +58,14 @@ int run_reproduce(int argc, char** argv) {
       throw InvalidArgument(concat("--python '", options.python, "' is no executable program; "
                                    "expected a path or a name on PATH"));
     std::error_code error;  // a path the system cannot even look at is no file either
-    if (options.plot && !options.dry_run && options.emit.empty() &&
+    // --emit slurm hands it to the merge job, which would fail on it after the whole array.
+    if (options.plot && !options.dry_run && options.emit != "parallel" &&
         !options.plot_script.empty() && !fs::is_regular_file(options.plot_script, error))
       throw InvalidArgument(concat("--plot-script '", options.plot_script, "' is no file; "
                                    "expected the plotting script (tools/plot_results.py)"));
+    bin_dir = options.bin_dir.empty() ? own_dir : fs::path(options.bin_dir);
     if (options.emit == "slurm") require_slurm_folder(options);
+    if (options.emit == "parallel") require_one_line_paths(options, self, bin_dir);
     plan = make_plan(options);
     if (plan.empty())
       throw InvalidArgument(concat(
@@ -74,17 +80,6 @@ int run_reproduce(int argc, char** argv) {
   } catch (const InvalidArgument& e) {
     std::cerr << "reproduce: " << e.what() << "\n";
     return 2;
-  }
-  const fs::path self = own_executable(argv[0]);
-  const fs::path own_dir = self.parent_path();
-  const fs::path bin_dir = options.bin_dir.empty() ? own_dir : fs::path(options.bin_dir);
-  if (options.emit == "parallel") {
-    try {
-      require_one_line_paths(options, self, bin_dir);
-    } catch (const InvalidArgument& e) {
-      std::cerr << "reproduce: " << e.what() << "\n";
-      return 2;
-    }
   }
   try {
     const fs::path runs = fs::path(options.out) / "runs";

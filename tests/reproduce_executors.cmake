@@ -159,12 +159,12 @@ file(MAKE_DIRECTORY "${M}")
 file(WRITE "${M}/plot.py" "")
 set(plotting_grid ${grid})
 list(REMOVE_ITEM plotting_grid --no-plot)
-execute_process(COMMAND "${REPRODUCE}" ${plotting_grid} --out "${M}/out" --python /usr/bin/python3
+execute_process(COMMAND "${REPRODUCE}" ${plotting_grid} --out "${M}/out" --python /bin/sh
                         --plot-script plot.py --emit slurm
                 WORKING_DIRECTORY "${M}" RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
 file(READ "${M}/out/slurm/merge.sh" merge_flags)
 check("merge.sh carries --python and --plot-script, the script's path made absolute (${merge_flags})"
-      rc EQUAL 0 AND merge_flags MATCHES " --python /usr/bin/python3 --plot-script ${M}/plot.py --merge\n")
+      rc EQUAL 0 AND merge_flags MATCHES " --python /bin/sh --plot-script ${M}/plot.py --merge\n")
 check("the printed sbatch commands chain the merge job after the array"
       printed MATCHES "sbatch --parsable [^\n]*array.sh[^\n]*--dependency=afterany:[^\n]*merge.sh")
 # The array's script runs its task's run as Slurm would (task 1: the second listed run),

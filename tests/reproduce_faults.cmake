@@ -81,15 +81,36 @@ check("the damaged run of the earlier sweep is named as left to a sweep that pla
       again_err MATCHES "guidance_rc0.001_C_norm_s42[^\n]*not planned")
 # Damaged files were removed, those of a run not planned too, whatever made them damaged (a
 # blank line an editor added, CRLF from a copy): the work in them is kept aside instead.
-check("a damaged run's files are moved to runs/damaged/, and the runner says so"
-      again MATCHES "cartpole_p4_C_norm_s42: [^\n]*the run is redone, its files moved to [^\n]*runs/damaged"
-      AND again_err MATCHES "guidance_rc0.001_C_norm_s42 [^\n]*moved to [^\n]*runs/damaged")
-file(READ "${runs}/damaged/guidance_rc0.001_C_norm_s42.csv" kept_unplanned)
-file(READ "${runs}/damaged/cartpole_p4_C_norm_s42.csv" kept_cut)
-check("runs/damaged/ holds the damaged files as they were"
+check("a damaged run's files are moved to a folder of their own, and the runner says so"
+      again MATCHES "cartpole_p4_C_norm_s42: [^\n]*the run is redone, its files moved to [^\n]*runs/damaged/cartpole_p4_C_norm_s42.1\n"
+      AND again_err MATCHES "guidance_rc0.001_C_norm_s42 [^\n]*moved to [^\n]*runs/damaged/guidance_rc0.001_C_norm_s42.1")
+file(READ "${runs}/damaged/guidance_rc0.001_C_norm_s42.1/guidance_rc0.001_C_norm_s42.csv"
+     kept_unplanned)
+file(READ "${runs}/damaged/cartpole_p4_C_norm_s42.1/cartpole_p4_C_norm_s42.csv" kept_cut)
+check("runs/damaged/<name>.1 holds the damaged files as they were"
       kept_unplanned STREQUAL "epoch,batch_loss" AND kept_cut STREQUAL text_cut
-      AND EXISTS "${runs}/damaged/guidance_rc0.001_C_norm_s42.log"
-      AND EXISTS "${runs}/damaged/cartpole_p4_C_norm_s42.run")
+      AND EXISTS "${runs}/damaged/guidance_rc0.001_C_norm_s42.1/guidance_rc0.001_C_norm_s42.log"
+      AND EXISTS "${runs}/damaged/cartpole_p4_C_norm_s42.1/cartpole_p4_C_norm_s42.run")
+# A second damage of a run goes to a folder of its own; with a file in the place of
+# runs/damaged the files stay where they are, and the runner says so, not that they moved.
+file(WRITE "${runs}/cartpole_p4_C_norm_s42.csv" "${text_cut}")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${out}" OUTPUT_VARIABLE second ERROR_QUIET)
+check("a second damage goes to runs/damaged/<name>.2, the first kept (${second})"
+      second MATCHES "runs/damaged/cartpole_p4_C_norm_s42.2\n"
+      AND EXISTS "${runs}/damaged/cartpole_p4_C_norm_s42.2/cartpole_p4_C_norm_s42.csv"
+      AND EXISTS "${runs}/damaged/cartpole_p4_C_norm_s42.1/cartpole_p4_C_norm_s42.csv")
+file(RENAME "${runs}/damaged" "${WORK_DIR}/damaged_kept")
+file(WRITE "${runs}/damaged" "a file\n")
+file(WRITE "${runs}/cartpole_p4_C_norm_s42.csv" "${text_cut}")
+execute_process(COMMAND "${REPRODUCE}" ${grid} --out "${out}" RESULT_VARIABLE rc
+                OUTPUT_VARIABLE blocked ERROR_QUIET)
+file(READ "${runs}/cartpole_p4_C_norm_s42.csv.damaged" kept_beside)
+check("no folder for them: the files are renamed beside, and the run is redone (${blocked})"
+      rc EQUAL 0 AND blocked MATCHES "the run is redone, its files renamed to [^\n]*cartpole_p4_C_norm_s42.[*].damaged"
+      AND kept_beside STREQUAL text_cut AND EXISTS "${runs}/cartpole_p4_C_norm_s42.csv")
+file(REMOVE "${runs}/cartpole_p4_C_norm_s42.csv.damaged" "${runs}/cartpole_p4_C_norm_s42.log.damaged"
+     "${runs}/cartpole_p4_C_norm_s42.run.damaged")
+file(REMOVE "${runs}/damaged")
 untimed_summary("${out}/summary.csv" repaired)
 string(REGEX REPLACE "[^\n]*guidance[^\n]*\n" "" undamaged_cartpole "${undamaged}")
 check("summary.csv after the repair equals the undamaged one (timing aside, no guidance row)"

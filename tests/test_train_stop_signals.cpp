@@ -4,9 +4,11 @@
 #include <catch2/catch.hpp>
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 #include <csignal>
+#include <ctime>
 #include <utility>
 #include "sbptt/train/stop_signals.hpp"
 
@@ -52,8 +54,9 @@ TEST_CASE("stop signals: the first signal is noted and gets its default action b
       quietly([&] { REQUIRE(::raise(signal) == 0); });
       CHECK(stop.requested());
       CHECK(stop.signal() == signal);
-      // A second one, of any kind, would end the process.
-      for (const int kind : stop_kinds) CHECK(disposition(kind) == SIG_DFL);
+      // A second one, of any kind, would end the process; SIGXCPU repeats by itself.
+      for (const int kind : stop_kinds)
+        CHECK(disposition(kind) == (kind == SIGXCPU ? SIG_IGN : SIG_DFL));
     }
     for (const int kind : stop_kinds) CHECK(disposition(kind) == SIG_DFL);
   }
@@ -82,6 +85,38 @@ TEST_CASE("stop signals: a second signal of the other kind ends the process at o
     CHECK(WIFSIGNALED(status));
     CHECK((WIFSIGNALED(status) ? WTERMSIG(status) : -WEXITSTATUS(status)) == second);
   }
+}
+
+TEST_CASE("stop signals: past a soft CPU-time limit the epoch under way still ends", "[train]") {
+  // The kernel sends SIGXCPU at the soft limit and again every CPU second after it: with its
+  // default action back after the first, the second killed the run about a second later, its
+  // epoch unfinished and nothing saved. A child with a soft limit of 1 s (the hard one at
+  // 30 s) spins 2.5 CPU seconds past it, as an epoch would.
+  const pid_t child = ::fork();
+  REQUIRE(child >= 0);
+  if (child == 0) {
+    const int null = ::open("/dev/null", O_WRONLY);
+    ::dup2(null, 2);
+    for (const int kind : stop_kinds) std::signal(kind, SIG_DFL);
+    const sbptt::StopSignals stop("child");
+    const rlimit limit{1, 30};
+    if (::setrlimit(RLIMIT_CPU, &limit) != 0) ::_exit(102);
+    const auto cpu_seconds = [] {
+      timespec t{};
+      ::clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+      return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+    };
+    volatile double sink = 0;
+    while (!stop.requested() && cpu_seconds() < 20) sink = sink + 1;
+    const double noted = cpu_seconds();
+    while (cpu_seconds() < noted + 2.5) sink = sink + 1;
+    ::_exit(stop.signal() == SIGXCPU ? 0 : 101);
+  }
+  int status = 0;
+  REQUIRE(::waitpid(child, &status, 0) == child);
+  INFO((WIFSIGNALED(status) ? "killed by signal " : "exit ")
+       << (WIFSIGNALED(status) ? WTERMSIG(status) : WEXITSTATUS(status)));
+  CHECK((WIFEXITED(status) && WEXITSTATUS(status) == 0));
 }
 
 extern "C" void count_signal(int /*signal*/) {}

@@ -4,6 +4,7 @@
 // flag, the value and what was expected, before any work.
 #include <charconv>
 #include <cmath>
+#include <csignal>
 #include <cstdint>
 #include <limits>
 #include <optional>
@@ -212,8 +213,9 @@ inline void require_float_range(const char* flag, double value) {
       " with the chosen gradient (docs/programs.md). Exit codes: 0 success, 1 error, 2 bad "
       "flag, 3 a non-finite value stopped training",
       task == Task::Mujoco ? " or --check-derivatives found derivatives that disagree" : "",
-      ", 130, 143, 129 and 152 after SIGINT, SIGTERM, SIGHUP and SIGXCPU stopped training (after "
-      "the epoch they came in, its outputs written)."));
+      ", 128 + the signal (", 128 + SIGINT, ", ", 128 + SIGTERM, ", ", 128 + SIGHUP, ", ",
+      128 + SIGXCPU, ") after SIGINT, SIGTERM, SIGHUP or SIGXCPU stopped training (after the "
+      "epoch it came in, its outputs written; 0 when that was the last)."));
   cli.value("--method", "R|M|C|S|N",
             "gradient: regular, modified, combined, stopped, network-only (long names and "
             "full/physics/stop work too)", "C",

@@ -345,8 +345,8 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
     }
     case RunEnd::Finished:
       if (signal != 0)
-        std::fprintf(stderr, "%s: %s came in the last epoch, which then ended the run\n", name,
-                     signal_name(signal));
+        std::fprintf(stderr, "%s: %s came in the last epoch or after it: the run had finished\n",
+                     name, signal_name(signal));
       break;
   }
   if (result.last && result.last->test_loss)

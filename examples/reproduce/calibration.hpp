@@ -24,6 +24,8 @@
 #include <string_view>
 #include <vector>
 
+#include <sbptt/core/number_text.hpp>
+
 #include "grid.hpp"
 #include "processes.hpp"
 #include "run_files.hpp"
@@ -83,8 +85,10 @@ inline fs::path temporary_folder() {
   if (set == nullptr || *set == '\0') return "/tmp";
   std::error_code error;
   if (!fs::is_directory(set, error))
-    throw sbptt::IoError(concat("TMPDIR '", set, "' is no folder; expected the folder for "
-                                "--dry-run's scratch files (or TMPDIR unset, for /tmp)"));
+    throw sbptt::IoError(concat("TMPDIR '", sbptt::detail::printable(set, 200), "' is no folder",
+                                error ? " (" + error.message() + ")" : std::string(),
+                                "; expected the folder for --dry-run's scratch files (or TMPDIR "
+                                "unset, for /tmp)"));
   return set;
 }
 

@@ -68,7 +68,8 @@ inline void require_slurm_folder(const Options& o) {
     return c == '%' || c == '\\' || std::iscntrl(static_cast<unsigned char>(c)) != 0;
   });
   if (bad != dir.end())
-    throw InvalidArgument(concat("--out '", o.out, "' with --emit slurm: its path holds ",
+    throw InvalidArgument(concat("--out '", sbptt::detail::printable(o.out, 200),
+                                 "' with --emit slurm: its path holds ",
                                  *bad == '%' ? "'%', which sbatch reads as a file-name pattern"
                                  : *bad == '\\' ? "a backslash, which sbatch reads as an escape "
                                                   "of the logs' file-name pattern"
@@ -77,13 +78,14 @@ inline void require_slurm_folder(const Options& o) {
 }
 
 /// Refuses, before any work, a path that --emit parallel cannot put on one line (the reader
-/// takes a command a line): a control character in --out, --bin-dir or the runner's own path.
+/// takes a command a line): a control character in --out, --bin-dir or the runner's own path,
+/// as the commands name them (absolute: the working directory's name counts too).
 inline void require_one_line_paths(const Options& o, const fs::path& self,
                                    const fs::path& bin_dir) {
   for (const auto& [what, path] : {std::pair{"--out", fs::path(o.out)},
                                    std::pair{"--bin-dir", bin_dir},
                                    std::pair{"the runner's own path", self}}) {
-    const std::string text = path.string();
+    const std::string text = fs::absolute(path).lexically_normal().string();
     if (std::any_of(text.begin(), text.end(),
                     [](char c) { return std::iscntrl(static_cast<unsigned char>(c)) != 0; }))
       throw InvalidArgument(concat(what, " '", sbptt::detail::printable(text, 200),

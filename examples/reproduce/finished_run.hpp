@@ -177,25 +177,38 @@ inline bool remove_or_warn(const fs::path& file) {
   return removed;
 }
 
-/// Where `set_aside_damaged` keeps a damaged run's files: runs/damaged/.
-inline fs::path damaged_folder(const fs::path& runs) { return runs / "damaged"; }
-
-/// Moves the finished-run files of the damaged run `name` into `damaged_folder` (over an
-/// earlier damaged copy of that run there), so that a sweep that plans it redoes it, and
-/// removes its checkpoint. Moved, not removed: what made them damaged may be a blank line an
-/// editor added or a copy's CRLF, and the rows are the user's work. A file that cannot be
-/// moved is removed (named in a warning when that fails too).
-inline void set_aside_damaged(const fs::path& runs, const std::string& name) {
+/// Moves the finished-run files of the damaged run `name` into a folder of their own,
+/// runs/damaged/<name>.<k> with the first free k (two damages of one run never mix or
+/// overwrite each other), and removes its checkpoint. Moved, not removed: what made them
+/// damaged may be a blank line an editor added or a copy's CRLF, and the rows are the user's
+/// work. Where no such folder can be made, each file is renamed to <file>.damaged beside it
+/// (over an earlier one): runs/<name>.csv must go, as it marks the run finished. Returns
+/// where they went, for a message.
+inline std::string set_aside_damaged(const fs::path& runs, const std::string& name) {
   std::error_code error;
-  fs::create_directories(damaged_folder(runs), error);
+  const fs::path damaged = runs / "damaged";
+  fs::create_directories(damaged, error);
+  fs::path aside;
+  for (int k = 1; !error && aside.empty() && k <= 10'000; ++k)
+    if (fs::create_directory(damaged / concat(name, ".", k), error))
+      aside = damaged / concat(name, ".", k);
+  for (const char* suffix : {".checkpoint", ".checkpoint.lock"})
+    remove_or_warn(runs / (name + suffix));
+  std::string kept = aside.empty()
+                         ? concat("its files renamed to ", (runs / name).string(),
+                                  ".*.damaged (no folder for them in ", damaged.string(),
+                                  error ? ": " + error.message() : std::string(), ")")
+                         : concat("its files moved to ", aside.string());
   for (const char* suffix : {".csv", ".log", ".run"}) {
     const fs::path file = runs / (name + suffix);
     if (!fs::exists(fs::symlink_status(file, error))) continue;
-    fs::rename(file, damaged_folder(runs) / (name + suffix), error);
-    if (error) remove_or_warn(file);
+    fs::rename(file, aside.empty() ? fs::path(file.string() + ".damaged") : aside / file.filename(),
+               error);
+    if (error && remove_or_warn(file))
+      kept += concat(" (but ", file.string(), ", which could not be moved: ", error.message(),
+                     ", was removed)");
   }
-  for (const char* suffix : {".checkpoint", ".checkpoint.lock"})
-    remove_or_warn(runs / (name + suffix));
+  return kept;
 }
 
 /// Rewrites <out>/summary.csv from every finished run on disk, under <out>/.lock, so that

@@ -190,15 +190,18 @@ private:
   void forget_damaged() {
     std::set<std::string> planned;
     for (const Run& run : plan_) planned.insert(run.name());
-    const std::string aside = damaged_folder(runs_).string();
     for (const auto& [name, why] : scan_finished(runs_).damaged) {
+      // Under the run's lock, and only while still damaged: another executor that set it
+      // aside first may be running it again, its fresh files in place.
+      const FileLock lock = try_lock_run(runs_, name);
+      if (lock.busy() || !scan_finished(runs_).damaged.contains(name)) continue;
+      const std::string kept = set_aside_damaged(runs_, name);
       if (planned.contains(name))
-        std::printf("reproduce: %s: %s; the run is redone, its files moved to %s\n",
-                    name.c_str(), why.c_str(), aside.c_str());
+        std::printf("reproduce: %s: %s; the run is redone, %s\n", name.c_str(), why.c_str(),
+                    kept.c_str());
       else
-        warn_unplanned_damage(name, why, concat(" and moved to ", aside,
-                                                ", so that a sweep that plans it redoes it"));
-      set_aside_damaged(runs_, name);
+        warn_unplanned_damage(name, why, concat("; ", kept,
+                                                "; a sweep that plans it redoes it"));
     }
   }
 
@@ -354,9 +357,7 @@ private:
         for (const auto& c : running_) ::kill(c.pid, SIGTERM);
         if (!running_.empty()) {
           finish_progress();
-          std::cerr << "reproduce: "
-                    << (interrupted == SIGHUP ? "SIGHUP" : sbptt::signal_name(interrupted))
-                    << ": stopping "
+          std::cerr << "reproduce: " << sbptt::signal_name(interrupted) << ": stopping "
                     << count_of(running_.size(), "running run")
                     << " after the current epoch, which keeps its work; a second signal "
                        "kills them at once\n";

@@ -57,7 +57,8 @@ inline int plot(const Options& o, const fs::path& own_dir) {
   const fs::path plots = fs::path(o.out) / "plots";
   // The kernel stamps files with a coarse clock, which may lag this one by a tick.
   const auto started = fs::file_time_type::clock::now() - std::chrono::seconds(1);
-  const int code = run_command({python, script->string(), o.out}, false);
+  const int code =
+      run_command({python, path_argument(*script), path_argument(o.out)}, false);
   // A script stopped by a signal cannot clean up after itself: its temporary figures go here.
   std::error_code error;
   for (const auto& entry : fs::directory_iterator(plots, error))

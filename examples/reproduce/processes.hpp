@@ -69,7 +69,8 @@ inline pid_t spawn(const std::vector<std::string>& argv, int log_fd, bool search
     // are the child's own business (a task program that is a script expects `| head` to work).
     struct sigaction action {};
     action.sa_handler = SIG_DFL;
-    for (int s : {SIGINT, SIGTERM, SIGHUP, SIGPIPE, SIGXFSZ}) ::sigaction(s, &action, nullptr);
+    for (int s : {SIGINT, SIGTERM, SIGHUP, SIGXCPU, SIGPIPE, SIGXFSZ})
+      ::sigaction(s, &action, nullptr);
     // dup2 onto the same number leaves close-on-exec set: clear it instead.
     const auto onto = [](int from, int to) {
       if (from != to) ::dup2(from, to);

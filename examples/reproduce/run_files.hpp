@@ -46,6 +46,12 @@ inline void require_task_program(const Run& run, const fs::path& bin_dir, bool f
                               "'; build the examples or pass --bin-dir DIR"));
 }
 
+/// `path` as another program's argument: a relative path that starts with '-' (--out=--results)
+/// would read as a flag there.
+inline std::string path_argument(const fs::path& path) {
+  return path.string().starts_with('-') ? "./" + path.string() : path.string();
+}
+
 /// The task program's command line. --threads is passed here and kept out of Run::flags(),
 /// which make the run's .run file: results are bitwise identical for any thread count
 /// (docs/benchmarks.md), so a sweep resumed with another --threads keeps its finished runs.
@@ -54,16 +60,12 @@ inline void require_task_program(const Run& run, const fs::path& bin_dir, bool f
 inline std::vector<std::string> command_line(const Run& run, const fs::path& bin_dir,
                                              const fs::path& runs, long threads) {
   const fs::path program = bin_dir / run.info().program;
-  // A relative --out such as --results would read as a flag where a value is due.
-  auto path_value = [](const fs::path& path) {
-    return path.string().starts_with('-') ? "./" + path.string() : path.string();
-  };
   std::vector<std::string> argv{program.string()};
   for (const auto& f : run.flags()) argv.push_back(f);
   argv.insert(argv.end(), {"--threads", std::to_string(threads), "--csv",
-                           path_value(run_file(runs, run, ".partial.csv"))});
+                           path_argument(run_file(runs, run, ".partial.csv"))});
   if (supports_checkpoints(program))
-    argv.insert(argv.end(), {"--checkpoint", path_value(run_file(runs, run, ".checkpoint"))});
+    argv.insert(argv.end(), {"--checkpoint", path_argument(run_file(runs, run, ".checkpoint"))});
   return argv;
 }
 

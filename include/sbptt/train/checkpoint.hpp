@@ -69,9 +69,11 @@ namespace detail {
 
 inline constexpr std::string_view checkpoint_magic = "sbptt-checkpoint 1";
 
-/// How much of a setting's name or value a message shows of the file's text, escaped: a
-/// damaged file must neither drive the terminal nor cut the message at a NUL.
-inline constexpr std::size_t setting_chars = 120;
+/// How much of a setting's name or value a message shows, escaped: a damaged file must
+/// neither drive the terminal nor cut the message at a NUL, nor flood it. Both sides of a
+/// comparison get the same cap, and a run's settings (a MuJoCo target lists a number per
+/// joint) stay far below it.
+inline constexpr std::size_t setting_chars = 1000;
 
 template <class Scalar>
 void append_vector(std::string& text, const char* key, const Vector<Scalar>& values) {
@@ -380,8 +382,9 @@ inline void require_same_settings(const std::vector<RunSetting>& expected,
       now = want.value;
     }
     throw InvalidArgument(detail::concat("checkpoint '", path, "' was made with ", name, " = ",
-                                         detail::printable(made, detail::setting_chars), "; this run has ",
-                                         name, " = ", now,
+                                         detail::printable(made, detail::setting_chars),
+                                         "; this run has ", name, " = ",
+                                         detail::printable(now, detail::setting_chars),
                                          "; expected the same settings (remove it to start "
                                          "over)"));
   }

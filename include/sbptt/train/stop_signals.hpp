@@ -3,8 +3,11 @@
 /// scheduler's end of a job, a closed terminal or dropped ssh connection, a soft CPU-time limit
 /// (which batch systems send before their kill). While a `StopSignals` lives, the first of
 /// those signals is noted and announced on stderr at once (an epoch of a large scene may take
-/// minutes, and silence would read as a signal lost), and all four get their default action
-/// back, so that a second one, of any kind, ends the process at once. `requested()` as
+/// minutes, and silence would read as a signal lost), and SIGINT, SIGTERM and SIGHUP get their
+/// default action back, so that a second one, of any kind, ends the process at once. SIGXCPU is
+/// ignored from then on: past the soft limit the kernel sends it again every CPU second, and
+/// its default would end the epoch that the first one let finish (the hard limit still ends
+/// the process). `requested()` as
 /// `RunCallbacks::should_stop` then ends the run after its current epoch (`RunEnd::Requested`)
 /// with that epoch's log row, a checkpoint and the parameters written (docs/training.md,
 /// "Stopping on a signal"). Its end gives back the handlers there were before.
@@ -35,7 +38,8 @@ constexpr int handled[] = {SIGINT, SIGTERM, SIGHUP, SIGXCPU};
 constexpr int kinds = static_cast<int>(std::size(handled));
 
 // Atomics, not volatile: the handler may run on any of the library's threads.
-static_assert(std::atomic<int>::is_always_lock_free, "a signal handler needs lock-free atomics");
+static_assert(std::atomic<int>::is_always_lock_free && std::atomic<bool>::is_always_lock_free,
+              "a signal handler needs lock-free atomics");
 inline std::atomic<int> caught{0};                   ///< the first signal that came, or 0
 inline std::atomic<bool> installed[kinds] = {};  ///< per `handled`
 inline std::atomic<bool> alive{false};               ///< a StopSignals exists
@@ -47,8 +51,14 @@ inline std::size_t notice_size[kinds];
 
 extern "C" inline void note(int signal) {
   const int saved_errno = errno;  // of the code the signal interrupted
-  for (int k = 0; k < kinds; ++k)
-    if (installed[k]) std::signal(handled[k], SIG_DFL);
+  // sigaction, not std::signal: C++ promises the latter's safety for the signal handled alone.
+  struct sigaction after {};
+  sigemptyset(&after.sa_mask);
+  for (int k = 0; k < kinds; ++k) {
+    if (!installed[k]) continue;
+    after.sa_handler = handled[k] == SIGXCPU ? SIG_IGN : SIG_DFL;
+    sigaction(handled[k], &after, nullptr);
+  }
   int none = 0;
   if (caught.compare_exchange_strong(none, signal)) {
     for (int k = 0; k < kinds; ++k) {
@@ -92,9 +102,9 @@ extern "C" inline void note(int signal) {
 
 class StopSignals {
  public:
-  /// Installs the handlers of SIGINT, SIGTERM, SIGHUP and SIGXCPU (of those not ignored now). The notice a
-  /// signal prints starts with `program`. Throws `InvalidArgument` if another `StopSignals`
-  /// lives.
+  /// Installs the handlers of SIGINT, SIGTERM, SIGHUP and SIGXCPU (of those not ignored now).
+  /// The notice a signal prints starts with `program`. Throws `InvalidArgument` if another
+  /// `StopSignals` lives.
   explicit StopSignals(const char* program) {
     namespace s = detail_stop_signals;
     bool none = false;
@@ -107,10 +117,17 @@ class StopSignals {
     for (const int signal : s::handled) sigaddset(&action.sa_mask, signal);  // one at a time
     for (int k = 0; k < s::kinds; ++k) {
       const char* name = signal_name(s::handled[k]);
-      const int size = std::snprintf(s::notice[k], sizeof s::notice[k],
-                                     "%s: %s: stopping after the current epoch, which keeps its "
-                                     "work; a second %s stops at once\n",
-                                     program, name, name);
+      const int size =
+          s::handled[k] == SIGXCPU
+              ? std::snprintf(s::notice[k], sizeof s::notice[k],
+                              "%s: SIGXCPU: past the soft CPU-time limit; stopping after the "
+                              "current epoch, which keeps its work, unless the hard limit "
+                              "comes first\n",
+                              program)
+              : std::snprintf(s::notice[k], sizeof s::notice[k],
+                              "%s: %s: stopping after the current epoch, which keeps its work; "
+                              "a second %s stops at once\n",
+                              program, name, name);
       s::notice_size[k] =
           size < 0 ? 0 : std::min(static_cast<std::size_t>(size), sizeof s::notice[k] - 1);
       s::installed[k] = sigaction(s::handled[k], nullptr, &previous_[k]) == 0 &&

@@ -37,6 +37,25 @@ void quietly(Body&& body) {
   std::fclose(null);
 }
 
+/// The wait status of a child that, its stderr into /dev/null and the stop signals at their
+/// default, makes a `StopSignals` and exits with `body(stop)`: what a signal does to a process
+/// is seen from outside it.
+template <class Body>
+int status_of_child(Body&& body) {
+  const pid_t child = ::fork();
+  REQUIRE(child >= 0);
+  if (child == 0) {
+    const int null = ::open("/dev/null", O_WRONLY);
+    ::dup2(null, 2);
+    for (const int kind : stop_kinds) std::signal(kind, SIG_DFL);
+    const sbptt::StopSignals stop("child");
+    ::_exit(body(stop));
+  }
+  int status = 0;
+  REQUIRE(::waitpid(child, &status, 0) == child);
+  return status;
+}
+
 }  // namespace
 
 TEST_CASE("stop signals: the first signal is noted and gets its default action back",
@@ -69,19 +88,11 @@ TEST_CASE("stop signals: a second signal of the other kind ends the process at o
   for (const auto& [first, second] : {std::pair{SIGINT, SIGTERM}, std::pair{SIGTERM, SIGINT},
                                       std::pair{SIGHUP, SIGINT}, std::pair{SIGXCPU, SIGHUP}}) {
     INFO(sbptt::signal_name(first) << " then " << sbptt::signal_name(second));
-    const pid_t child = ::fork();
-    REQUIRE(child >= 0);
-    if (child == 0) {
-      const int null = ::open("/dev/null", O_WRONLY);
-      ::dup2(null, 2);
-      for (const int kind : stop_kinds) std::signal(kind, SIG_DFL);
-      const sbptt::StopSignals stop("child");
+    const int status = status_of_child([&](const sbptt::StopSignals& stop) {
       ::raise(first);
       ::raise(second);
-      ::_exit(stop.signal() == first ? 100 : 101);  // alive: the second was caught
-    }
-    int status = 0;
-    REQUIRE(::waitpid(child, &status, 0) == child);
+      return stop.signal() == first ? 100 : 101;  // alive: the second was caught
+    });
     CHECK(WIFSIGNALED(status));
     CHECK((WIFSIGNALED(status) ? WTERMSIG(status) : -WEXITSTATUS(status)) == second);
   }
@@ -92,15 +103,9 @@ TEST_CASE("stop signals: past a soft CPU-time limit the epoch under way still en
   // default action back after the first, the second killed the run about a second later, its
   // epoch unfinished and nothing saved. A child with a soft limit of 1 s (the hard one at
   // 30 s) spins 2.5 CPU seconds past it, as an epoch would.
-  const pid_t child = ::fork();
-  REQUIRE(child >= 0);
-  if (child == 0) {
-    const int null = ::open("/dev/null", O_WRONLY);
-    ::dup2(null, 2);
-    for (const int kind : stop_kinds) std::signal(kind, SIG_DFL);
-    const sbptt::StopSignals stop("child");
+  const int status = status_of_child([](const sbptt::StopSignals& stop) {
     const rlimit limit{1, 30};
-    if (::setrlimit(RLIMIT_CPU, &limit) != 0) ::_exit(102);
+    if (::setrlimit(RLIMIT_CPU, &limit) != 0) return 102;
     const auto cpu_seconds = [] {
       timespec t{};
       ::clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
@@ -110,10 +115,8 @@ TEST_CASE("stop signals: past a soft CPU-time limit the epoch under way still en
     while (!stop.requested() && cpu_seconds() < 20) sink = sink + 1;
     const double noted = cpu_seconds();
     while (cpu_seconds() < noted + 2.5) sink = sink + 1;
-    ::_exit(stop.signal() == SIGXCPU ? 0 : 101);
-  }
-  int status = 0;
-  REQUIRE(::waitpid(child, &status, 0) == child);
+    return stop.signal() == SIGXCPU ? 0 : 101;
+  });
   INFO((WIFSIGNALED(status) ? "killed by signal " : "exit ")
        << (WIFSIGNALED(status) ? WTERMSIG(status) : WEXITSTATUS(status)));
   CHECK((WIFEXITED(status) && WEXITSTATUS(status) == 0));

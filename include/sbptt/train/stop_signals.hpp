@@ -7,10 +7,10 @@
 /// default action back, so that a second one, of any kind, ends the process at once. SIGXCPU is
 /// ignored from then on: past the soft limit the kernel sends it again every CPU second, and
 /// its default would end the epoch that the first one let finish (the hard limit still ends
-/// the process). `requested()` as
-/// `RunCallbacks::should_stop` then ends the run after its current epoch (`RunEnd::Requested`)
-/// with that epoch's log row, a checkpoint and the parameters written (docs/training.md,
-/// "Stopping on a signal"). Its end gives back the handlers there were before.
+/// the process). `requested()` as `RunCallbacks::should_stop` then ends the run after its
+/// current epoch (`RunEnd::Requested`) with that epoch's log row, a checkpoint and the
+/// parameters written (docs/training.md, "Stopping on a signal"). Its end gives back the
+/// handlers there were before.
 ///
 /// A signal the process was started ignoring stays ignored: a non-interactive shell starts a
 /// background job (`program &`) with SIGINT ignored, and that choice is its starter's (make

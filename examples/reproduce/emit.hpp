@@ -59,13 +59,23 @@ inline std::string sbatch_quote(const std::string& word) {
   return quoted + "\"";
 }
 
+/// `path` absolute and normal, as the emitted commands and scripts name it: the same from any
+/// directory.
+inline std::string absolute_path(const fs::path& path) {
+  return fs::absolute(path).lexically_normal().string();
+}
+
+inline bool is_control_character(char c) {
+  return std::iscntrl(static_cast<unsigned char>(c)) != 0;
+}
+
 /// Refuses, before any work, an --out that the Slurm scripts cannot name: sbatch reads '%' in
 /// --output as a pattern (%a, %j, %x, ...), and a backslash there as an escape of the patterns
 /// (Slurm's documentation), which the logs' %a needs; a line break would end the line.
 inline void require_slurm_folder(const Options& o) {
-  const std::string dir = fs::absolute(o.out).lexically_normal().string();
+  const std::string dir = absolute_path(o.out);
   const auto bad = std::find_if(dir.begin(), dir.end(), [](char c) {
-    return c == '%' || c == '\\' || std::iscntrl(static_cast<unsigned char>(c)) != 0;
+    return c == '%' || c == '\\' || is_control_character(c);
   });
   if (bad != dir.end())
     throw InvalidArgument(concat("--out '", sbptt::detail::printable(o.out, 200),
@@ -85,9 +95,8 @@ inline void require_one_line_paths(const Options& o, const fs::path& self,
   for (const auto& [what, path] : {std::pair{"--out", fs::path(o.out)},
                                    std::pair{"--bin-dir", bin_dir},
                                    std::pair{"the runner's own path", self}}) {
-    const std::string text = fs::absolute(path).lexically_normal().string();
-    if (std::any_of(text.begin(), text.end(),
-                    [](char c) { return std::iscntrl(static_cast<unsigned char>(c)) != 0; }))
+    const std::string text = absolute_path(path);
+    if (std::any_of(text.begin(), text.end(), is_control_character))
       throw InvalidArgument(concat(what, " '", sbptt::detail::printable(text, 200),
                                    "' with --emit parallel: its path holds a control character, "
                                    "and the commands go one a line; expected a folder without "
@@ -118,9 +127,8 @@ inline std::vector<std::string> selection_flags(const Options& o, const fs::path
   if (o.epochs) f.insert(f.end(), {"--epochs", std::to_string(*o.epochs)});
   if (o.samples) f.insert(f.end(), {"--samples", std::to_string(*o.samples)});
   if (o.use_float) f.emplace_back("--float");
-  f.insert(f.end(), {"--threads", std::to_string(o.threads), "--out",
-                     fs::absolute(o.out).lexically_normal().string(), "--bin-dir",
-                     fs::absolute(bin_dir).lexically_normal().string()});
+  f.insert(f.end(), {"--threads", std::to_string(o.threads), "--out", absolute_path(o.out),
+                     "--bin-dir", absolute_path(bin_dir)});
   return f;
 }
 
@@ -172,7 +180,7 @@ inline int emit_slurm(const Options& o, const std::vector<Run>& plan, const fs::
     std::printf("reproduce: all %zu planned runs are finished; nothing to submit\n", plan.size());
     return 0;
   }
-  const fs::path dir = fs::absolute(fs::path(o.out) / "slurm").lexically_normal();
+  const fs::path dir = absolute_path(fs::path(o.out) / "slurm");
   fs::create_directories(dir / "logs");
   std::string names, quoted_names;
   double longest = 0;
@@ -204,10 +212,10 @@ inline int emit_slurm(const Options& o, const std::vector<Run>& plan, const fs::
     merging.insert(merging.end(),
                    {"--python", o.python.find('/') == std::string::npos
                                     ? o.python  // a name on PATH
-                                    : fs::absolute(o.python).lexically_normal().string()});
+                                    : absolute_path(o.python)});
   if (o.plot && !o.plot_script.empty())
     merging.insert(merging.end(),
-                   {"--plot-script", fs::absolute(o.plot_script).lexically_normal().string()});
+                   {"--plot-script", absolute_path(o.plot_script)});
   merging.emplace_back("--merge");
   const std::string merge = concat(
       "#!/bin/bash\n# Collects the array's runs into summary.csv, the table and the figures.\n"

@@ -85,8 +85,11 @@ TEST_CASE("stop signals: a second signal of the other kind ends the process at o
           "[train]") {
   // Ctrl-C, then a SIGTERM from a timeout or a scheduler: found by a review, the SIGTERM was
   // caught again and replaced the SIGINT. In a child, which the second signal must kill.
-  for (const auto& [first, second] : {std::pair{SIGINT, SIGTERM}, std::pair{SIGTERM, SIGINT},
-                                      std::pair{SIGHUP, SIGINT}, std::pair{SIGXCPU, SIGHUP}}) {
+  for (const auto& signals : {std::pair{SIGINT, SIGTERM}, std::pair{SIGTERM, SIGINT},
+                              std::pair{SIGHUP, SIGINT}, std::pair{SIGXCPU, SIGHUP}}) {
+    // Named copies, not a structured binding: clang 14 cannot capture a binding in a lambda.
+    const int first = signals.first;
+    const int second = signals.second;
     INFO(sbptt::signal_name(first) << " then " << sbptt::signal_name(second));
     const int status = status_of_child([&](const sbptt::StopSignals& stop) {
       ::raise(first);

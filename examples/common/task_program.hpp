@@ -27,6 +27,7 @@
 #include <sbptt/sbptt.hpp>
 
 #include "memory_budget.hpp"
+#include "open_file_limit.hpp"
 #include "standard_streams.hpp"
 #include "task_options.hpp"
 
@@ -145,12 +146,18 @@ inline std::vector<RunSetting> task_identity(const TaskOptions& o) {
 }
 
 /// The file flags, checked by `task_main` before any work (drawing the sets of a large
-/// --samples takes seconds): every output can be written, and no file is named twice.
+/// --samples takes seconds): every output can be written, no file is named twice, and the
+/// outputs' descriptors fit under `ulimit -n`.
 inline void check_file_flags(const TaskOptions& o) {
-  for (const auto& [flag, path] : {std::pair{"--csv", &o.csv}, std::pair{"--save-params", &o.save_params},
-                                   std::pair{"--dump-gradients", &o.dump_gradients},
-                                   std::pair{"--checkpoint", &o.checkpoint}})
-    if (!path->empty()) check_output_path(*path, flag);
+  std::vector<std::string> outputs;
+  for (const auto& [flag, path] :
+       {std::pair{"--csv", &o.csv}, std::pair{"--checkpoint", &o.checkpoint},
+        std::pair{"--save-params", &o.save_params},
+        std::pair{"--dump-gradients", &o.dump_gradients}}) {
+    if (path->empty()) continue;
+    check_output_path(*path, flag);
+    outputs.emplace_back(flag);
+  }
   require_distinct_files({{"--model", o.task == Task::Mujoco ? o.model : std::string(), false},
                           {"--init-params", o.init_params, false},
                           {"--init-states", o.init_states, false},
@@ -159,6 +166,15 @@ inline void check_file_flags(const TaskOptions& o) {
                           {"--dump-gradients", o.dump_gradients, true},
                           {"--checkpoint", o.checkpoint, true},
                           {"--checkpoint's lock file", checkpoint_lock_path(o.checkpoint), false}});
+  if (outputs.empty()) return;
+  std::string flags = outputs.front();
+  for (std::size_t k = 1; k < outputs.size(); ++k)
+    flags += (k + 1 == outputs.size() ? " and " : ", ") + outputs[k];
+  const bool log = !o.csv.empty(), lock = !o.checkpoint.empty();
+  require_descriptors_for_outputs(flags, int{log} + int{lock},
+                                  log && lock ? "the log and the checkpoint's lock"
+                                  : log       ? "the log"
+                                              : "the checkpoint's lock");
 }
 
 /// `load()` of the input file `path` that `flag` names: its errors prefixed with the flag, and

@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -175,4 +176,46 @@ TEST_CASE("memory that runs out reading an input file is said to be that file's"
   CHECK(r.output.find("cartpole: --init-states: out of memory reading '" + states.string() +
                       "'") != std::string::npos);
   CHECK(r.output.find("--samples") == std::string::npos);
+}
+
+TEST_CASE("a descriptor limit too low for the outputs is refused before any work", "[programs]") {
+  // Under `ulimit -n 5`, `--csv l.csv --checkpoint ck` trained every epoch and then could not
+  // save: "cannot write 'ck' …: Too many open files", the trained parameters lost. The limit the
+  // refusal asks for is checked by a run under it. (Below 4 the loader cannot open libstdc++.)
+  if (sbptt::testing::address_sanitizer) {
+    WARN("AddressSanitizer opens files of its own at start: not checked");
+    return;
+  }
+  const fs::path dir = fresh_directory("open_file_limit");
+  const std::string outputs = "--csv " + (dir / "l.csv").string() + " --checkpoint " +
+                              (dir / "ck").string() + " --save-params " +
+                              (dir / "p.txt").string();
+  const auto limited = [&](int files, const std::string& flags) {
+    // The redirection first: dash saves a descriptor above 9 for `exec … 2>&1`.
+    return sbptt::testing::run("cartpole", "--epochs 2 --samples 8 " + flags,
+                               "exec 2>&1; ulimit -n " + std::to_string(files) + "; exec ", "");
+  };
+  for (const auto& [files, flags, named] :
+       std::vector<std::tuple<int, std::string, std::string>>{
+           {5, outputs, "--csv, --checkpoint and --save-params"},
+           {4, "--csv " + (dir / "l.csv").string(), "--csv"},
+           {4, "--checkpoint " + (dir / "ck").string(), "--checkpoint"}}) {
+    const auto refused = limited(files, flags);
+    INFO("ulimit -n " << files << " " << flags << "\n" << refused.output);
+    CHECK(refused.status == 1);
+    CHECK(refused.output.find("cartpole: " + named + ": ") == 0);
+    CHECK(refused.output.find("epoch") == std::string::npos);
+    CHECK(fs::is_empty(dir));
+    const std::string asked = "expected ulimit -n ";
+    const auto at = refused.output.find(asked);
+    REQUIRE(at != std::string::npos);
+    const int enough = std::stoi(refused.output.substr(at + asked.size()));
+    CHECK(enough > files);
+    const auto ran = limited(enough, flags);
+    INFO("ulimit -n " << enough << "\n" << ran.output);
+    CHECK(ran.status == 0);
+    CHECK(limited(enough - 1, flags).status == 1);
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+  }
 }

@@ -13,7 +13,9 @@
 #   4. a checkpoint whose training log is gone (the programs refuse to resume it) fails the run
 #      once, is removed, and the next sweep redoes the run from epoch 1;
 #   5. a run that ends on a signal its program answers (exit 128 + SIGHUP or SIGXCPU, as on
-#      SIGINT or SIGTERM) keeps its checkpoint, and the next sweep resumes it.
+#      SIGINT or SIGTERM) keeps its checkpoint, and the next sweep resumes it;
+#   6. a runner started with those signals (and SIGPIPE, SIGXFSZ) ignored starts its programs
+#      with none of them ignored.
 # Without the CHECKPOINTS marker the fake programs do not list --checkpoint in --help, and the
 # runner passes no --checkpoint (reproduce_resume.cmake covers that case).
 cmake_minimum_required(VERSION 3.20)
@@ -125,3 +127,18 @@ foreach(signal 1 24)
   check("exit ${code}: the next sweep resumed the run after its epoch 1 (${resumed})"
         again EQUAL 0 AND resumed STREQUAL "cartpole_p4_C_norm_s42 1\n")
 endforeach()
+
+# --- 6. the task programs start with the default actions of the signals they answer -----------
+# The runner started ignoring them (nohup, a batch system's trap) or ignoring them itself
+# (SIGPIPE, SIGXFSZ: write_signals.hpp) must not pass that on through exec: a program would
+# then neither stop at the runner's SIGTERM nor stop at `| head`. The fake's mask is its own.
+set(I "${WORK_DIR}/ignoring")
+execute_process(COMMAND sh -c "trap '' INT TERM HUP XCPU PIPE XFSZ; exec \"\$0\" \"\$@\""
+                        "${REPRODUCE}" ${grid} --seeds 1 --methods C --out "${I}"
+                RESULT_VARIABLE rc OUTPUT_QUIET ERROR_VARIABLE err)
+file(STRINGS "${I}/fake_ignored_signals" ignored)
+string(REGEX REPLACE "^[^ ]+ " "" mask "${ignored}")
+# Bits s − 1 of SIGHUP 1, SIGINT 2, SIGPIPE 13, SIGTERM 15, SIGXCPU 24, SIGXFSZ 25.
+math(EXPR passed_on "0x${mask} & 0x1805003" OUTPUT_FORMAT HEXADECIMAL)
+check("a runner started ignoring them runs its programs with none of them ignored (mask ${ignored}, ${err})"
+      rc EQUAL 0 AND mask MATCHES "^[0-9a-f]+$" AND passed_on STREQUAL "0x0")

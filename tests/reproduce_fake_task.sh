@@ -9,7 +9,8 @@
 # cuts the log (which must still be there, at least that long; else exit 1 like the real
 # programs) back to that length and resumes after that epoch (noted in fake_resumes). A file
 # `stop_<run name>` in the out dir holding an exit code makes the run end with it after its
-# epoch (the file removed): a task program stopped by a signal it answers exits 128 + it.
+# epoch (the file removed): a task program stopped by a signal it answers exits 128 + it. Its
+# mask of ignored signals (SigIgn of /proc) goes to fake_ignored_signals.
 task=$(basename "$0")
 csv= epochs=1 seed=0 method= clip= complexity= threads=1 checkpoint=
 if [ "${1:-}" = --help ]; then
@@ -39,6 +40,9 @@ name=$(basename "$csv" .partial.csv)
 echo "$$" >> "$out/fake_pids"
 echo "$name" >> "$out/fake_invocations"
 echo "$name $threads" >> "$out/fake_threads"
+while read -r key value; do
+  [ "$key" = SigIgn: ] && echo "$name $value" >> "$out/fake_ignored_signals"
+done < "/proc/$$/status"
 stop=$epochs
 [ "$method" = R ] && [ "$seed" = 43 ] && stop=2
 e=1

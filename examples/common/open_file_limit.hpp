@@ -3,13 +3,16 @@
 // work.
 //
 // A run keeps its log (--csv) and its checkpoint's lock (--checkpoint) open from its start to
-// its end, and each write opens one more descriptor at a time (the file being written, then its
-// directory to sync the rename). Under a limit too low for that, a run trained every epoch and
-// then failed at its first save ("Too many open files"), the trained parameters lost.
+// its end, and a write opens up to two more at once (the file being written, then its
+// directory to sync the rename; or the directory and, one by one, the temporaries of writers
+// that died, to remove them). Under a limit too low for that, `--csv l.csv --checkpoint ck`
+// trained an epoch and then failed at its checkpoint ("Too many open files"), and `--csv` alone
+// trained every epoch and failed at the log's last sync.
 #include <fcntl.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <string>
 #include <vector>
@@ -18,43 +21,42 @@
 
 namespace sbptt::examples {
 
-/// How many of `wanted` more descriptors this process can open now, found by opening them: the
-/// limit alone does not tell, because descriptors a parent left open count against it too.
-/// `wanted` when opening fails for another reason than the limit (not this check's to judge).
-inline int openable_descriptors(int wanted) {
-  std::vector<int> opened;
-  int failure = 0;
-  while (static_cast<int>(opened.size()) < wanted) {
-    const int fd = ::open("/", O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (fd < 0) {
-      failure = errno;
-      break;
-    }
-    opened.push_back(fd);
-  }
-  for (const int fd : opened) ::close(fd);
-  if (failure != 0 && failure != EMFILE) return wanted;
-  return static_cast<int>(opened.size());
+/// The first `count` free descriptor numbers from 3 up: where the run's files will go, since it
+/// opens each through `detail::open_above_standard_streams` (a free 0, 1 or 2, a closed
+/// standard stream, takes none of them).
+inline std::vector<int> free_descriptors_above_standard_streams(int count) {
+  std::vector<int> numbers;
+  for (int fd = 3; static_cast<int>(numbers.size()) < count; ++fd)
+    if (::fcntl(fd, F_GETFD) == -1 && errno == EBADF) numbers.push_back(fd);
+  return numbers;
 }
 
-/// Throws IoError, naming `flags`, when the `held` files a run keeps open and the one a write
+/// Throws IoError, naming `flags`, when the `held` files a run keeps open and the two a write
 /// opens beside them cannot be open at once under the process's descriptor limit.
 /// `held_names` says what the held files are ("the log and the checkpoint's lock").
 inline void require_descriptors_for_outputs(const std::string& flags, int held,
                                             const std::string& held_names) {
-  const int needed = held + 1;
-  const int available = openable_descriptors(needed);
-  if (available >= needed) return;
+  const int needed = held + 2;
   rlimit limit{};
-  ::getrlimit(RLIMIT_NOFILE, &limit);
-  const auto soft = static_cast<unsigned long long>(limit.rlim_cur);
+  if (::getrlimit(RLIMIT_NOFILE, &limit) != 0 || limit.rlim_cur == RLIM_INFINITY) return;
+  const std::vector<int> free = free_descriptors_above_standard_streams(needed);
+  // A limit bounds the numbers, not the count: one the parent left open past it takes a number
+  // that raising the limit would free.
+  const auto enough = static_cast<rlim_t>(free.back()) + 1;
+  if (enough <= limit.rlim_cur) return;
+  const auto free_now = std::count_if(free.begin(), free.end(), [&](int fd) {
+    return static_cast<rlim_t>(fd) < limit.rlim_cur;
+  });
+  const bool beyond_hard = limit.rlim_max != RLIM_INFINITY && enough > limit.rlim_max;
   throw IoError(detail::concat(
-      flags, ": ", needed, needed == 1 ? " file" : " files", " must be open at once (",
+      flags, ": ", needed, " files must be open at once beside the standard streams (",
       held == 0 ? std::string() : held_names + (held == 1 ? " stays" : " stay") +
                                       " open while the run trains, and ",
-      "each write opens one more), but ulimit -n ", soft, " leaves ", available,
-      " to open; expected ulimit -n ", soft + static_cast<unsigned long long>(needed - available),
-      " or more"));
+      "a write opens up to two), but ulimit -n ", limit.rlim_cur, " leaves ", free_now,
+      " free; expected ulimit -n ", enough, " or more",
+      beyond_hard ? detail::concat(" (past the hard limit ", limit.rlim_max,
+                                   ", which only an administrator can raise)")
+                  : std::string()));
 }
 
 }  // namespace sbptt::examples

@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -178,11 +179,13 @@ TEST_CASE("memory that runs out reading an input file is said to be that file's"
 }
 
 TEST_CASE("a descriptor limit too low for the outputs is refused before any work", "[programs]") {
-  // Under `ulimit -n 5`, `--csv l.csv --checkpoint ck` trained every epoch and then could not
-  // save: "cannot write 'ck' …: Too many open files", the trained parameters lost. Each case
-  // starts at the lowest limit under which the program loads at all (exit 127 below it: the
-  // loader cannot open libstdc++), which leaves it one descriptor free: the descriptors the test
-  // runner leaves open count too. The limit the refusal asks for is checked by a run under it.
+  // Under `ulimit -n 5`, `--csv l.csv --checkpoint ck` trained an epoch and then could not write
+  // its checkpoint ("Too many open files"); `--csv` alone trained every epoch and failed at the
+  // log's last sync. Each case starts at the lowest limit under which the program loads at all
+  // (exit 127 below it: the loader cannot open libstdc++), which leaves it one descriptor free:
+  // the descriptors the test runner leaves open count too. The limit the refusal asks for is
+  // checked by runs under it and one below it. With stdin closed, its free number 0 is no use
+  // to a run that opens its files above the standard streams.
   if (sbptt::testing::address_sanitizer) {
     WARN("AddressSanitizer opens files of its own at start: not checked");
     return;
@@ -191,21 +194,29 @@ TEST_CASE("a descriptor limit too low for the outputs is refused before any work
   const std::string outputs = "--csv " + (dir / "l.csv").string() + " --checkpoint " +
                               (dir / "ck").string() + " --save-params " +
                               (dir / "p.txt").string();
-  const auto limited = [&](int files, const std::string& flags) {
-    // The redirection first: dash saves a descriptor above 9 for `exec … 2>&1`.
-    return sbptt::testing::run("cartpole", "--epochs 2 --samples 8 " + flags,
-                               "exec 2>&1; ulimit -n " + std::to_string(files) + "; exec ", "");
-  };
-  for (const auto& [flags, named] : std::vector<std::pair<std::string, std::string>>{
-           {outputs, "--csv, --checkpoint and --save-params"},
-           {"--csv " + (dir / "l.csv").string(), "--csv"},
-           {"--checkpoint " + (dir / "ck").string(), "--checkpoint"}}) {
+  for (const auto& [flags, named, stdin_closed] :
+       std::vector<std::tuple<std::string, std::string, bool>>{
+           {outputs, "--csv, --checkpoint and --save-params", false},
+           {outputs, "--csv, --checkpoint and --save-params", true},
+           {"--csv " + (dir / "l.csv").string(), "--csv", false},
+           {"--checkpoint " + (dir / "ck").string(), "--checkpoint", false},
+           {"--save-params " + (dir / "p.txt").string(), "--save-params", false}}) {
+    const auto limited = [&, flags = flags, stdin_closed = stdin_closed](int files) {
+      // The redirections first: dash saves a descriptor above 9 for `exec … 2>&1`.
+      return sbptt::testing::run(
+          "cartpole", "--epochs 2 --samples 8 " + flags,
+          std::string("exec 2>&1") + (stdin_closed ? " 0<&-" : "") + "; ulimit -n " +
+              std::to_string(files) + "; exec ",
+          "");
+    };
+    const std::string refusal = "cartpole: " + named + ": ";
     int files = 4;
-    auto refused = limited(files, flags);
-    while (refused.status == 127 && files < 64) refused = limited(++files, flags);
-    INFO("ulimit -n " << files << " " << flags << "\n" << refused.output);
+    auto refused = limited(files);
+    while (refused.status == 127 && files < 64) refused = limited(++files);
+    INFO("ulimit -n " << files << " " << flags << (stdin_closed ? ", stdin closed" : "") << "\n"
+                      << refused.output);
     CHECK(refused.status == 1);
-    CHECK(refused.output.find("cartpole: " + named + ": ") == 0);
+    CHECK(refused.output.find(refusal) == 0);
     CHECK(refused.output.find("epoch") == std::string::npos);
     CHECK(fs::is_empty(dir));
     const std::string asked = "expected ulimit -n ";
@@ -213,10 +224,13 @@ TEST_CASE("a descriptor limit too low for the outputs is refused before any work
     REQUIRE(at != std::string::npos);
     const int enough = std::stoi(refused.output.substr(at + asked.size()));
     CHECK(enough > files);
-    const auto ran = limited(enough, flags);
+    const auto below = limited(enough - 1);
+    INFO("ulimit -n " << enough - 1 << "\n" << below.output);
+    CHECK(below.status == 1);
+    CHECK(below.output.find(refusal) == 0);
+    const auto ran = limited(enough);
     INFO("ulimit -n " << enough << "\n" << ran.output);
     CHECK(ran.status == 0);
-    CHECK(limited(enough - 1, flags).status == 1);
     fs::remove_all(dir);
     fs::create_directories(dir);
   }

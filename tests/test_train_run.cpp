@@ -521,3 +521,47 @@ TEST_CASE("run: outputs that are one file are refused before any work", "[train]
   CHECK_THROWS_WITH(run_training(s.trainer, spread<double>(4, 0.1), spread<double>(2, 0.1), settings),
                     Catch::Contains("are the same file"));
 }
+
+TEST_CASE("run: a descriptor limit too low for the outputs is refused before any work",
+          "[train]") {
+  // Under `ulimit -n 5` a run with a log, a checkpoint and a parameters file trained every epoch
+  // and then wrote neither its checkpoint nor its parameters ("Too many open files"). The log
+  // and the lock stay open and a write opens up to two more: four free numbers above the
+  // standard streams. The limit is set to the fourth free number (leaving three), then past it.
+  const fs::path dir = fresh_directory("run_descriptors");
+  Setup<double> s(Method::Regular);
+  RunSettings settings;
+  settings.epochs = 2;
+  settings.log_csv = (dir / "log.csv").string();
+  settings.checkpoint = (dir / "ck").string();
+  settings.save_params = (dir / "p.txt").string();
+  settings.setting_names = {{"log_csv", "--log"}};
+  const int fourth = detail::free_descriptors_above_standard_streams(4).back();
+  rlimit old{};
+  REQUIRE(getrlimit(RLIMIT_NOFILE, &old) == 0);
+  REQUIRE((old.rlim_cur == RLIM_INFINITY || static_cast<rlim_t>(fourth) < old.rlim_cur));
+  const auto run_under = [&](int limit) {
+    rlimit lowered = old;
+    lowered.rlim_cur = static_cast<rlim_t>(limit);
+    REQUIRE(setrlimit(RLIMIT_NOFILE, &lowered) == 0);
+    std::string error;
+    try {
+      run_training(s.trainer, spread<double>(4, 0.1), spread<double>(2, 0.1), settings);
+    } catch (const IoError& e) {
+      error = e.what();
+    }
+    REQUIRE(setrlimit(RLIMIT_NOFILE, &old) == 0);
+    return error;
+  };
+  const std::string refused = run_under(fourth);
+  CHECK(refused == "--log, checkpoint and save_params: 4 files must be open at once beside the "
+                   "standard streams (the log and the checkpoint's lock stay open while the run "
+                   "trains, and a write opens up to two), but ulimit -n " +
+                       std::to_string(fourth) + " leaves 3 free; expected ulimit -n " +
+                       std::to_string(fourth + 1) + " or more");
+  CHECK(s.trainer.epoch() == 0);
+  CHECK(fs::is_empty(dir));
+  CHECK(run_under(fourth + 1).empty());
+  CHECK(s.trainer.epoch() == 2);
+  CHECK(fs::exists(dir / "p.txt"));
+}

@@ -27,7 +27,6 @@
 #include <sbptt/sbptt.hpp>
 
 #include "memory_budget.hpp"
-#include "open_file_limit.hpp"
 #include "standard_streams.hpp"
 #include "task_options.hpp"
 
@@ -166,15 +165,7 @@ inline void check_file_flags(const TaskOptions& o) {
                           {"--dump-gradients", o.dump_gradients, true},
                           {"--checkpoint", o.checkpoint, true},
                           {"--checkpoint's lock file", checkpoint_lock_path(o.checkpoint), false}});
-  if (outputs.empty()) return;
-  std::string flags = outputs.front();
-  for (std::size_t k = 1; k < outputs.size(); ++k)
-    flags += (k + 1 == outputs.size() ? " and " : ", ") + outputs[k];
-  const bool log = !o.csv.empty(), lock = !o.checkpoint.empty();
-  require_descriptors_for_outputs(flags, int{log} + int{lock},
-                                  log && lock ? "the log and the checkpoint's lock"
-                                  : log       ? "the log"
-                                              : "the checkpoint's lock");
+  detail::require_descriptors_for_outputs(outputs, !o.csv.empty(), !o.checkpoint.empty());
 }
 
 /// `load()` of the input file `path` that `flag` names: its errors prefixed with the flag, and
@@ -253,6 +244,7 @@ int train(const TaskOptions& o, const Sim& sim, Ctrl& controller, const Objectiv
                        {"epochs", "--epochs"},
                        {"log_csv", "--csv"},
                        {"checkpoint", "--checkpoint"},
+                       {"save_params", "--save-params"},
                        {"scalar", "scalar (--float)"},
                        // Compared after --seed and --samples: what differs here is a file's
                        // content, or the way another build draws the sets and parameters.

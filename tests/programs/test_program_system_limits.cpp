@@ -14,7 +14,6 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
-#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -147,6 +146,25 @@ TEST_CASE("threads the system will not start: exit 1 naming --threads, no hang, 
                          "thread beside the training: the system started 1 of the 2") !=
            std::string::npos) == beside_failed);
   }
+  // bench's own probes beside the epochs (the round trip, the other core's lines, three copies
+  // of an epoch at once) said only "Resource temporarily unavailable", and a copy that started
+  // while the next did not ended its row's child in std::terminate ("child process failed
+  // (status 6)"). Each refusal now names the threads and the row says it; with threads enough
+  // the row is measured.
+  for (int allowed = 0; allowed <= 7; ++allowed) {
+    const auto r = sbptt::testing::run(
+        "bench", "--tasks cartpole1 --scalars float --methods R --repeats 1 --threads 3",
+        "SBPTT_THREADS_ALLOWED=" + std::to_string(allowed) + " " + shim + " timeout 120 ");
+    INFO(allowed << " threads allowed\n" << r.output);
+    CHECK(r.status == 0);
+    CHECK(r.output.find("terminate") == std::string::npos);
+    CHECK(r.output.find("child process failed") == std::string::npos);
+    const bool row_failed = r.output.find("cartpole1      float  R failed: ") != std::string::npos;
+    CHECK(row_failed == (allowed < 7));
+    const bool named = r.output.find(" of the 3 threads asked for") != std::string::npos ||
+                       r.output.find(" of the 2 threads asked for") != std::string::npos;
+    CHECK(named == row_failed);
+  }
 #endif
 }
 
@@ -181,11 +199,13 @@ TEST_CASE("memory that runs out reading an input file is said to be that file's"
 TEST_CASE("a descriptor limit too low for the outputs is refused before any work", "[programs]") {
   // Under `ulimit -n 5`, `--csv l.csv --checkpoint ck` trained an epoch and then could not write
   // its checkpoint ("Too many open files"); `--csv` alone trained every epoch and failed at the
-  // log's last sync. Each case starts at the lowest limit under which the program loads at all
-  // (exit 127 below it: the loader cannot open libstdc++), which leaves it one descriptor free:
-  // the descriptors the test runner leaves open count too. The limit the refusal asks for is
-  // checked by runs under it and one below it. With stdin closed, its free number 0 is no use
-  // to a run that opens its files above the standard streams.
+  // log's last sync; train_own_scene, whose run_training does the check for a library's user,
+  // trained all its epochs and then wrote neither its checkpoint nor its parameters. Each case
+  // starts at the lowest limit under which the program loads at all (exit 127 below it: the
+  // loader cannot open libstdc++), which leaves it one descriptor free: the descriptors the test
+  // runner leaves open count too. The limit the refusal asks for is checked by runs under it and
+  // one below it. With stdin closed, its free number 0 is no use to a run that opens its files
+  // above the standard streams.
   if (sbptt::testing::address_sanitizer) {
     WARN("AddressSanitizer opens files of its own at start: not checked");
     return;
@@ -194,26 +214,33 @@ TEST_CASE("a descriptor limit too low for the outputs is refused before any work
   const std::string outputs = "--csv " + (dir / "l.csv").string() + " --checkpoint " +
                               (dir / "ck").string() + " --save-params " +
                               (dir / "p.txt").string();
-  for (const auto& [flags, named, stdin_closed] :
-       std::vector<std::tuple<std::string, std::string, bool>>{
-           {outputs, "--csv, --checkpoint and --save-params", false},
-           {outputs, "--csv, --checkpoint and --save-params", true},
-           {"--csv " + (dir / "l.csv").string(), "--csv", false},
-           {"--checkpoint " + (dir / "ck").string(), "--checkpoint", false},
-           {"--save-params " + (dir / "p.txt").string(), "--save-params", false}}) {
-    const auto limited = [&, flags = flags, stdin_closed = stdin_closed](int files) {
+  const std::string two_epochs = "--epochs 2 --samples 8 ";
+  struct Case {
+    std::string program, arguments, named;
+    bool stdin_closed;
+  };
+  for (const Case& c : std::vector<Case>{
+           {"cartpole", two_epochs + outputs, "--csv, --checkpoint and --save-params", false},
+           {"cartpole", two_epochs + outputs, "--csv, --checkpoint and --save-params", true},
+           {"cartpole", two_epochs + "--csv " + (dir / "l.csv").string(), "--csv", false},
+           {"cartpole", two_epochs + "--checkpoint " + (dir / "ck").string(), "--checkpoint",
+            false},
+           {"cartpole", two_epochs + "--save-params " + (dir / "p.txt").string(),
+            "--save-params", false},
+           {"train_own_scene", dir.string(), "log_csv, checkpoint and save_params", false}}) {
+    const auto limited = [&](int files) {
       // The redirections first: dash saves a descriptor above 9 for `exec … 2>&1`.
-      return sbptt::testing::run(
-          "cartpole", "--epochs 2 --samples 8 " + flags,
-          std::string("exec 2>&1") + (stdin_closed ? " 0<&-" : "") + "; ulimit -n " +
-              std::to_string(files) + "; exec ",
-          "");
+      return sbptt::testing::run(c.program, c.arguments,
+                                 std::string("exec 2>&1") + (c.stdin_closed ? " 0<&-" : "") +
+                                     "; ulimit -n " + std::to_string(files) + "; exec ",
+                                 "");
     };
-    const std::string refusal = "cartpole: " + named + ": ";
+    const std::string refusal = c.program + ": " + c.named + ": ";
     int files = 4;
     auto refused = limited(files);
     while (refused.status == 127 && files < 64) refused = limited(++files);
-    INFO("ulimit -n " << files << " " << flags << (stdin_closed ? ", stdin closed" : "") << "\n"
+    INFO("ulimit -n " << files << " " << c.program << " " << c.arguments
+                      << (c.stdin_closed ? ", stdin closed" : "") << "\n"
                       << refused.output);
     CHECK(refused.status == 1);
     CHECK(refused.output.find(refusal) == 0);

@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <exception>
 #include <mutex>
+#include <string>
 #include <system_error>
 #include <thread>
 #include <vector>
@@ -46,6 +47,16 @@ inline void back_off(int& turns) {
   }
 }
 
+/// What to say when the system started `started` of `asked` threads (the caller's included) and
+/// then refused one for `reason`.
+[[nodiscard]] inline std::string threads_not_started(Index started, Index asked,
+                                                     const char* reason) {
+  return concat("the system started ", started, " of the ", asked,
+                " threads asked for (the caller's included): ", reason,
+                "; expected a thread count within the process's limits (ulimit -u, a "
+                "container's or Slurm's pids limit, ulimit -v)");
+}
+
 /// Fork-join pool of `threads − 1` background workers plus the calling thread.
 class ThreadPool {
 public:
@@ -62,10 +73,7 @@ public:
         // The destructor does not run for a constructor that throws; joinable threads left
         // behind would terminate the program, or hang it in the condition variable's end.
         stop_and_join();
-        throw ResourceError(concat("the system started ", w, " of the ", threads,
-                                   " threads asked for (the caller's included): ", e.what(),
-                                   "; expected a thread count within the process's limits "
-                                   "(ulimit -u, a container's or Slurm's pids limit, ulimit -v)"));
+        throw ResourceError(threads_not_started(w, threads, e.what()));
       } catch (...) {  // std::thread allocates its state first: bad_alloc under ulimit -v
         stop_and_join();
         throw;

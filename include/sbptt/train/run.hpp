@@ -44,6 +44,7 @@
 #include <vector>
 
 #include "sbptt/core/atomic_file.hpp"
+#include "sbptt/core/descriptor_limit.hpp"
 #include "sbptt/core/file_identity.hpp"
 #include "sbptt/nn/parameters_io.hpp"
 #include "sbptt/train/checkpoint.hpp"
@@ -150,6 +151,14 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
                           {"parameters file", settings.save_params, true},
                           {"checkpoint's lock file", checkpoint_lock_path(settings.checkpoint),
                            false}});
+  std::vector<std::string> outputs;
+  for (const auto& [setting, path] : {std::pair{"log_csv", &settings.log_csv},
+                                      std::pair{"checkpoint", &settings.checkpoint},
+                                      std::pair{"save_params", &settings.save_params}}) {
+    if (!path->empty()) outputs.push_back(caller_name(settings.setting_names, setting));
+  }
+  detail::require_descriptors_for_outputs(outputs, !settings.log_csv.empty(),
+                                          !settings.checkpoint.empty());
   const detail::FileLock checkpoint_lock =
       detail::naming_checkpoint(settings, [&] { return lock_checkpoint(settings.checkpoint); });
 

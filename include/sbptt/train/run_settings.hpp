@@ -39,7 +39,7 @@ struct RunSettings {
   /// Settings of the caller that a checkpoint must share (e.g. the task's flags).
   std::vector<RunSetting> identity{};
   /// The caller's names, in messages, for any setting the checkpoint compares and for
-  /// "epochs", "log_csv" and "checkpoint", as pairs {setting, caller's name} (e.g.
+  /// "epochs", "log_csv", "checkpoint" and "save_params", as pairs {setting, caller's name} (e.g.
   /// {"shuffle_seed", "--seed"}); the others keep their own. A name for "checkpoint" leads
   /// every refusal of the checkpoint ("--checkpoint: checkpoint 'F' …").
   std::vector<RunSetting> setting_names{};

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -40,6 +41,20 @@ fs::path scratch(const std::string& name) {
   static const fs::path dir = fresh_directory("run");
   return dir / name;
 }
+
+/// A resource limit of this process, set back to what it was when this object ends: a test that
+/// lowers it and then fails must not leave it lowered for the tests after it.
+struct RestoredLimit {
+  using Resource = decltype(RLIMIT_NOFILE);  // an enum in glibc's C++ declarations
+  explicit RestoredLimit(Resource which) : resource(which) {
+    REQUIRE(getrlimit(resource, &old) == 0);
+  }
+  RestoredLimit(const RestoredLimit&) = delete;
+  RestoredLimit& operator=(const RestoredLimit&) = delete;
+  ~RestoredLimit() { setrlimit(resource, &old); }
+  Resource resource;
+  rlimit old{};
+};
 
 /// Settings of a run of `epochs` epochs with the checkpoint `name` in the scratch directory,
 /// none there yet.
@@ -476,15 +491,14 @@ TEST_CASE("run: a log that cannot be written still saves the parameters", "[trai
   settings.epochs = 200;
   settings.log_csv = log.string();
   settings.save_params = params.string();
-  rlimit old{};
-  REQUIRE(getrlimit(RLIMIT_FSIZE, &old) == 0);
+  const RestoredLimit restored(RLIMIT_FSIZE);
   const auto old_handler = std::signal(SIGXFSZ, SIG_IGN);
-  rlimit small = old;
+  rlimit small = restored.old;
   small.rlim_cur = 600;
   REQUIRE(setrlimit(RLIMIT_FSIZE, &small) == 0);
   const auto result = run_training(s.trainer, spread<double>(6, -1.0), spread<double>(2, 0.2),
                                    settings);
-  REQUIRE(setrlimit(RLIMIT_FSIZE, &old) == 0);
+  REQUIRE(setrlimit(RLIMIT_FSIZE, &restored.old) == 0);
   std::signal(SIGXFSZ, old_handler);
   CHECK(result.end == RunEnd::OutputFailed);
   CHECK_THAT(result.output_error, Catch::Contains("full.csv"));
@@ -524,10 +538,11 @@ TEST_CASE("run: outputs that are one file are refused before any work", "[train]
 
 TEST_CASE("run: a descriptor limit too low for the outputs is refused before any work",
           "[train]") {
-  // Under `ulimit -n 5` a run with a log, a checkpoint and a parameters file trained every epoch
-  // and then wrote neither its checkpoint nor its parameters ("Too many open files"). The log
-  // and the lock stay open and a write opens up to two more: four free numbers above the
-  // standard streams. The limit is set to the fourth free number (leaving three), then past it.
+  // Under `ulimit -n 5` a run with a log, a checkpoint and a parameters file trained its first
+  // epoch, could not write that epoch's checkpoint ("Too many open files") and stopped without
+  // its parameters saved either. The log and the lock stay open and the first write of a file
+  // opens up to two more: four free numbers above the standard streams. The limit is set to the
+  // fourth free number (leaving three), then past it.
   const fs::path dir = fresh_directory("run_descriptors");
   Setup<double> s(Method::Regular);
   RunSettings settings;
@@ -537,31 +552,37 @@ TEST_CASE("run: a descriptor limit too low for the outputs is refused before any
   settings.save_params = (dir / "p.txt").string();
   settings.setting_names = {{"log_csv", "--log"}};
   const int fourth = detail::free_descriptors_above_standard_streams(4).back();
-  rlimit old{};
-  REQUIRE(getrlimit(RLIMIT_NOFILE, &old) == 0);
-  REQUIRE((old.rlim_cur == RLIM_INFINITY || static_cast<rlim_t>(fourth) < old.rlim_cur));
+  const RestoredLimit restored(RLIMIT_NOFILE);
+  REQUIRE((restored.old.rlim_cur == RLIM_INFINITY ||
+           static_cast<rlim_t>(fourth) < restored.old.rlim_cur));
+  std::optional<RunResult<double>> result;
   const auto run_under = [&](int limit) {
-    rlimit lowered = old;
+    rlimit lowered = restored.old;
     lowered.rlim_cur = static_cast<rlim_t>(limit);
     REQUIRE(setrlimit(RLIMIT_NOFILE, &lowered) == 0);
     std::string error;
     try {
-      run_training(s.trainer, spread<double>(4, 0.1), spread<double>(2, 0.1), settings);
+      result = run_training(s.trainer, spread<double>(4, 0.1), spread<double>(2, 0.1), settings);
     } catch (const IoError& e) {
       error = e.what();
     }
-    REQUIRE(setrlimit(RLIMIT_NOFILE, &old) == 0);
+    REQUIRE(setrlimit(RLIMIT_NOFILE, &restored.old) == 0);
     return error;
   };
   const std::string refused = run_under(fourth);
   CHECK(refused == "--log, checkpoint and save_params: 4 files must be open at once beside the "
                    "standard streams (the log and the checkpoint's lock stay open while the run "
-                   "trains, and a write opens up to two), but ulimit -n " +
+                   "trains, and a write opens up to two: the directory, and the file or a killed "
+                   "writer's temporary), but ulimit -n " +
                        std::to_string(fourth) + " leaves 3 free; expected ulimit -n " +
                        std::to_string(fourth + 1) + " or more");
+  CHECK(!result);
   CHECK(s.trainer.epoch() == 0);
   CHECK(fs::is_empty(dir));
   CHECK(run_under(fourth + 1).empty());
+  REQUIRE(result);
+  CHECK(result->end == RunEnd::Finished);
+  CHECK(result->output_error.empty());
   CHECK(s.trainer.epoch() == 2);
-  CHECK(fs::exists(dir / "p.txt"));
+  for (const char* file : {"log.csv", "ck", "p.txt"}) CHECK(fs::exists(dir / file));
 }

@@ -9,6 +9,7 @@
 #include <cstddef>
 #include <exception>
 #include <mutex>
+#include <stdexcept>
 #include <system_error>
 #include <thread>
 #include <utility>
@@ -91,6 +92,7 @@ inline double cross_core_round_trip_ns() {
     }
   });
   std::vector<double> ns;
+  ns.reserve(kBatches);  // nothing to allocate while the partner runs: a throw would terminate
   for (int batch = 0; batch < kBatches; ++batch) {
     const double start = now_ms();
     for (int i = batch * kTrips; i < (batch + 1) * kTrips; ++i) {
@@ -194,6 +196,13 @@ double concurrent_copies_ratio(Index copies, int repeats, Copy&& copy) {
     } catch (...) {
       const std::lock_guard lock(failure_mutex);
       if (!failure) failure = std::current_exception();
+      abandoned = true;
+    }
+    if (!finished && !abandoned) {  // the copy never ran its rounds: its times would read 0
+      const std::lock_guard lock(failure_mutex);
+      if (!failure)
+        failure = std::make_exception_ptr(std::logic_error(sbptt::detail::concat(
+            "concurrent_copies_ratio: copy ", c, " returned without running its rounds")));
       abandoned = true;
     }
     if (!finished) round_start.arrive_and_drop();

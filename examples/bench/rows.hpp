@@ -63,7 +63,7 @@ struct RowResult {
   long long sweeps_threaded = 0, sweeps_alone = 0;
   double trajectory_bytes = 0, rss_kib = 0;
   int ok = 0;
-  char error[200] = {};
+  char error[512] = {};  // room for a refusal of threads, with its flag and what it asks for
 
   [[nodiscard]] double gflops() const { return gflop / (ms_epoch / 1e3); }  ///< 1 thread
   [[nodiscard]] double fraction_of_peak() const { return gflops() / peak_gflops; }
@@ -210,16 +210,19 @@ RowResult measure(const Settings& settings, const Sim& sim,
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
   r.rss_kib = static_cast<double>(usage.ru_maxrss);
+  // What the threads the system will not start (ulimit -u, a pids limit) say leads with the
+  // flag that asked for them.
+  const std::string threads_flag = "--threads " + std::to_string(settings.threads);
   std::optional<Counted> threaded;  // none with one thread
-  if (settings.threads > 1) {
-    threaded.emplace(sim, initial, objective, steps, method, settings.threads,
-                     settings.sweep_threading);
-    epoch(*threaded);  // its warm-up
-  }
   std::optional<TrainerBeside<Sim, Loss>> beside;  // none with one thread
   if (settings.threads > 1) {
-    beside.emplace(sim, initial, objective, steps, method);
-    beside->epoch(train, test);  // its warm-up
+    sbptt::detail::prefixing_errors(threads_flag, [&] {
+      threaded.emplace(sim, initial, objective, steps, method, settings.threads,
+                       settings.sweep_threading);
+      epoch(*threaded);  // its warm-up
+      beside.emplace(sim, initial, objective, steps, method);
+      beside->epoch(train, test);  // its warm-up
+    });
   }
   std::optional<Counted> regular;  // a C row's R trainer
   if (method == Method::Combined) {
@@ -273,13 +276,15 @@ RowResult measure(const Settings& settings, const Sim& sim,
     const sbptt::SweepTally tally = threaded->trainer.engine().sweep_tally();
     r.sweeps_threaded = tally.threaded - tally_before.threaded;
     r.sweeps_alone = tally.alone - tally_before.alone;
-    r.round_trip_ns = cross_core_round_trip_ns();
-    r.other_core_read_ratio = other_core_read_ratio();
-    r.copies_ratio =
-        concurrent_copies_ratio(settings.threads, settings.repeats, [&](auto&& rounds) {
-          Counted copy(sim, initial, objective, steps, method, 1);
-          rounds([&] { epoch(copy); });
-        });
+    sbptt::detail::prefixing_errors(threads_flag + " (--threads 1 runs no host probes)", [&] {
+      r.round_trip_ns = cross_core_round_trip_ns();
+      r.other_core_read_ratio = other_core_read_ratio();
+      r.copies_ratio =
+          concurrent_copies_ratio(settings.threads, settings.repeats, [&](auto&& rounds) {
+            Counted copy(sim, initial, objective, steps, method, 1);
+            rounds([&] { epoch(copy); });
+          });
+    });
   }
   r.ok = 1;
   return r;

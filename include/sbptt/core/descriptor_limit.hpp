@@ -2,15 +2,16 @@
 /// \file The descriptors a run's output files need at once, checked against `ulimit -n` before
 /// any work (`run_training`, and the programs before they load anything).
 ///
-/// A run keeps its log and its checkpoint's lock open from its start to its end, and a write
-/// opens up to two more at once (the file being written, then its directory to sync the rename;
-/// or the directory and, one by one, the temporaries of writers that died, to remove them).
-/// Under a limit too low for that, a run with a log and a checkpoint trained an epoch and then
-/// failed at its checkpoint ("Too many open files"), and one with a log alone trained every
-/// epoch and failed at the log's last sync.
+/// A run keeps its log and its checkpoint's lock open from its start to its end. A write opens
+/// one more at a time (the file, closed before its directory is opened to sync the rename), and
+/// the first write of each file two: the directory and, one by one, the temporaries that killed
+/// writers left, to remove them. That removal is best effort, so one spare number would let the
+/// run go on and leave those copies behind without a word; the check asks for two. Under a limit
+/// too low even for one, a run with a log and a checkpoint trained an epoch and then failed at
+/// its checkpoint ("Too many open files"), and one with a log alone trained every epoch and
+/// failed at the log's last sync.
 #include <fcntl.h>
 #include <sys/resource.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -60,7 +61,8 @@ inline void require_descriptors_for_outputs(const std::vector<std::string>& outp
   throw IoError(concat(
       listed, ": ", needed, " files must be open at once beside the standard streams (",
       held == 0 ? std::string() : concat(held_names, " open while the run trains, and "),
-      "a write opens up to two), but ulimit -n ", limit.rlim_cur, " leaves ", free_now,
+      "a write opens up to two: the directory, and the file or a killed writer's temporary), "
+      "but ulimit -n ", limit.rlim_cur, " leaves ", free_now,
       " free; expected ulimit -n ", enough, " or more",
       beyond_hard ? concat(" (past the hard limit ", limit.rlim_max,
                            ", which only an administrator can raise)")

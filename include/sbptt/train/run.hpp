@@ -41,6 +41,7 @@
 #include <utility>
 #include <optional>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "sbptt/core/atomic_file.hpp"
@@ -139,10 +140,14 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
   const TrainerOptions& o = trainer.options();
   const std::vector<RunSetting> identity =
       detail::run_identity(trainer, train, test, settings, best_by);
-  for (const auto& [what, path] : {std::pair{"training log", &settings.log_csv},
-                                   std::pair{"checkpoint", &settings.checkpoint},
-                                   std::pair{"parameters file", &settings.save_params}}) {
-    if (!path->empty()) check_output_path(*path, what);
+  std::vector<std::string> outputs;  // by the caller's names
+  for (const auto& [what, setting, path] :
+       {std::tuple{"training log", "log_csv", &settings.log_csv},
+        std::tuple{"checkpoint", "checkpoint", &settings.checkpoint},
+        std::tuple{"parameters file", "save_params", &settings.save_params}}) {
+    if (path->empty()) continue;
+    check_output_path(*path, what);
+    outputs.push_back(caller_name(settings.setting_names, setting));
   }
   // The lock too (never written, so an input beside it is no clash): a log renamed over it
   // would leave a second run of the checkpoint a lock of its own.
@@ -151,12 +156,6 @@ RunResult<typename TrainerT::Scalar> run_training(TrainerT& trainer,
                           {"parameters file", settings.save_params, true},
                           {"checkpoint's lock file", checkpoint_lock_path(settings.checkpoint),
                            false}});
-  std::vector<std::string> outputs;
-  for (const auto& [setting, path] : {std::pair{"log_csv", &settings.log_csv},
-                                      std::pair{"checkpoint", &settings.checkpoint},
-                                      std::pair{"save_params", &settings.save_params}}) {
-    if (!path->empty()) outputs.push_back(caller_name(settings.setting_names, setting));
-  }
   detail::require_descriptors_for_outputs(outputs, !settings.log_csv.empty(),
                                           !settings.checkpoint.empty());
   const detail::FileLock checkpoint_lock =

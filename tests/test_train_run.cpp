@@ -542,7 +542,9 @@ TEST_CASE("run: a descriptor limit too low for the outputs is refused before any
   // epoch, could not write that epoch's checkpoint ("Too many open files") and stopped without
   // its parameters saved either. The log and the lock stay open and the first write of a file
   // opens up to two more: four free numbers above the standard streams. The limit is set to the
-  // fourth free number (leaving three), then past it.
+  // third free number (leaving two: the old code's failure), to the fourth (leaving three: the
+  // old code ran, but the removal of a killed writer's temporaries would have found no number),
+  // then past it.
   const fs::path dir = fresh_directory("run_descriptors");
   Setup<double> s(Method::Regular);
   RunSettings settings;
@@ -551,7 +553,8 @@ TEST_CASE("run: a descriptor limit too low for the outputs is refused before any
   settings.checkpoint = (dir / "ck").string();
   settings.save_params = (dir / "p.txt").string();
   settings.setting_names = {{"log_csv", "--log"}};
-  const int fourth = detail::free_descriptors_above_standard_streams(4).back();
+  const std::vector<int> free = detail::free_descriptors_above_standard_streams(4);
+  const int third = free[2], fourth = free[3];
   const RestoredLimit restored(RLIMIT_NOFILE);
   REQUIRE((restored.old.rlim_cur == RLIM_INFINITY ||
            static_cast<rlim_t>(fourth) < restored.old.rlim_cur));
@@ -569,6 +572,10 @@ TEST_CASE("run: a descriptor limit too low for the outputs is refused before any
     REQUIRE(setrlimit(RLIMIT_NOFILE, &restored.old) == 0);
     return error;
   };
+  CHECK_THAT(run_under(third), Catch::StartsWith("--log, checkpoint and save_params: 4 files") &&
+                                   Catch::Contains(" leaves 2 free; expected ulimit -n " +
+                                                   std::to_string(fourth + 1) + " or more"));
+  CHECK(!result);
   const std::string refused = run_under(fourth);
   CHECK(refused == "--log, checkpoint and save_params: 4 files must be open at once beside the "
                    "standard streams (the log and the checkpoint's lock stay open while the run "

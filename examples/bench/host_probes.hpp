@@ -193,16 +193,12 @@ double concurrent_copies_ratio(Index copies, int repeats, Copy&& copy) {
         }
         finished = true;
       });
+      if (!finished && !abandoned)  // its times would read 0
+        throw std::logic_error(sbptt::detail::concat(
+            "concurrent_copies_ratio: copy ", c, " returned without running its rounds"));
     } catch (...) {
       const std::lock_guard lock(failure_mutex);
       if (!failure) failure = std::current_exception();
-      abandoned = true;
-    }
-    if (!finished && !abandoned) {  // the copy never ran its rounds: its times would read 0
-      const std::lock_guard lock(failure_mutex);
-      if (!failure)
-        failure = std::make_exception_ptr(std::logic_error(sbptt::detail::concat(
-            "concurrent_copies_ratio: copy ", c, " returned without running its rounds")));
       abandoned = true;
     }
     if (!finished) round_start.arrive_and_drop();

@@ -217,12 +217,11 @@ TEST_CASE("a descriptor limit too low for the outputs is refused before any work
   // its checkpoint ("Too many open files"); `--csv` alone trained every epoch and failed at the
   // log's last sync; train_own_scene, whose run_training does the check for a library's user,
   // trained its first epoch, could not write that epoch's checkpoint and stopped without its
-  // parameters saved either. Each case
-  // starts at the lowest limit under which the program loads at all (exit 127 below it: the
-  // loader cannot open libstdc++), which leaves it one descriptor free: the descriptors the test
-  // runner leaves open count too. The limit the refusal asks for is checked by runs under it and
-  // one below it. With stdin closed, its free number 0 is no use to a run that opens its files
-  // above the standard streams.
+  // parameters saved either. Each case starts at the lowest limit under which the program loads
+  // at all (exit 127 below it: the loader cannot open libstdc++), which leaves it one descriptor
+  // free: the descriptors the test runner leaves open count too. The limit the refusal asks for
+  // is checked by runs under it and one below it. With stdin closed, its free number 0 is no use
+  // to a run that opens its files above the standard streams.
   if (sbptt::testing::address_sanitizer) {
     WARN("AddressSanitizer opens files of its own at start: not checked");
     return;

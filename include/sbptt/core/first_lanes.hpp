@@ -5,23 +5,27 @@
 /// reading or writing past its end. Lanes not loaded are 0; memory past the lanes stored is
 /// left as it was. And the lower half or quarter of a register as a narrower one, for a panel
 /// that fills no more: where a core splits a 512-bit multiply-add in two 256-bit halves (AMD
-/// Zen 4), a masked register costs a whole one, half a register half of one. Defined only
-/// where Eigen vectorizes with AVX-512, for float and double.
+/// Zen 4), a masked register costs a whole one, half a register half of one. Defined where
+/// Eigen vectorizes with AVX-512, for float and double; the first lanes of a register (no
+/// narrower parts) also where it vectorizes with AVX2 and not AVX-512: its 256-bit registers
+/// have no mask registers, so a vector mask goes there (`vmaskmovps`), which likewise neither
+/// reads nor writes the lanes it leaves out.
 #include <type_traits>
 
 #include <Eigen/Core>
 
 #include "sbptt/core/types.hpp"
 
-#if defined(EIGEN_VECTORIZE_AVX512)
+#if defined(EIGEN_VECTORIZE_AVX512) || defined(EIGEN_VECTORIZE_AVX2)
 #include <immintrin.h>
 
 namespace sbptt::detail {
 
-/// Eigen's AVX-512 register of `Scalar` (16 floats or 8 doubles).
+/// Eigen's widest register of `Scalar`: 16 floats or 8 doubles with AVX-512, 8 or 4 with AVX2.
 template <class Scalar>
 using FullPacket = typename Eigen::internal::packet_traits<Scalar>::type;
 
+#if defined(EIGEN_VECTORIZE_AVX512)
 /// The mask of lanes 0 … count − 1 (0 < count ≤ the register's lanes).
 template <class Mask>
 EIGEN_ALWAYS_INLINE Mask first_lanes_mask(Index count) {
@@ -48,6 +52,55 @@ EIGEN_ALWAYS_INLINE void store_first_lanes(Scalar* to, const FullPacket<Scalar>&
     _mm512_mask_storeu_pd(to, first_lanes_mask<__mmask8>(count), value);
   }
 }
+
+#else  // AVX2
+/// All bits set in the 32-bit (float) or 64-bit (double) lanes 0 … count − 1 (0 < count ≤ the
+/// register's lanes), none in the others.
+template <class Scalar>
+EIGEN_ALWAYS_INLINE __m256i first_lanes_mask(Index count) {
+  if constexpr (std::is_same_v<Scalar, float>) {
+    return _mm256_cmpgt_epi32(_mm256_set1_epi32(static_cast<int>(count)),
+                              _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+  } else {
+    return _mm256_cmpgt_epi64(_mm256_set1_epi64x(count), _mm256_setr_epi64x(0, 1, 2, 3));
+  }
+}
+
+// A whole register goes by a plain load or store: the masked ones cost more even with every
+// lane selected (AMD EPYC, Zen 3: guidance's paired VJP of 8 samples 1312 ns with masks on
+// every tile, 1151 with plain moves for the whole ones; docs/benchmark-runs-avx2.md).
+
+template <class Scalar>
+EIGEN_ALWAYS_INLINE FullPacket<Scalar> load_first_lanes(const Scalar* from, Index count) {
+  static_assert(FloatOrDouble<Scalar>);
+  constexpr auto kLanes = static_cast<Index>(32 / sizeof(Scalar));  // a 256-bit register
+  if (count == kLanes) return Eigen::internal::ploadu<FullPacket<Scalar>>(from);
+  if constexpr (std::is_same_v<Scalar, float>) {
+    return _mm256_maskload_ps(from, first_lanes_mask<Scalar>(count));
+  } else {
+    return _mm256_maskload_pd(from, first_lanes_mask<Scalar>(count));
+  }
+}
+
+template <class Scalar>
+EIGEN_ALWAYS_INLINE void store_first_lanes(Scalar* to, const FullPacket<Scalar>& value,
+                                           Index count) {
+  static_assert(FloatOrDouble<Scalar>);
+  constexpr auto kLanes = static_cast<Index>(32 / sizeof(Scalar));  // a 256-bit register
+  if (count == kLanes) return Eigen::internal::pstoreu(to, value);
+  if constexpr (std::is_same_v<Scalar, float>) {
+    _mm256_maskstore_ps(to, first_lanes_mask<Scalar>(count), value);
+  } else {
+    _mm256_maskstore_pd(to, first_lanes_mask<Scalar>(count), value);
+  }
+}
+#endif
+
+}  // namespace sbptt::detail
+#endif
+
+#if defined(EIGEN_VECTORIZE_AVX512)
+namespace sbptt::detail {
 
 /// The register of the lower 1/Fraction of a `FullPacket` (Fraction 2 or 4). Named type by
 /// type: a vector type as a template argument loses its attributes (GCC warns).

@@ -1,9 +1,10 @@
 #pragma once
-/// \file A square tile of an AVX-512 register's lanes transposed in registers: register l's
-/// lane i to register i's lane l (16 × 16 floats or 8 × 8 doubles). Moving a batch matrix in
-/// and out of a simulator's lanes (sim/lane_rows.hpp) and packing a weight matrix's panels
-/// (nn/packed_product.hpp) both turn rows into columns this way, instead of entry by entry.
-/// Defined only where Eigen vectorizes with AVX-512, for float and double.
+/// \file A square tile of a register's lanes transposed in registers: register l's lane i to
+/// register i's lane l (AVX-512: 16 × 16 floats or 8 × 8 doubles; AVX2: 8 × 8 or 4 × 4).
+/// Moving a batch matrix in and out of a simulator's lanes (sim/lane_rows.hpp) and, with
+/// AVX-512, packing a weight matrix's panels (nn/packed_product.hpp) turn rows into columns
+/// this way, instead of entry by entry. Defined where Eigen vectorizes with AVX-512 or AVX2,
+/// for float and double.
 #include <algorithm>
 #include <type_traits>
 
@@ -110,4 +111,49 @@ EIGEN_ALWAYS_INLINE void transpose_tile(FullPacket<Scalar>* r) {
 
 }  // namespace sbptt::detail
 
-#endif  // EIGEN_VECTORIZE_AVX512
+#elif defined(EIGEN_VECTORIZE_AVX2)
+#include <immintrin.h>
+
+namespace sbptt::detail {
+
+/// Register l's lane i to register i's lane l: 32-bit (64-bit for doubles) interleaves of
+/// neighbouring registers, for floats a 64-bit shuffle of those, then a 128-bit permute.
+template <class Scalar>
+EIGEN_ALWAYS_INLINE void transpose_tile(FullPacket<Scalar>* r) {
+  if constexpr (std::is_same_v<Scalar, float>) {
+    __m256 t[8];
+    SBPTT_UNROLL
+    for (int i = 0; i < 8; i += 2) {
+      t[i] = _mm256_unpacklo_ps(r[i], r[i + 1]);
+      t[i + 1] = _mm256_unpackhi_ps(r[i], r[i + 1]);
+    }
+    // t[i] holds entries 0, 1 of registers i and i + 1 alternating (4, 5 in its upper 128
+    // bits), t[i + 1] entries 2, 3 (6, 7).
+    __m256 u[8];
+    SBPTT_UNROLL
+    for (int i = 0; i < 8; i += 4) {
+      u[i] = _mm256_shuffle_ps(t[i], t[i + 2], _MM_SHUFFLE(1, 0, 1, 0));
+      u[i + 1] = _mm256_shuffle_ps(t[i], t[i + 2], _MM_SHUFFLE(3, 2, 3, 2));
+      u[i + 2] = _mm256_shuffle_ps(t[i + 1], t[i + 3], _MM_SHUFFLE(1, 0, 1, 0));
+      u[i + 3] = _mm256_shuffle_ps(t[i + 1], t[i + 3], _MM_SHUFFLE(3, 2, 3, 2));
+    }
+    // u[j] (u[4 + j]) holds entry j and 4 + j of registers 0–3 (4–7).
+    SBPTT_UNROLL
+    for (int j = 0; j < 4; ++j) {
+      r[j] = _mm256_permute2f128_ps(u[j], u[4 + j], 0x20);
+      r[4 + j] = _mm256_permute2f128_ps(u[j], u[4 + j], 0x31);
+    }
+  } else {
+    static_assert(std::is_same_v<Scalar, double>);
+    const __m256d t0 = _mm256_unpacklo_pd(r[0], r[1]), t1 = _mm256_unpackhi_pd(r[0], r[1]);
+    const __m256d t2 = _mm256_unpacklo_pd(r[2], r[3]), t3 = _mm256_unpackhi_pd(r[2], r[3]);
+    r[0] = _mm256_permute2f128_pd(t0, t2, 0x20);
+    r[1] = _mm256_permute2f128_pd(t1, t3, 0x20);
+    r[2] = _mm256_permute2f128_pd(t0, t2, 0x31);
+    r[3] = _mm256_permute2f128_pd(t1, t3, 0x31);
+  }
+}
+
+}  // namespace sbptt::detail
+
+#endif  // EIGEN_VECTORIZE_AVX512, EIGEN_VECTORIZE_AVX2

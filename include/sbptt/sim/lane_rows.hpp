@@ -11,10 +11,12 @@
 ///
 /// A batch matrix holds a sample's rows together (column-major), a block of lanes a row's
 /// samples together: moving a whole block in or out (`load_rows`, `store_rows`) transposes it.
-/// On AVX-512 that goes by tiles of kLanes × kLanes, a column of the tile a register,
-/// transposed in registers by core/transpose_tile.hpp (guidance's `vjp_batch` moves 52 rows
-/// in and 28 out per block: entry by entry, about 0.15–0.2 ns an entry;
-/// docs/benchmark-runs.md, eighteenth run).
+/// With AVX-512 or AVX2 that goes by square tiles of a register's lanes (kLanes × kLanes with
+/// AVX-512; with AVX2 a block is two tiles of 8 × 8 floats or 4 × 4 doubles side by side), a
+/// column of the tile a register, transposed in registers by core/transpose_tile.hpp.
+/// Guidance's `vjp_batch` moves 52 rows in and 28 out per block: entry by entry, about
+/// 0.15–0.2 ns an entry (docs/benchmark-runs.md, eighteenth run); by AVX2 tiles its paired VJP
+/// of 8 samples took 1151 ns against 1934 (docs/benchmark-runs-avx2.md).
 #include <algorithm>
 #include <span>
 
@@ -62,7 +64,7 @@ struct LaneRows {
     eigen_assert(static_cast<Index>(rows.size()) == m.rows());
     // By pointer from here: a span's operator[] is bounds-checked under _GLIBCXX_ASSERTIONS.
     Values* const out = rows.data();
-#if defined(EIGEN_VECTORIZE_AVX512)
+#if defined(EIGEN_VECTORIZE_AVX512) || defined(EIGEN_VECTORIZE_AVX2)
     if constexpr (kTransposeInRegisters) {
       return load_tiles(m, first, count, out);
     }
@@ -81,7 +83,7 @@ struct LaneRows {
                                              const ColumnsOut& m) {
     eigen_assert(static_cast<Index>(rows.size()) == m.rows());
     const Values* const in = rows.data();
-#if defined(EIGEN_VECTORIZE_AVX512)
+#if defined(EIGEN_VECTORIZE_AVX512) || defined(EIGEN_VECTORIZE_AVX2)
     if constexpr (kTransposeInRegisters) {
       return store_tiles(in, first, count, m);
     }
@@ -95,39 +97,58 @@ struct LaneRows {
   }
 
 private:
-#if defined(EIGEN_VECTORIZE_AVX512)
+#if defined(EIGEN_VECTORIZE_AVX512) || defined(EIGEN_VECTORIZE_AVX2)
   static constexpr bool kTransposeInRegisters = FloatOrDouble<Scalar>;
   using Packet = typename Eigen::internal::packet_traits<Scalar>::type;
+  /// A register's lanes: a tile is kTile × kTile, and a block kLanes / kTile tiles wide
+  /// (one with AVX-512, two with AVX2).
+  static constexpr int kTile = Eigen::internal::unpacket_traits<Packet>::size;
+  static_assert(kLanes % kTile == 0);
   static Packet zero() { return Eigen::internal::pset1<Packet>(Scalar(0)); }
 
   EIGEN_ALWAYS_INLINE static void load_tiles(const Columns& m, Index first, int count,
                                              Values* rows) {
-    for (Index top = 0; top < m.rows(); top += kLanes) {
-      const Index height = std::min<Index>(kLanes, m.rows() - top);
-      Packet tile[kLanes];
+    for (Index top = 0; top < m.rows(); top += kTile) {
+      const Index height = std::min<Index>(kTile, m.rows() - top);
       SBPTT_UNROLL
-      for (int l = 0; l < kLanes; ++l)
-        tile[l] = l < count ? load_first_lanes(m.column(first + l) + top, height) : zero();
-      transpose_tile<Scalar>(tile);
-      SBPTT_UNROLL
-      for (Index i = 0; i < height; ++i) Eigen::internal::pstoreu(rows[top + i].data(), tile[i]);
+      for (int left = 0; left < kLanes; left += kTile) {
+        Packet tile[kTile];
+        if (left >= count) {  // lanes past the count only: zeros, nothing to transpose
+          for (Index i = 0; i < height; ++i)
+            Eigen::internal::pstoreu(rows[top + i].data() + left, zero());
+          continue;
+        }
+        SBPTT_UNROLL
+        for (int l = 0; l < kTile; ++l)
+          tile[l] = left + l < count ? load_first_lanes(m.column(first + left + l) + top, height)
+                                     : zero();
+        transpose_tile<Scalar>(tile);
+        SBPTT_UNROLL
+        for (Index i = 0; i < height; ++i)
+          Eigen::internal::pstoreu(rows[top + i].data() + left, tile[i]);
+      }
     }
   }
 
   EIGEN_ALWAYS_INLINE static void store_tiles(const Values* rows, Index first, int count,
                                               const ColumnsOut& m) {
-    for (Index top = 0; top < m.rows(); top += kLanes) {
-      const Index height = std::min<Index>(kLanes, m.rows() - top);
-      Packet tile[kLanes];
+    for (Index top = 0; top < m.rows(); top += kTile) {
+      const Index height = std::min<Index>(kTile, m.rows() - top);
       SBPTT_UNROLL
-      for (Index i = 0; i < kLanes; ++i)
-        tile[i] = i < height ? Eigen::internal::ploadu<Packet>(rows[top + i].data()) : zero();
-      transpose_tile<Scalar>(tile);
-      SBPTT_UNROLL
-      for (int l = 0; l < count; ++l) store_first_lanes(m.column(first + l) + top, tile[l], height);
+      for (int left = 0; left < kLanes && left < count; left += kTile) {
+        Packet tile[kTile];
+        SBPTT_UNROLL
+        for (Index i = 0; i < kTile; ++i)
+          tile[i] = i < height ? Eigen::internal::ploadu<Packet>(rows[top + i].data() + left)
+                               : zero();
+        transpose_tile<Scalar>(tile);
+        const int lanes = std::min(kTile, count - left);
+        SBPTT_UNROLL
+        for (int l = 0; l < lanes; ++l)
+          store_first_lanes(m.column(first + left + l) + top, tile[l], height);
+      }
     }
   }
-
 #endif
 };
 

@@ -68,7 +68,8 @@ EIGEN_ALWAYS_INLINE __m256i first_lanes_mask(Index count) {
 
 // A whole register goes by a plain load or store: the masked ones cost more even with every
 // lane selected (AMD EPYC, Zen 3: guidance's paired VJP of 8 samples 1312 ns with masks on
-// every tile, 1151 with plain moves for the whole ones; docs/benchmark-runs-avx2.md).
+// every tile, 1170 with plain moves for the whole ones; docs/benchmark-runs.md, eighty-second
+// run).
 
 template <class Scalar>
 EIGEN_ALWAYS_INLINE FullPacket<Scalar> load_first_lanes(const Scalar* from, Index count) {

@@ -16,7 +16,7 @@
 /// column of the tile a register, transposed in registers by core/transpose_tile.hpp.
 /// Guidance's `vjp_batch` moves 52 rows in and 28 out per block: entry by entry, about
 /// 0.15–0.2 ns an entry (docs/benchmark-runs.md, eighteenth run); by AVX2 tiles its paired VJP
-/// of 8 samples took 1151 ns against 1934 (docs/benchmark-runs-avx2.md).
+/// of 8 samples took 1170 ns against 1930 (docs/benchmark-runs.md, eighty-second run).
 #include <algorithm>
 #include <span>
 

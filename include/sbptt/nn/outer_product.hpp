@@ -28,7 +28,6 @@
 
 #include "sbptt/core/count_dispatch.hpp"
 #include "sbptt/core/error.hpp"
-#include "sbptt/core/fused_multiply_add.hpp"
 #include "sbptt/core/types.hpp"
 #include "sbptt/core/unroll.hpp"
 #include "sbptt/core/first_lanes.hpp"
@@ -244,9 +243,12 @@ private:
     }
   }
 };
+#endif
 
+#if defined(EIGEN_VECTORIZE_AVX512) || defined(SBPTT_OUTER_PRODUCT_AVX2)
 /// The registers of `add_sample_sums`: blocks of kRegisters registers of rows, then the rows
-/// left (the last register masked).
+/// left (the last register masked). With AVX2 only where it has FMA, as the scaled sums round
+/// d·s + b once, like the scalar path.
 template <class Scalar>
 class SampleSums {
 public:
@@ -372,24 +374,18 @@ namespace detail {
 /// run).
 template <class Scalar>
 void add_sample_sums(Scalar* b, Index rows, const Scalar* d, Index n, const Scalar* scale) {
-#if defined(EIGEN_VECTORIZE_AVX512)
+#if defined(EIGEN_VECTORIZE_AVX512) || defined(SBPTT_OUTER_PRODUCT_AVX2)
   if constexpr (FloatOrDouble<Scalar>) {
     SampleSums<Scalar>::run(b, rows, d, n, scale);
     return;
   }
 #endif
-  // Rows of 2 entries: where any build's kernel runs (AVX2 here; AVX-512 returned above).
-  require(scale == nullptr || outer_product_kernel_applies<Scalar>(2),
+  // No register kernel in this build (outer_product_kernel_applies is false), so no scale.
+  require(scale == nullptr,
           "add_weight_and_bias_products: a scale where the register kernels do not run; "
           "expected none");
-  if (scale == nullptr) {
-    Eigen::Map<Vector<Scalar>> bias(b, rows);
-    for (Index k = 0; k < n; ++k) bias += Eigen::Map<const Vector<Scalar>>(d + k * rows, rows);
-    return;
-  }
-  // One by one: Eigen's d·s + b is a product and a sum, which clang does not fuse.
-  for (Index k = 0; k < n; ++k)
-    for (Index i = 0; i < rows; ++i) b[i] = fused_multiply_add(d[k * rows + i], scale[k], b[i]);
+  Eigen::Map<Vector<Scalar>> bias(b, rows);
+  for (Index k = 0; k < n; ++k) bias += Eigen::Map<const Vector<Scalar>>(d + k * rows, rows);
 }
 
 }  // namespace detail

@@ -1,10 +1,10 @@
 // A batch matrix's block of samples into lane arrays and back (sim/lane_rows.hpp): every
 // entry against the matrix indexed one entry at a time, for heights that fill no tile, one,
 // and several with a partial last one (of every height short of an AVX2 tile, 8 floats or 4
-// doubles), every count of samples in a block, blocks that start
-// past column 0 and blocks that end at the matrix's last column (a read past the block there
-// leaves the allocation, for a sanitizer to see); the lanes past the count are 0, and nothing
-// outside the block or past the last lane array is written.
+// doubles), every count of samples in a block, blocks that start past column 0 and blocks that
+// end at the matrix's last column (a read past the block there leaves the allocation, for a
+// sanitizer to see); the lanes past the count are 0, and nothing outside the block or past the
+// last lane array is written.
 #include <catch2/catch.hpp>
 
 #include <span>

@@ -247,8 +247,8 @@ private:
 
 #if defined(EIGEN_VECTORIZE_AVX512) || defined(SBPTT_OUTER_PRODUCT_AVX2)
 /// The registers of `add_sample_sums`: blocks of kRegisters registers of rows, then the rows
-/// left (the last register masked). With AVX2 only where it has FMA, as the scaled sums round
-/// d·s + b once, like the scalar path.
+/// left (the last register masked). With AVX2 only where it has FMA: a scale comes only with
+/// the register kernels, and its sums round d·s + b once.
 template <class Scalar>
 class SampleSums {
 public:

@@ -1,5 +1,5 @@
 #pragma once
-/// \file The first `count` lanes of an AVX-512 register from or to memory, by masked loads
+/// \file The first `count` lanes of a register from or to memory, by masked loads
 /// and stores: a matrix's last panel narrower than a register (the packed and the outer
 /// products), or a tile's columns shorter than one (the simulators' lane rows), without
 /// reading or writing past its end. Lanes not loaded are 0; memory past the lanes stored is
@@ -8,8 +8,10 @@
 /// Zen 4), a masked register costs a whole one, half a register half of one. Defined where
 /// Eigen vectorizes with AVX-512, for float and double; the first lanes of a register (no
 /// narrower parts) also where it vectorizes with AVX2 and not AVX-512: its 256-bit registers
-/// have no mask registers, so a vector mask goes there (`vmaskmovps`), which likewise neither
-/// reads nor writes the lanes it leaves out.
+/// have no mask registers, so a vector mask goes there (`vmaskmovps`). Its lanes left out are
+/// neither read nor written; Intel guarantees that they do not fault either, AMD leaves it to
+/// the implementation, and this code relies on it as Eigen's own masked AVX moves do (the last
+/// column of a batch matrix ends at its allocation).
 #include <type_traits>
 
 #include <Eigen/Core>
@@ -67,15 +69,15 @@ EIGEN_ALWAYS_INLINE __m256i first_lanes_mask(Index count) {
 }
 
 // A whole register goes by a plain load or store: the masked ones cost more even with every
-// lane selected (AMD EPYC, Zen 3: guidance's paired VJP of 8 samples 1312 ns with masks on
+// lane selected (AMD EPYC without AVX-512: guidance's paired VJP of 8 samples 1312 ns with masks on
 // every tile, 1170 with plain moves for the whole ones; docs/benchmark-runs.md, eighty-second
 // run).
 
 template <class Scalar>
 EIGEN_ALWAYS_INLINE FullPacket<Scalar> load_first_lanes(const Scalar* from, Index count) {
   static_assert(FloatOrDouble<Scalar>);
-  constexpr auto kLanes = static_cast<Index>(32 / sizeof(Scalar));  // a 256-bit register
-  if (count == kLanes) return Eigen::internal::ploadu<FullPacket<Scalar>>(from);
+  constexpr auto lanes = static_cast<Index>(32 / sizeof(Scalar));  // a 256-bit register
+  if (count == lanes) return Eigen::internal::ploadu<FullPacket<Scalar>>(from);
   if constexpr (std::is_same_v<Scalar, float>) {
     return _mm256_maskload_ps(from, first_lanes_mask<Scalar>(count));
   } else {
@@ -87,8 +89,8 @@ template <class Scalar>
 EIGEN_ALWAYS_INLINE void store_first_lanes(Scalar* to, const FullPacket<Scalar>& value,
                                            Index count) {
   static_assert(FloatOrDouble<Scalar>);
-  constexpr auto kLanes = static_cast<Index>(32 / sizeof(Scalar));  // a 256-bit register
-  if (count == kLanes) return Eigen::internal::pstoreu(to, value);
+  constexpr auto lanes = static_cast<Index>(32 / sizeof(Scalar));  // a 256-bit register
+  if (count == lanes) return Eigen::internal::pstoreu(to, value);
   if constexpr (std::is_same_v<Scalar, float>) {
     _mm256_maskstore_ps(to, first_lanes_mask<Scalar>(count), value);
   } else {

@@ -117,7 +117,9 @@ EIGEN_ALWAYS_INLINE void transpose_tile(FullPacket<Scalar>* r) {
 namespace sbptt::detail {
 
 /// Register l's lane i to register i's lane l: 32-bit (64-bit for doubles) interleaves of
-/// neighbouring registers, for floats a 64-bit shuffle of those, then a 128-bit permute.
+/// neighbouring registers, for floats a 64-bit shuffle of those, then a 128-bit permute: the
+/// steps of Eigen's `ptranspose`, which takes a `PacketBlock` instead of the callers' array
+/// and whose vector template argument GCC 12 warns about (-Wignored-attributes) in our headers.
 template <class Scalar>
 EIGEN_ALWAYS_INLINE void transpose_tile(FullPacket<Scalar>* r) {
   if constexpr (std::is_same_v<Scalar, float>) {

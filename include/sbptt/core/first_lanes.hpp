@@ -56,6 +56,10 @@ EIGEN_ALWAYS_INLINE void store_first_lanes(Scalar* to, const FullPacket<Scalar>&
 }
 
 #else  // AVX2
+/// The lanes of a 256-bit register of `Scalar`.
+template <class Scalar>
+inline constexpr auto register_lanes = static_cast<Index>(32 / sizeof(Scalar));
+
 /// All bits set in the 32-bit (float) or 64-bit (double) lanes 0 … count − 1 (0 < count ≤ the
 /// register's lanes), none in the others.
 template <class Scalar>
@@ -76,8 +80,7 @@ EIGEN_ALWAYS_INLINE __m256i first_lanes_mask(Index count) {
 template <class Scalar>
 EIGEN_ALWAYS_INLINE FullPacket<Scalar> load_first_lanes(const Scalar* from, Index count) {
   static_assert(FloatOrDouble<Scalar>);
-  constexpr auto lanes = static_cast<Index>(32 / sizeof(Scalar));  // a 256-bit register
-  if (count == lanes) return Eigen::internal::ploadu<FullPacket<Scalar>>(from);
+  if (count == register_lanes<Scalar>) return Eigen::internal::ploadu<FullPacket<Scalar>>(from);
   if constexpr (std::is_same_v<Scalar, float>) {
     return _mm256_maskload_ps(from, first_lanes_mask<Scalar>(count));
   } else {
@@ -89,8 +92,7 @@ template <class Scalar>
 EIGEN_ALWAYS_INLINE void store_first_lanes(Scalar* to, const FullPacket<Scalar>& value,
                                            Index count) {
   static_assert(FloatOrDouble<Scalar>);
-  constexpr auto lanes = static_cast<Index>(32 / sizeof(Scalar));  // a 256-bit register
-  if (count == lanes) return Eigen::internal::pstoreu(to, value);
+  if (count == register_lanes<Scalar>) return Eigen::internal::pstoreu(to, value);
   if constexpr (std::is_same_v<Scalar, float>) {
     _mm256_maskstore_ps(to, first_lanes_mask<Scalar>(count), value);
   } else {
